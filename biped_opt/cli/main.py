@@ -1,0 +1,58 @@
+"""``biped-opt``: entry point and sub-command registry.
+
+Each sub-command lives in its own module exposing ``register(subparsers)``; the module adds its
+parser and sets ``func(args) -> int``. The library raises :class:`~biped_opt.errors.BipedOptError`;
+this layer turns it into a one-line message on stderr and exit status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from biped_opt.errors import BipedOptError
+
+#: modules under biped_opt.cli that provide sub-commands, in help order
+COMMAND_MODULES = (
+    "simulate_cmd",
+    "demo_cmd",
+)
+
+EXIT_USAGE = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports bad arguments in one line (no usage dump) with exit status 2."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="biped-opt",
+        description="Nonsmooth optimal control of a biped subject to unilateral constraints.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    for name in COMMAND_MODULES:
+        importlib.import_module(f"biped_opt.cli.{name}").register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except BipedOptError as exc:
+        print(f"biped-opt {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print(f"biped-opt {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,224 @@
+"""Event-driven hybrid simulation of the biped's maneuvers (MODEL.md Sec. 3).
+
+:func:`simulate` runs one maneuver and returns a :class:`~biped_opt.hybrid.trajectory.Trajectory`;
+:func:`simulate_batch` runs many (th0, inputs) in parallel compiled threads and returns flat
+arrays, the path sweeps and optimisation grids take. Both validate their inputs once, up front,
+and call the same compiled kernel (:mod:`biped_opt.hybrid._kernel`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from biped_opt.errors import InvalidInputError, InvalidParameterError
+from biped_opt.hybrid import _kernel as K
+from biped_opt.hybrid.trajectory import Status, Trajectory
+from biped_opt.maneuvers import ManeuverSpec, check_theta0, initial_state, parse_maneuver, spec
+from biped_opt.model.biped import NSTATE
+from biped_opt.model.modes import ContactMode
+from biped_opt.model.params import BipedParams
+
+__all__ = ["SimulatorOptions", "BatchResult", "simulate", "simulate_batch", "check_inputs"]
+
+Array = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimulatorOptions:
+    """Integrator and bookkeeping settings of the hybrid simulator."""
+
+    rtol: float = 1e-12  # relative tolerance of the DOP853 error estimate
+    atol: float = 1e-12  # absolute tolerance
+    h_max: float = 0.05  # largest step [time]; bounds how far a double crossing can hide
+    t_end: float = 10.0  # time horizon [time]
+    max_events: int = 16  # contact events allowed before giving up
+
+    def __post_init__(self) -> None:
+        for name in ("rtol", "atol", "h_max", "t_end"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise InvalidParameterError(f"{name} must be a positive number, got {value!r}")
+        if self.rtol < 1e-15:
+            raise InvalidParameterError(f"rtol must be at least 1e-15, got {self.rtol}")
+        if not isinstance(self.max_events, int) or self.max_events < 1:
+            raise InvalidParameterError(
+                f"max_events must be a positive integer, got {self.max_events!r}"
+            )
+
+
+DEFAULT_OPTIONS = SimulatorOptions()
+INPUT_NAMES = ("u1", "u2", "u12")
+
+
+def check_inputs(inputs: npt.ArrayLike | None) -> Array:
+    """Inputs as (u1, u2, u12), zero-padded; the error names the offending input."""
+    out = np.zeros(3)
+    if inputs is None:
+        return out
+    try:
+        values = np.asarray(inputs, dtype=np.float64).ravel()
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"inputs must be numbers, got {inputs!r}") from None
+    if values.size > 3:
+        raise InvalidInputError(f"at most 3 inputs (u1, u2, u12), got {values.size}")
+    for name, value in zip(INPUT_NAMES, values):
+        if not math.isfinite(value):
+            raise InvalidInputError(f"{name} must be finite, got {value}")
+    out[: values.size] = values
+    return out
+
+
+def _kernel_args(s: ManeuverSpec, options: SimulatorOptions) -> tuple:
+    term_mode = -1 if s.term_mode is None else int(s.term_mode)
+    return (
+        s.term_sign,
+        s.term_after_touchdown,
+        term_mode,
+        options.t_end,
+        options.max_events,
+        options.rtol,
+        options.atol,
+        options.h_max,
+    )
+
+
+def simulate(
+    maneuver: str,
+    theta0: float,
+    inputs: npt.ArrayLike | None = None,
+    *,
+    params: BipedParams | None = None,
+    options: SimulatorOptions = DEFAULT_OPTIONS,
+    sample_dt: float | None = None,
+) -> Trajectory:
+    """Simulate ``maneuver`` from initial pitch ``theta0`` with inputs (u1, u2, u12).
+
+    ``sample_dt`` requests dense samples on the grid t = k sample_dt (plus the events and t_f).
+    The trajectory's ``status`` says how it ended; this function raises only for invalid
+    arguments.
+    """
+    s = spec(maneuver)
+    params = params if params is not None else BipedParams()
+    y0, mode0 = initial_state(s.maneuver, theta0, params)
+    u = check_inputs(inputs)
+    if sample_dt is not None:
+        if not (math.isfinite(sample_dt) and sample_dt > 0):
+            raise InvalidInputError(f"sample_dt must be a positive number, got {sample_dt!r}")
+        capacity = int(options.t_end / sample_dt) + 2 * options.max_events + 8
+        samples = np.empty((capacity, K.SAMPLE_WIDTH))
+        dt = float(sample_dt)
+    else:
+        samples = np.empty((0, K.SAMPLE_WIDTH))
+        dt = 0.0
+    events = np.empty((options.max_events + 1, K.EVENT_WIDTH))
+    y_out = np.empty(NSTATE)
+    status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej = K.simulate_kernel(
+        params.as_array(), y0, int(mode0), u, *_kernel_args(s, options), dt, samples, events,
+        y_out,
+    )
+    n_rows = n_ev + (1 if status in (K.OK, K.APEX_IN_CONTACT) else 0)
+    return Trajectory(
+        maneuver=s.maneuver.value,
+        theta0=float(theta0),
+        inputs=u,
+        status=Status(status),
+        t_final=t_f,
+        state_final=y_out,
+        mode_final=ContactMode(mode_f),
+        event_rows=events[:n_rows],
+        samples=samples[:n_s] if sample_dt is not None else None,
+        nfev=nfev,
+        nsteps=nsteps,
+        nrejected=nrej,
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class BatchResult:
+    """Many trajectories of one maneuver, as flat arrays (index k = k-th (th0, inputs))."""
+
+    maneuver: str
+    theta0: Array  # (N,)
+    inputs: Array  # (N, 3)
+    status: npt.NDArray[np.int64]  # (N,) Status values
+    t_final: Array  # (N,)
+    state_final: Array  # (N, 14)
+    mode_final: npt.NDArray[np.int64]  # (N,)
+    n_events: npt.NDArray[np.int64]  # (N,) contact events
+    event_rows: Array  # (N, max_events + 1, EVENT_WIDTH), valid rows per n_events (+ terminal)
+    nfev: npt.NDArray[np.int64]  # (N,)
+
+    @property
+    def outcome(self) -> Array:
+        return self.state_final[:, 2]
+
+    @property
+    def success(self) -> npt.NDArray[np.bool_]:
+        return self.status == Status.OK
+
+    def event_times(self, k: int) -> Array:
+        return self.event_rows[k, : self.n_events[k], 0].copy()
+
+    def mode_sequence(self, k: int) -> tuple[ContactMode, ...]:
+        rows = self.event_rows[k, : self.n_events[k]]
+        first = int(self.event_rows[k, 0, 4])
+        return (ContactMode(first), *(ContactMode(int(m)) for m in rows[:, 5]))
+
+
+def simulate_batch(
+    maneuver: str,
+    theta0: npt.ArrayLike,
+    inputs: npt.ArrayLike | None = None,
+    *,
+    params: BipedParams | None = None,
+    options: SimulatorOptions = DEFAULT_OPTIONS,
+) -> BatchResult:
+    """Simulate ``maneuver`` for every th0 in ``theta0`` (shape (N,)) in parallel threads.
+
+    ``inputs`` is one input vector for all (shape (3,) or shorter) or one per angle (N, <=3).
+    """
+    s = spec(parse_maneuver(maneuver))
+    params = params if params is not None else BipedParams()
+    th = np.atleast_1d(np.asarray(theta0, dtype=np.float64))
+    if th.ndim != 1:
+        raise InvalidInputError(f"theta0 must be a 1-D array of angles, got shape {th.shape}")
+    n = th.size
+    u_arr = np.zeros((n, 3))
+    raw = np.zeros(0) if inputs is None else np.asarray(inputs, dtype=np.float64)
+    if raw.ndim <= 1:
+        u_arr[:] = check_inputs(raw)
+    elif raw.ndim == 2 and raw.shape[0] == n:
+        for k in range(n):
+            u_arr[k] = check_inputs(raw[k])
+    else:
+        raise InvalidInputError(
+            f"inputs must have shape (<=3,) or ({n}, <=3) for {n} angles, got {raw.shape}"
+        )
+    y0s = np.empty((n, NSTATE))
+    modes0 = np.empty(n, dtype=np.int64)
+    for k in range(n):
+        check_theta0(s.maneuver, th[k])
+        y0s[k], mode0 = initial_state(s.maneuver, th[k], params)
+        modes0[k] = int(mode0)
+    events = np.zeros((n, options.max_events + 1, K.EVENT_WIDTH))
+    y_out = np.empty((n, NSTATE))
+    info = np.empty((n, 8))
+    K.simulate_batch_kernel(
+        params.as_array(), y0s, modes0, u_arr, *_kernel_args(s, options), events, y_out, info
+    )
+    return BatchResult(
+        maneuver=s.maneuver.value,
+        theta0=th,
+        inputs=u_arr,
+        status=info[:, 0].astype(np.int64),
+        t_final=info[:, 1].copy(),
+        state_final=y_out,
+        mode_final=info[:, 2].astype(np.int64),
+        n_events=info[:, 3].astype(np.int64),
+        event_rows=events,
+        nfev=info[:, 5].astype(np.int64),
+    )

@@ -1,0 +1,192 @@
+"""The sagittal-plane biped of [1]_ Fig. 1 as a mechanical system with unilateral constraints.
+
+MODEL.md Sec. 2. Configuration q = (x, z, th, x1, z1, x2, z2): body centre of mass, body pitch
+(counter-clockwise positive) and the two point feet; leg 1 is the left leg (hip at -w along the
+body), leg 2 the right (hip at +w). The state is y = (q, q'), 14 floats.
+
+Each leg is a massless spring-damper between its hip and its foot with a mode-dependent actuator
+force: u1 acts only in left single stance J = {1}, u2 only in right single stance J = {2}, and the
+body torque u12 only in double stance J = {1, 2}. This *force coupling* (paper Sec. II-B) is what
+makes outcomes nonsmooth when the order of contact events changes.
+
+The physics is written once, as compiled functions on flat float arrays (the simulator's hot
+path calls them directly), and wrapped by :class:`Biped` for the generic framework of
+:mod:`biped_opt.model.system`, which the tests use to check the specialised constraint handling
+against Eq. (1) computed with general linear algebra.
+
+.. [1] B. Banjanin and S. A. Burden, "Nonsmooth optimal value and policy functions in mechanical
+   systems subject to unilateral constraints", IEEE Control Systems Letters 4(2), 2020.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+import numpy.typing as npt
+
+from biped_opt.model.params import BipedParams
+from biped_opt.model.system import MechanicalSystem
+
+__all__ = [
+    "NDOF",
+    "NSTATE",
+    "NCONSTRAINTS",
+    "Biped",
+    "generalised_forces",
+    "dynamics",
+    "apply_impact",
+    "energy",
+]
+
+Array = npt.NDArray[np.float64]
+
+NDOF = 7  #: configuration dimension d
+NSTATE = 2 * NDOF  #: state dimension, y = (q, q')
+NCONSTRAINTS = 2  #: unilateral constraints a_j(q) = z_j >= 0, one per foot
+#: index in y of each foot's height z_j (the constraint a_j) ...
+FOOT_Z = (4, 6)
+#: ... and of its vertical velocity z_j'
+FOOT_DZ = (11, 13)
+BODY_DZ = 8  #: index in y of the body's vertical velocity z'
+
+
+@nb.njit(cache=True)
+def generalised_forces(
+    p: Array, mode: int, y: Array, u: Array, f: Array, off: int
+) -> None:
+    """Write f_J(q, q', u) into ``f[off:off + 7]`` (MODEL.md Sec. 2).
+
+    p: parameters (:data:`~biped_opt.model.params.PARAM_ORDER`), shape (9,);
+    mode: contact mode bit mask; y: state, shape (14,); u: inputs (u1, u2, u12), shape (3,).
+
+    Leg j's force F_j = k (l0 - L_j) - c L_j' + ubar_j(J) pushes the hip away from the foot along
+    the unit leg vector n_j; ubar_j(J) = u_j iff J = {j} (force coupling).
+    """
+    mb, ib_unused, mf, g, l0, w, k, c = p[0], p[1], p[2], p[3], p[4], p[5], p[6], p[7]
+    th = y[2]
+    ct = math.cos(th)
+    st = math.sin(th)
+    fx = 0.0
+    fz = 0.0
+    torque = 0.0
+    for j in range(2):
+        s = -1.0 if j == 0 else 1.0
+        ex = y[0] + s * w * ct - y[3 + 2 * j]
+        ez = y[1] + s * w * st - y[4 + 2 * j]
+        vx = y[7] - s * w * st * y[9] - y[10 + 2 * j]
+        vz = y[8] + s * w * ct * y[9] - y[11 + 2 * j]
+        length = math.sqrt(ex * ex + ez * ez)
+        nx = ex / length
+        nz = ez / length
+        force = k * (l0 - length) - c * (nx * vx + nz * vz)
+        if mode == 1 << j:
+            force += u[j]
+        fx += force * nx
+        fz += force * nz
+        torque += s * w * (ct * nz - st * nx) * force
+        f[off + 3 + 2 * j] = -force * nx
+        f[off + 4 + 2 * j] = -force * nz - mf * g
+    if mode == 3:
+        torque += u[2]
+    f[off + 0] = fx
+    f[off + 1] = fz - mb * g
+    f[off + 2] = torque
+
+
+@nb.njit(cache=True)
+def dynamics(p: Array, mode: int, y: Array, u: Array, dy: Array, lam: Array) -> None:
+    """Vector field of mode J: dy = (q', q''), and reaction forces lam (shape (2,)), Eq. (1a).
+
+    M is diagonal and Da_j = e_{z_j}, so Eq. (1a) reduces to lambda_j = -f_J[z_j] =
+    mf g + F_j n_jz and z_j'' = 0 for every active constraint j; inactive entries of lam are 0.
+    """
+    generalised_forces(p, mode, y, u, dy, NDOF)
+    mb, ib, mf = p[0], p[1], p[2]
+    dy[7] /= mb
+    dy[8] /= mb
+    dy[9] /= ib
+    for j in range(2):
+        dy[10 + 2 * j] /= mf
+        if mode >> j & 1:
+            lam[j] = -dy[11 + 2 * j] * mf
+            dy[11 + 2 * j] = 0.0
+        else:
+            lam[j] = 0.0
+            dy[11 + 2 * j] /= mf
+    for i in range(NDOF):
+        dy[i] = y[NDOF + i]
+
+
+@nb.njit(cache=True)
+def apply_impact(p: Array, mode: int, y: Array) -> None:
+    """q'+ = Delta_J q'- in place, on entering mode J, Eq. (1b).
+
+    With M diagonal and Da_j = e_{z_j}, Delta_J only scales each contacting foot's vertical
+    velocity by -gamma: the body's velocity does not jump (the legs decouple the feet's impacts).
+    """
+    gamma = p[8]
+    for j in range(2):
+        if mode >> j & 1:
+            y[11 + 2 * j] *= -gamma
+
+
+def energy(params: BipedParams, y: Array) -> float:
+    """Total mechanical energy: kinetic + gravitational + leg springs (no actuation)."""
+    p = params
+    q, dq = y[:NDOF], y[NDOF:]
+    masses = np.array([p.mb, p.mb, p.Ib, p.mf, p.mf, p.mf, p.mf])
+    kinetic = 0.5 * float(masses @ dq**2)
+    gravity = p.g * (p.mb * q[1] + p.mf * (q[4] + q[6]))
+    springs = 0.0
+    for j, s in enumerate((-1.0, 1.0)):
+        hip = np.array([q[0] + s * p.w * np.cos(q[2]), q[1] + s * p.w * np.sin(q[2])])
+        length = float(np.hypot(*(hip - q[3 + 2 * j : 5 + 2 * j])))
+        springs += 0.5 * p.k * (p.l0 - length) ** 2
+    return kinetic + gravity + springs
+
+
+class Biped(MechanicalSystem):
+    """The biped through the generic interface of :class:`MechanicalSystem` (Eq. (1) of [1]_)."""
+
+    ndof = NDOF
+    nconstraints = NCONSTRAINTS
+
+    def __init__(self, params: BipedParams | None = None) -> None:
+        self.params = params if params is not None else BipedParams()
+        self._p = self.params.as_array()
+
+    @property
+    def restitution(self) -> float:
+        return self.params.gamma
+
+    def mass_matrix(self, q: Array) -> Array:
+        p = self.params
+        return np.diag([p.mb, p.mb, p.Ib, p.mf, p.mf, p.mf, p.mf])
+
+    def forces(self, q: Array, dq: Array, u: Array, mode: int) -> Array:
+        f = np.empty(NDOF)
+        y = np.concatenate([q, dq]).astype(np.float64)
+        generalised_forces(self._p, int(mode), y, _inputs3(u), f, 0)
+        return f
+
+    def constraints(self, q: Array) -> Array:
+        return np.array([q[FOOT_Z[0]], q[FOOT_Z[1]]], dtype=np.float64)
+
+    def constraint_jacobian(self, q: Array) -> Array:
+        da = np.zeros((NCONSTRAINTS, NDOF))
+        da[0, FOOT_Z[0]] = 1.0
+        da[1, FOOT_Z[1]] = 1.0
+        return da
+
+    def constraint_jacobian_rate(self, q: Array, dq: Array) -> Array:
+        return np.zeros(NCONSTRAINTS)
+
+
+def _inputs3(u: Array | tuple[float, ...]) -> Array:
+    """Inputs padded to (u1, u2, u12)."""
+    out = np.zeros(3)
+    values = np.asarray(u, dtype=np.float64).ravel()
+    out[: values.size] = values
+    return out

@@ -1,0 +1,38 @@
+"""Packaging for biped_opt: an ament_python package that also installs with plain pip."""
+
+from pathlib import Path
+
+from setuptools import find_packages, setup
+
+package_name = "biped_opt"
+here = Path(__file__).resolve().parent
+
+
+def pinned_requirements() -> list[str]:
+    """Runtime pins from requirements.txt, the single place versions are chosen."""
+    lines = (here / "requirements.txt").read_text().splitlines()
+    return [line.strip() for line in lines if line.strip() and not line.startswith("#")]
+
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(include=[package_name, f"{package_name}.*"]),
+    package_data={package_name: ["py.typed"]},
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{package_name}"]),
+        (f"share/{package_name}", ["package.xml"]),
+    ],
+    install_requires=pinned_requirements(),
+    python_requires=">=3.10",
+    zip_safe=False,
+    maintainer="biped_opt maintainers",
+    description="Nonsmooth optimal control of a biped with unilateral constraints",
+    license="MIT",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "biped-opt = biped_opt.cli.main:main",
+        ],
+    },
+)
