@@ -2,9 +2,11 @@
 
 One call integrates a whole maneuver: an adaptive Dormand-Prince 8(5,3) integrator with its
 7th-order dense output (Hairer, Norsett and Wanner, *Solving ODEs I*, Sec. II.10; the tableau is
-read from SciPy's ``dop853_coefficients``), guard monitoring, event location on the dense output
-polished by re-stepping, simultaneous events, resets and termination. Everything lives in flat
-float arrays; nothing allocates per step.
+read from SciPy's ``dop853_coefficients``), guard monitoring at the step ends and at every stage
+(so a guard that dips below zero inside a step is not missed), event location as the root of the
+guard on the dense output (Illinois method, bracket < 1e-15 of the step; the interpolant is as
+accurate as the step, so event times are good to ~1e-12), simultaneous events, resets and
+termination. Everything lives in flat float arrays; nothing allocates per step.
 
 Guards are normalised so that every event is "the guard falls through zero":
 
@@ -49,8 +51,6 @@ NGUARDS = 3
 SIMULTANEOUS_TOL = 1e-9
 #: a flipped guard stays disarmed until it is farther than this from zero
 REARM_TOL = 1e-10
-#: Newton polishing stops once the event-time correction is below this
-EVENT_TIME_TOL = 1e-13
 
 # --- Dormand-Prince 8(5,3) tableau --------------------------------------------------------
 _NSTAGES = 12
@@ -67,28 +67,44 @@ _ERROR_EXPONENT = -1.0 / 8.0
 _MAX_STEPS = 100_000
 
 
-@nb.njit(cache=True)
-def _step(p, mode, u, y, f, h, K, y_new, f_new, lam_new, tmp, rtol, atol):
+@nb.njit(cache=True, error_model="numpy")
+def _step(p, mode, u, term_sign, y, f, h, K, y_new, f_new, lam_new, tmp, rtol, atol, probe):
     """One DOP853 step of size h from (y, f = dy/dt at y) in mode ``mode``.
 
     K: stage derivatives, shape (16, 14); rows 0-11 stages, row 12 = f_new on return.
     Writes y_new, f_new, lam_new (reactions at y_new); returns the scaled error norm.
+    probe[i] receives the smallest stage abscissa c_s at which guard i was <= 0 on the stage
+    state (2.0 if never): the stages sample the step's interior for free, which catches a guard
+    that dips below zero and comes back within one step.
     """
     n = y.shape[0]
+    for i in range(NGUARDS):
+        probe[i] = 2.0
     for i in range(n):
         K[0, i] = f[i]
     for s in range(1, _NSTAGES):
         for i in range(n):
-            acc = 0.0
-            for r in range(s):
-                acc += _A[s, r] * K[r, i]
-            tmp[i] = y[i] + h * acc
+            tmp[i] = y[i]
+        for r in range(s):
+            a = h * _A[s, r]
+            if a != 0.0:
+                for i in range(n):
+                    tmp[i] += a * K[r, i]
         dynamics(p, mode, tmp, u, K[s], lam_new)
+        c = _C[s]
+        for j in range(2):
+            g = lam_new[j] if mode >> j & 1 else tmp[4 + 2 * j]
+            if g <= 0.0 and c < probe[j]:
+                probe[j] = c
+        if term_sign * tmp[8] <= 0.0 and c < probe[2]:
+            probe[2] = c
     for i in range(n):
-        acc = 0.0
-        for r in range(_NSTAGES):
-            acc += _B[r] * K[r, i]
-        y_new[i] = y[i] + h * acc
+        y_new[i] = y[i]
+    for r in range(_NSTAGES):
+        b = h * _B[r]
+        if b != 0.0:
+            for i in range(n):
+                y_new[i] += b * K[r, i]
     dynamics(p, mode, y_new, u, f_new, lam_new)
     err5 = 0.0
     err3 = 0.0
@@ -107,16 +123,18 @@ def _step(p, mode, u, y, f, h, K, y_new, f_new, lam_new, tmp, rtol, atol):
     return abs(h) * err5 / math.sqrt((err5 + 0.01 * err3) * n)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _dense_coefficients(p, mode, u, y, f, h, K, y_new, f_new, F, tmp, lam):
     """Coefficients F (7, 14) of the 7th-order interpolant on the step just taken (3 more stages)."""
     n = y.shape[0]
     for s in range(_NSTAGES + 1, 16):
         for i in range(n):
-            acc = 0.0
-            for r in range(s):
-                acc += _A[s, r] * K[r, i]
-            tmp[i] = y[i] + h * acc
+            tmp[i] = y[i]
+        for r in range(s):
+            a = h * _A[s, r]
+            if a != 0.0:
+                for i in range(n):
+                    tmp[i] += a * K[r, i]
         dynamics(p, mode, tmp, u, K[s], lam)
     for i in range(n):
         dy = y_new[i] - y[i]
@@ -130,7 +148,7 @@ def _dense_coefficients(p, mode, u, y, f, h, K, y_new, f_new, F, tmp, lam):
             F[3 + r, i] = h * acc
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _dense_eval(F, y, x, out):
     """Interpolant at fraction x in [0, 1] of the step that started at y."""
     for i in range(y.shape[0]):
@@ -141,18 +159,7 @@ def _dense_eval(F, y, x, out):
         out[i] = y[i] + acc
 
 
-@nb.njit(cache=True)
-def _hermite_eval(y0, f0, y1, f1, h, x, out):
-    """Cubic Hermite interpolant (cheap, used only to detect double crossings)."""
-    h00 = (1.0 + 2.0 * x) * (1.0 - x) ** 2
-    h10 = x * (1.0 - x) ** 2
-    h01 = x * x * (3.0 - 2.0 * x)
-    h11 = x * x * (x - 1.0)
-    for i in range(y0.shape[0]):
-        out[i] = h00 * y0[i] + h10 * h * f0[i] + h01 * y1[i] + h11 * h * f1[i]
-
-
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _guard(p, mode, u, term_sign, y, i, fscratch):
     """Value of guard i at state y in mode ``mode`` (see the module docstring)."""
     if i == 2:
@@ -163,7 +170,7 @@ def _guard(p, mode, u, term_sign, y, i, fscratch):
     return y[4 + 2 * i]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _guards_at_step_end(mode, term_sign, y, lam, gv):
     """All guards at a state whose reactions lam are already known (no extra evaluation)."""
     for j in range(2):
@@ -171,7 +178,7 @@ def _guards_at_step_end(mode, term_sign, y, lam, gv):
     gv[2] = term_sign * y[8]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _guard_rate(p, mode, u, term_sign, y, dy, i, tmp, fscratch):
     """d/dt of guard i along the flow of mode ``mode`` at y (dy = vector field at y)."""
     if i == 2:
@@ -189,7 +196,7 @@ def _guard_rate(p, mode, u, term_sign, y, dy, i, tmp, fscratch):
     return (g_plus - g_minus) / (2.0 * eps)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _root_on_dense(p, mode, u, term_sign, F, y, i, xa, ga, xb, gb, tmp, fscratch):
     """Root in (xa, xb] of guard i on the dense output, by the Illinois method.
 
@@ -220,7 +227,7 @@ def _root_on_dense(p, mode, u, term_sign, F, y, i, xa, ga, xb, gb, tmp, fscratch
     return xb
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _record_sample(samples, ns, t, y, mode, lam):
     if ns < samples.shape[0]:
         samples[ns, 0] = t
@@ -232,7 +239,7 @@ def _record_sample(samples, ns, t, y, mode, lam):
     return ns + 1
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _initial_step(p, mode, u, y, f, rtol, atol, h_max, tmp, ftmp, lam):
     """Starting step size (Hairer, Norsett and Wanner, Sec. II.4), one extra evaluation."""
     n = y.shape[0]
@@ -260,42 +267,44 @@ def _initial_step(p, mode, u, y, f, rtol, atol, h_max, tmp, ftmp, lam):
     return min(100.0 * h0, h1, h_max)
 
 
-@nb.njit(cache=True)
-def simulate_kernel(
-    p,
-    y0,
-    mode0,
-    u,
-    term_sign,
-    term_after_touchdown,
-    term_mode,
-    t_end,
-    max_events,
-    rtol,
-    atol,
-    h_max,
-    sample_dt,
-    samples,
-    events,
-    y_out,
-):
+#: layout of the ``cfg`` vector of :func:`simulate_kernel`
+CFG_TERM_SIGN = 0  # +1: end when z' falls through 0 (apex); -1: when it rises through 0 (nadir)
+CFG_TERM_AFTER_TOUCHDOWN = 1  # 1: the terminal event counts only after the first touchdown
+CFG_TERM_MODE = 2  # mode the terminal event must happen in (-1: any), else APEX_IN_CONTACT
+CFG_T_END = 3  # time horizon
+CFG_MAX_EVENTS = 4  # contact events allowed
+CFG_RTOL = 5
+CFG_ATOL = 6
+CFG_H_MAX = 7  # largest step
+CFG_SAMPLE_DT = 8  # spacing of dense samples (<= 0: none)
+CFG_SIZE = 9
+
+
+@nb.njit(cache=True, error_model="numpy")
+def simulate_kernel(p, y0, mode0, u, cfg, samples, events, y_out):
     """Integrate one maneuver from (t = 0, y0, mode0) to its terminal event.
 
     Parameters
     ----------
     p : (9,) model parameters; y0 : (14,) initial state; mode0 : initial contact mode;
-    u : (3,) inputs (u1, u2, u12); term_sign : +1 ends at z' falling through 0 (apex), -1 at z'
-    rising through 0 (nadir); term_after_touchdown : arm the termination only after the first
-    touchdown; term_mode : mode the terminal event must happen in (-1: any), else status
-    APEX_IN_CONTACT; t_end : horizon; max_events : contact events allowed; rtol, atol, h_max :
-    integrator settings; sample_dt : spacing of dense samples (<= 0: none); samples :
-    (capacity, SAMPLE_WIDTH) output; events : (max_events + 1, EVENT_WIDTH) output;
+    u : (3,) inputs (u1, u2, u12); cfg : (CFG_SIZE,) settings, see the CFG_* indices;
+    samples : (capacity, SAMPLE_WIDTH) output; events : (max_events + 1, EVENT_WIDTH) output;
     y_out : (14,) final state output.
 
     Returns
     -------
     (status, t_final, mode_final, n_events, n_samples, nfev, nsteps, nrejected)
     """
+    term_sign = cfg[CFG_TERM_SIGN]
+    term_after_touchdown = cfg[CFG_TERM_AFTER_TOUCHDOWN] != 0.0
+    term_mode = int(cfg[CFG_TERM_MODE])
+    t_end = cfg[CFG_T_END]
+    max_events = int(cfg[CFG_MAX_EVENTS])
+    rtol = cfg[CFG_RTOL]
+    atol = cfg[CFG_ATOL]
+    h_max = cfg[CFG_H_MAX]
+    sample_dt = cfg[CFG_SAMPLE_DT]
+
     n = NSTATE
     K = np.empty((16, n))
     F = np.empty((7, n))
@@ -303,21 +312,17 @@ def simulate_kernel(
     f = np.empty(n)
     y_new = np.empty(n)
     f_new = np.empty(n)
-    y_try = np.empty(n)
-    f_try = np.empty(n)
     tmp = np.empty(n)
     tmp2 = np.empty(n)
     fscratch = np.empty(7)
     lam = np.zeros(2)
     lam_new = np.zeros(2)
-    lam_try = np.zeros(2)
+    lam_tmp = np.zeros(2)
     gv = np.empty(NGUARDS)
     gv_new = np.empty(NGUARDS)
+    probe = np.empty(NGUARDS)
     armed = np.zeros(NGUARDS, dtype=np.bool_)
     flips = np.zeros(NGUARDS, dtype=np.bool_)
-    bracket_lo = np.zeros(NGUARDS)
-    bracket_hi = np.ones(NGUARDS)
-    crossing = np.zeros(NGUARDS, dtype=np.bool_)
 
     mode = mode0
     t = 0.0
@@ -342,7 +347,7 @@ def simulate_kernel(
         ns = _record_sample(samples, ns, t, y, mode, lam)
         next_sample = 1
 
-    h = _initial_step(p, mode, u, y, f, rtol, atol, h_max, tmp, f_try, lam_try)
+    h = _initial_step(p, mode, u, y, f, rtol, atol, h_max, tmp, tmp2, lam_tmp)
     nfev += 1
     step_rejected = False
     finished = False
@@ -355,7 +360,9 @@ def simulate_kernel(
             status = HORIZON
             break
         h_step = min(h, h_max, t_end - t)
-        err = _step(p, mode, u, y, f, h_step, K, y_new, f_new, lam_new, tmp, rtol, atol)
+        err = _step(
+            p, mode, u, term_sign, y, f, h_step, K, y_new, f_new, lam_new, tmp, rtol, atol, probe
+        )
         nfev += 12
         nsteps += 1
         if not err < 1.0:
@@ -372,80 +379,62 @@ def simulate_kernel(
         step_rejected = False
         h = h_step * factor
 
-        # --- event detection: sign changes at the step's end or inside it ------------------
+        # --- event detection: a sign change at the step's end, or at a stage inside it -----
         _guards_at_step_end(mode, term_sign, y_new, lam_new, gv_new)
-        any_crossing = False
+        any_candidate = False
         for i in range(NGUARDS):
-            crossing[i] = False
-            if armed[i] and gv[i] > 0.0:
-                bracket_lo[i] = 0.0
-                bracket_hi[i] = 1.0
-                if gv_new[i] <= 0.0:
-                    crossing[i] = True
-                else:
-                    # a guard can dip below zero and come back within one step
-                    for xi in (1.0 / 3.0, 2.0 / 3.0):
-                        _hermite_eval(y, f, y_new, f_new, h_step, xi, tmp)
-                        if _guard(p, mode, u, term_sign, tmp, i, fscratch) <= 0.0:
-                            crossing[i] = True
-                            bracket_hi[i] = xi
-                            break
-                any_crossing = any_crossing or crossing[i]
+            if armed[i] and gv[i] > 0.0 and (gv_new[i] <= 0.0 or probe[i] <= 1.0):
+                any_candidate = True
 
         dense_ready = False
-        if any_crossing or sampling:
-            _dense_coefficients(
-                p, mode, u, y, f, h_step, K, y_new, f_new, F, tmp, lam_try
-            )
+        if any_candidate or sampling:
+            _dense_coefficients(p, mode, u, y, f, h_step, K, y_new, f_new, F, tmp, lam_tmp)
             nfev += 3
             dense_ready = True
 
-        t_stop = t + h_step
         first = -1
-        if any_crossing:
-            x_first = 2.0
+        x_first = 2.0
+        if any_candidate:
             for i in range(NGUARDS):
-                if crossing[i]:
-                    xb = bracket_hi[i]
-                    if xb < 1.0:
-                        _dense_eval(F, y, xb, tmp)
-                        gb = _guard(p, mode, u, term_sign, tmp, i, fscratch)
-                        if gb > 0.0:  # the cheap interpolant misled us: no crossing
-                            continue
-                    else:
-                        gb = gv_new[i]
-                    x = _root_on_dense(
-                        p, mode, u, term_sign, F, y, i, 0.0, gv[i], xb, gb, tmp, fscratch
-                    )
-                    if x < x_first:
-                        x_first = x
-                        first = i
-            if first >= 0:
-                # Polish: re-step exactly to the root, then Newton on the guard of the true step.
-                h_ev = x_first * h_step
-                for it in range(5):
-                    _step(p, mode, u, y, f, h_ev, K, y_try, f_try, lam_try, tmp, rtol, atol)
-                    nfev += 12
-                    g_ev = _guard(p, mode, u, term_sign, y_try, first, fscratch)
-                    rate = _guard_rate(p, mode, u, term_sign, y_try, f_try, first, tmp, fscratch)
-                    if rate == 0.0 or it == 4:
-                        break
-                    dt = -g_ev / rate
-                    if abs(dt) <= EVENT_TIME_TOL or not 0.0 < h_ev + dt <= h_step:
-                        break
-                    h_ev += dt
-                t_stop = t + h_ev
+                if not (armed[i] and gv[i] > 0.0):
+                    continue
+                if gv_new[i] <= 0.0:
+                    xb = 1.0
+                    gb = gv_new[i]
+                elif probe[i] <= 1.0:
+                    # confirm the stage's hint on the interpolant, scanning up to the stage
+                    xb = -1.0
+                    gb = 0.0
+                    for m in range(1, 9):
+                        xm = probe[i] * m / 8.0
+                        _dense_eval(F, y, xm, tmp)
+                        gm = _guard(p, mode, u, term_sign, tmp, i, fscratch)
+                        if gm <= 0.0:
+                            xb = xm
+                            gb = gm
+                            break
+                    if xb < 0.0:
+                        continue
+                else:
+                    continue
+                x = _root_on_dense(
+                    p, mode, u, term_sign, F, y, i, 0.0, gv[i], xb, gb, tmp, fscratch
+                )
+                if x < x_first:
+                    x_first = x
+                    first = i
+        t_stop = t + h_step if first < 0 else t + x_first * h_step
 
-        # --- dense samples strictly inside (t, t_stop] -------------------------------------
+        # --- dense samples inside (t, t_stop] (before an event: strictly before it) ----------
         if sampling and dense_ready:
             while True:
                 ts = next_sample * sample_dt
                 if ts > t_stop or (first >= 0 and ts >= t_stop):
                     break
                 _dense_eval(F, y, (ts - t) / h_step, tmp)
-                dynamics(p, mode, tmp, u, tmp2, lam_try)
+                dynamics(p, mode, tmp, u, tmp2, lam_tmp)
                 nfev += 1
-                ns = _record_sample(samples, ns, ts, tmp, mode, lam_try)
+                ns = _record_sample(samples, ns, ts, tmp, mode, lam_tmp)
                 next_sample += 1
 
         if first < 0:
@@ -466,13 +455,13 @@ def simulate_kernel(
                         finished = True
             continue
 
-        # --- event at t_stop: which guards flip together -----------------------------------
+        # --- event at t_stop: the state is the 7th-order interpolant at the root -----------
         t = t_stop
+        _dense_eval(F, y, x_first, tmp)
         for k in range(n):
-            y[k] = y_try[k]
-            f[k] = f_try[k]
-        lam[0] = lam_try[0]
-        lam[1] = lam_try[1]
+            y[k] = tmp[k]
+        dynamics(p, mode, y, u, f, lam)
+        nfev += 1
         for i in range(NGUARDS):
             flips[i] = i == first
             if i != first and armed[i]:
@@ -548,48 +537,18 @@ def simulate_kernel(
     return status, t, mode, n_events, ns, nfev, nsteps, nrejected
 
 
-@nb.njit(cache=True, parallel=True)
-def simulate_batch_kernel(
-    p,
-    y0s,
-    modes0,
-    us,
-    term_sign,
-    term_after_touchdown,
-    term_mode,
-    t_end,
-    max_events,
-    rtol,
-    atol,
-    h_max,
-    events,
-    y_out,
-    info,
-):
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def simulate_batch_kernel(p, y0s, modes0, us, cfg, events, y_out, info):
     """:func:`simulate_kernel` over many initial states and inputs, in parallel threads.
 
-    y0s : (N, 14); modes0 : (N,) int; us : (N, 3); events : (N, max_events + 1, EVENT_WIDTH);
-    y_out : (N, 14); info : (N, 8) receives the kernel's returned tuple per trajectory.
+    y0s : (N, 14); modes0 : (N,) int; us : (N, 3); cfg : as for simulate_kernel (no samples);
+    events : (N, max_events + 1, EVENT_WIDTH); y_out : (N, 14); info : (N, 8) receives the
+    kernel's returned tuple per trajectory.
     """
     no_samples = np.empty((0, SAMPLE_WIDTH))
     for k in nb.prange(y0s.shape[0]):
         status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej = simulate_kernel(
-            p,
-            y0s[k],
-            modes0[k],
-            us[k],
-            term_sign,
-            term_after_touchdown,
-            term_mode,
-            t_end,
-            max_events,
-            rtol,
-            atol,
-            h_max,
-            0.0,
-            no_samples,
-            events[k],
-            y_out[k],
+            p, y0s[k], modes0[k], us[k], cfg, no_samples, events[k], y_out[k]
         )
         info[k, 0] = status
         info[k, 1] = t_f

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from biped_opt.errors import InvalidInputError, InvalidParameterError
+from biped_opt.errors import InvalidInputError, InvalidParameterError, SimulationError
 from biped_opt.hybrid import _kernel as K
 from biped_opt.hybrid.trajectory import Status, Trajectory
 from biped_opt.maneuvers import ManeuverSpec, check_theta0, initial_state, parse_maneuver, spec
@@ -54,6 +54,9 @@ DEFAULT_OPTIONS = SimulatorOptions()
 INPUT_NAMES = ("u1", "u2", "u12")
 
 
+DEFAULT_PARAMS = BipedParams()
+
+
 def check_inputs(inputs: npt.ArrayLike | None) -> Array:
     """Inputs as (u1, u2, u12), zero-padded; the error names the offending input."""
     out = np.zeros(3)
@@ -65,25 +68,28 @@ def check_inputs(inputs: npt.ArrayLike | None) -> Array:
         raise InvalidInputError(f"inputs must be numbers, got {inputs!r}") from None
     if values.size > 3:
         raise InvalidInputError(f"at most 3 inputs (u1, u2, u12), got {values.size}")
-    for name, value in zip(INPUT_NAMES, values):
-        if not math.isfinite(value):
-            raise InvalidInputError(f"{name} must be finite, got {value}")
     out[: values.size] = values
+    if not np.isfinite(out).all():
+        bad = int(np.flatnonzero(~np.isfinite(out))[0])
+        raise InvalidInputError(f"{INPUT_NAMES[bad]} must be finite, got {out[bad]}")
     return out
 
 
-def _kernel_args(s: ManeuverSpec, options: SimulatorOptions) -> tuple:
-    term_mode = -1 if s.term_mode is None else int(s.term_mode)
-    return (
-        s.term_sign,
-        s.term_after_touchdown,
-        term_mode,
-        options.t_end,
-        options.max_events,
-        options.rtol,
-        options.atol,
-        options.h_max,
-    )
+def kernel_config(
+    s: ManeuverSpec, options: SimulatorOptions, sample_dt: float = 0.0
+) -> Array:
+    """The ``cfg`` vector of :func:`biped_opt.hybrid._kernel.simulate_kernel`."""
+    cfg = np.empty(K.CFG_SIZE)
+    cfg[K.CFG_TERM_SIGN] = s.term_sign
+    cfg[K.CFG_TERM_AFTER_TOUCHDOWN] = float(s.term_after_touchdown)
+    cfg[K.CFG_TERM_MODE] = -1.0 if s.term_mode is None else float(s.term_mode)
+    cfg[K.CFG_T_END] = options.t_end
+    cfg[K.CFG_MAX_EVENTS] = options.max_events
+    cfg[K.CFG_RTOL] = options.rtol
+    cfg[K.CFG_ATOL] = options.atol
+    cfg[K.CFG_H_MAX] = options.h_max
+    cfg[K.CFG_SAMPLE_DT] = sample_dt
+    return cfg
 
 
 def simulate(
@@ -102,7 +108,7 @@ def simulate(
     arguments.
     """
     s = spec(maneuver)
-    params = params if params is not None else BipedParams()
+    params = params if params is not None else DEFAULT_PARAMS
     y0, mode0 = initial_state(s.maneuver, theta0, params)
     u = check_inputs(inputs)
     if sample_dt is not None:
@@ -117,9 +123,11 @@ def simulate(
     events = np.empty((options.max_events + 1, K.EVENT_WIDTH))
     y_out = np.empty(NSTATE)
     status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej = K.simulate_kernel(
-        params.as_array(), y0, int(mode0), u, *_kernel_args(s, options), dt, samples, events,
+        params.as_array(), y0, int(mode0), u, kernel_config(s, options, dt), samples, events,
         y_out,
     )
+    if n_s > samples.shape[0]:  # cannot happen while capacity covers t_end / sample_dt
+        raise SimulationError(f"sample buffer overflow: {n_s} > {samples.shape[0]}")
     n_rows = n_ev + (1 if status in (K.OK, K.APEX_IN_CONTACT) else 0)
     return Trajectory(
         maneuver=s.maneuver.value,
@@ -182,7 +190,7 @@ def simulate_batch(
     ``inputs`` is one input vector for all (shape (3,) or shorter) or one per angle (N, <=3).
     """
     s = spec(parse_maneuver(maneuver))
-    params = params if params is not None else BipedParams()
+    params = params if params is not None else DEFAULT_PARAMS
     th = np.atleast_1d(np.asarray(theta0, dtype=np.float64))
     if th.ndim != 1:
         raise InvalidInputError(f"theta0 must be a 1-D array of angles, got shape {th.shape}")
@@ -208,7 +216,7 @@ def simulate_batch(
     y_out = np.empty((n, NSTATE))
     info = np.empty((n, 8))
     K.simulate_batch_kernel(
-        params.as_array(), y0s, modes0, u_arr, *_kernel_args(s, options), events, y_out, info
+        params.as_array(), y0s, modes0, u_arr, kernel_config(s, options), events, y_out, info
     )
     return BatchResult(
         maneuver=s.maneuver.value,

@@ -52,7 +52,7 @@ FOOT_DZ = (11, 13)
 BODY_DZ = 8  #: index in y of the body's vertical velocity z'
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def generalised_forces(
     p: Array, mode: int, y: Array, u: Array, f: Array, off: int
 ) -> None:
@@ -95,7 +95,7 @@ def generalised_forces(
     f[off + 2] = torque
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def dynamics(p: Array, mode: int, y: Array, u: Array, dy: Array, lam: Array) -> None:
     """Vector field of mode J: dy = (q', q''), and reaction forces lam (shape (2,)), Eq. (1a).
 
@@ -119,7 +119,7 @@ def dynamics(p: Array, mode: int, y: Array, u: Array, dy: Array, lam: Array) -> 
         dy[i] = y[NDOF + i]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def apply_impact(p: Array, mode: int, y: Array) -> None:
     """q'+ = Delta_J q'- in place, on entering mode J, Eq. (1b).
 

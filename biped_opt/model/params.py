@@ -7,7 +7,7 @@ sqrt(length / g). The defaults are the paper's.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
 import numpy.typing as npt
@@ -30,9 +30,12 @@ class BipedParams:
     k: float = 27.0  # leg stiffness [force / length]
     c: float = 0.0  # leg damping [force time / length]
     gamma: float = 0.0  # coefficient of restitution at touchdown, 0 = plastic [-]
+    _array: npt.NDArray[np.float64] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         for f in fields(self):
+            if not f.init:
+                continue
             value = getattr(self, f.name)
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise InvalidParameterError(f"{f.name} must be a real number, got {value!r}")
@@ -49,13 +52,19 @@ class BipedParams:
                 )
         if not 0.0 <= self.gamma <= 1.0:
             raise InvalidParameterError(f"gamma must lie in [0, 1], got {self.gamma}")
+        packed = np.array([getattr(self, name) for name in PARAM_ORDER], dtype=np.float64)
+        packed.flags.writeable = False
+        object.__setattr__(self, "_array", packed)
 
     def as_array(self) -> npt.NDArray[np.float64]:
-        """Parameters packed for the compiled kernels, in the order of :data:`PARAM_ORDER`."""
-        return np.array([getattr(self, name) for name in PARAM_ORDER], dtype=np.float64)
+        """Parameters packed for the compiled kernels, in the order of :data:`PARAM_ORDER`
+        (read-only, computed once)."""
+        return self._array
 
     def as_dict(self) -> dict[str, float]:
-        return asdict(self)
+        out = asdict(self)
+        out.pop("_array")
+        return out
 
 
 #: Order of the parameters in :meth:`BipedParams.as_array` (the kernels index by position).

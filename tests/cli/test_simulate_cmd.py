@@ -1,0 +1,52 @@
+"""``biped-opt simulate`` end to end, as a user runs it (a subprocess)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from tests.conftest import REFERENCE
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "biped_opt.cli.main", *args],
+        capture_output=True, text=True, timeout=120,
+    )
+
+
+def test_json_reproduces_r1():
+    maneuver, theta0, u, expected = REFERENCE["R1"]
+    proc = run_cli("simulate", "--maneuver", maneuver, "--theta0", repr(theta0),
+                   "--u1", repr(u[0]), "--u2", repr(u[1]), "--json")
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    assert abs(out["outcome"] - expected) <= 1e-9
+    assert out["status"] == "ok"
+    assert [m["mode"] for m in out["modes"]] == ["AIR", "LEFT", "GROUND"]
+    assert out["modes"][0]["t"] == 0.0
+    assert len(out["state"]["q"]) == 7 and len(out["state"]["qdot"]) == 7
+    assert out["state"]["q"][2] == out["outcome"]
+    assert out["nfev"] > 0 and out["t_final"] > out["modes"][-1]["t"]
+
+
+@pytest.mark.parametrize(
+    ("args", "named"),
+    [
+        (("--maneuver", "touchdown", "--theta0", "nan"), "--theta0"),
+        (("--maneuver", "touchdown", "--theta0", "inf"), "--theta0"),
+        (("--maneuver", "touchdown", "--theta0", "0.4"), "--theta0"),
+        (("--maneuver", "hop", "--theta0", "0.1"), "--maneuver"),
+        (("--maneuver", "liftoff", "--theta0", "0.1", "--u12", "nan"), "--u12"),
+        (("--maneuver", "liftoff", "--theta0", "abc"), "--theta0"),
+    ],
+)
+def test_bad_arguments_exit_nonzero_with_one_line_naming_the_argument(args, named):
+    proc = run_cli("simulate", *args)
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and named in lines[0]

@@ -1,0 +1,223 @@
+"""The hybrid simulator against exact solutions, conservation laws, symmetry and MODEL.md."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from biped_opt.errors import InvalidInputError, InvalidParameterError
+from biped_opt.hybrid import SimulatorOptions, Status, simulate, simulate_batch
+from biped_opt.maneuvers import initial_state
+from biped_opt.model.biped import energy
+from biped_opt.model.modes import ContactMode as M
+from biped_opt.model.params import BipedParams
+from tests.conftest import REFERENCE
+
+AIR, LEFT, RIGHT, GROUND = M.AIR, M.LEFT, M.RIGHT, M.GROUND
+
+
+@pytest.mark.parametrize("name", sorted(REFERENCE))
+def test_reference_outcomes(name):
+    """MODEL.md R1-R4; the table has 12 significant digits, we require 1e-9 absolute."""
+    maneuver, theta0, u, expected = REFERENCE[name]
+    tr = simulate(maneuver, theta0, u)
+    assert tr.status is Status.OK
+    assert abs(tr.outcome - expected) <= 1e-9
+
+
+@pytest.mark.parametrize("theta0", [0.13, -0.07, 0.0])
+def test_free_fall_is_the_exact_parabola_and_touchdown_time_is_exact(theta0):
+    """Before the first touchdown every coordinate falls as z0 - g t^2 / 2 (legs at rest length,
+    so no leg force acts). The first foot reaches z = 0 at t = sqrt(2 z_foot / g) exactly: the
+    located event must agree to 1e-10 (MODEL.md Sec. 3)."""
+    params = BipedParams(g=1.3)
+    y0, _ = initial_state("touchdown", theta0, params)
+    tr = simulate("touchdown", theta0, (0.4, 0.2), params=params, sample_dt=0.01)
+    first = tr.contact_events[0]
+    t_exact = math.sqrt(2 * min(y0[4], y0[6]) / params.g)
+    assert abs(first.t - t_exact) <= 1e-10
+    pre = tr.samples[tr.samples[:, 0] < first.t]
+    assert len(pre) > 50
+    t = pre[:, :1]
+    expected_q = y0[:7] - 0.5 * params.g * t**2 * np.array([0, 1, 0, 0, 1, 0, 1])
+    expected_dq = -params.g * t * np.array([0, 1, 0, 0, 1, 0, 1])
+    np.testing.assert_allclose(pre[:, 1:8], expected_q, atol=1e-12)
+    np.testing.assert_allclose(pre[:, 8:15], expected_dq, atol=1e-12)
+    assert np.all(pre[:, 15] == AIR)
+
+
+@pytest.mark.parametrize(("maneuver", "theta0"), [("touchdown", 0.08), ("touchdown", -0.15),
+                                                  ("touchdown", 0.0), ("liftoff", 0.05)])
+def test_energy_conserved_except_the_exact_impact_loss(maneuver, theta0):
+    """c = 0, u = 0: energy is constant along the flow (to 1e-10: rtol 1e-12 over ~1 time unit)
+    and each touchdown removes exactly 0.5 mf z_j'^2 of the landing foot (to 1e-12)."""
+    params = BipedParams(mf=0.7)
+    tr = simulate(maneuver, theta0, (0.0, 0.0, 0.0), params=params, sample_dt=0.005)
+    assert tr.success
+    e0 = energy(params, tr.samples[0, 1:15])
+    lost = 0.0
+    for e in tr.contact_events:
+        before = energy(params, e.state_before)
+        after = energy(params, e.state_after)
+        expected_loss = sum(0.5 * params.mf * e.state_before[9 + 2 * j] ** 2 for j in e.touchdown)
+        assert before - after == pytest.approx(expected_loss, abs=1e-12)
+        assert abs(before - (e0 - lost)) < 1e-10
+        lost += expected_loss
+    # every sample between events sits on its segment's energy level (event rows checked above)
+    event_times = {e.t for e in tr.contact_events}
+    for row in tr.samples:
+        if row[0] in event_times:
+            continue
+        level = e0 - sum(
+            0.5 * params.mf * e.state_before[9 + 2 * j] ** 2
+            for e in tr.contact_events for j in e.touchdown if e.t < row[0]
+        )
+        assert abs(energy(params, row[1:15]) - level) < 1e-10
+    if maneuver == "touchdown":
+        assert lost > 0.01  # the feet land with real speed: the check above is not vacuous
+
+
+@pytest.mark.parametrize("theta0", [0.01, 0.1, 0.2])
+def test_mirror_symmetry(theta0):
+    """outcome(-th0) with (u1, u2) swapped = -outcome(th0) (u12 = 0); 1e-12 covers rounding."""
+    for maneuver, u in (("touchdown", (2.0, 0.5)), ("liftoff", (1.5, 3.0))):
+        a = simulate(maneuver, theta0, u)
+        b = simulate(maneuver, -theta0, u[::-1])
+        assert abs(a.outcome + b.outcome) < 1e-12
+        assert abs(a.t_final - b.t_final) < 1e-12
+        mirrored = [{LEFT: RIGHT, RIGHT: LEFT}.get(m, m) for m in a.mode_sequence]
+        assert list(b.mode_sequence) == mirrored
+
+
+@pytest.mark.parametrize(
+    ("maneuver", "theta0", "u", "sequence"),
+    [
+        ("touchdown", 0.1, (2.0, 0.5), (AIR, LEFT, GROUND)),
+        ("touchdown", 1e-6, (2.0, 0.5), (AIR, LEFT, GROUND)),
+        ("touchdown", -0.2, (2.0, 0.5), (AIR, RIGHT, GROUND)),
+        ("touchdown", 0.0, (2.0, 0.5), (AIR, GROUND)),
+        ("liftoff", -1e-6, (1.5, 3.0), (GROUND, RIGHT, AIR)),
+        ("liftoff", 0.1, (1.5, 3.0), (GROUND, LEFT, AIR)),
+        ("liftoff", 0.0, (1.5, 3.0), (GROUND, AIR)),
+    ],
+)
+def test_mode_sequences(maneuver, theta0, u, sequence):
+    tr = simulate(maneuver, theta0, u)
+    assert tr.success
+    assert tr.mode_sequence == sequence
+    assert tr.modes[0][0] == 0.0
+    if len(sequence) == 2:  # th0 = 0 exactly: both feet flip in one simultaneous event
+        (event,) = tr.contact_events
+        assert event.simultaneous
+        assert tr.outcome == 0.0  # the motion stays exactly symmetric
+
+
+def test_liftoff_events_are_roots_of_the_reaction_force():
+    """Each liftoff happens where lambda_j = 0: |lambda_j| / |dlambda_j/dt| <= 1e-10."""
+    from biped_opt.model.biped import dynamics
+
+    params = BipedParams()
+    tr = simulate("liftoff", 0.07, (1.5, 3.0, 0.1), sample_dt=0.001)
+    for e in tr.contact_events:
+        (leg,) = e.liftoff
+        j = leg - 1
+        dy, lam = np.empty(14), np.empty(2)
+        dynamics(params.as_array(), int(e.mode_before), e.state_before, tr.inputs, dy, lam)
+        # rate of lambda_j from the samples just before the event
+        before = tr.samples[(tr.samples[:, 0] < e.t) & (tr.samples[:, 15] == e.mode_before)]
+        rate = (before[-1, 16 + j] - before[-2, 16 + j]) / (before[-1, 0] - before[-2, 0])
+        assert abs(lam[j] / rate) <= 1e-10
+        # no reset at liftoff: the state is continuous
+        np.testing.assert_array_equal(e.state_before, e.state_after)
+
+
+def test_liftoff_does_not_retrigger_touchdown():
+    """A foot that just lifted sits at z = 0: the disarmed guard must not fire again."""
+    for theta0 in (-0.2, -0.01, 0.03, 0.25):
+        tr = simulate("liftoff", theta0, (1.5, 3.0, 0.0))
+        assert tr.success
+        assert all(e.kind == "liftoff" for e in tr.contact_events)
+        assert tr.nevents == 2
+
+
+def test_touchdown_impact_stops_only_the_landing_foot():
+    tr = simulate("touchdown", 0.1, (2.0, 0.5))
+    first = tr.contact_events[0]
+    assert first.touchdown == (1,)
+    changed = np.flatnonzero(first.state_before != first.state_after)
+    assert changed.tolist() == [11]  # z1' only (gamma = 0: plastic)
+    assert first.state_after[11] == 0.0
+
+
+def test_inconsistent_contact_is_reported():
+    """A pulling leg (u1 = -3 < -mf g / cos th) would need lambda_1 < 0 right at touchdown."""
+    tr = simulate("touchdown", 0.1, (-3.0, 0.0))
+    assert tr.status is Status.INCONSISTENT
+    assert not tr.success
+    assert "negative reaction" in tr.message
+
+
+def test_budgets_end_with_a_clear_status():
+    tr = simulate("touchdown", 0.1, (2.0, 0.5), options=SimulatorOptions(max_events=1))
+    assert tr.status is Status.MAX_EVENTS and tr.nevents == 1
+    tr = simulate("touchdown", 0.1, (2.0, 0.5), options=SimulatorOptions(t_end=0.5))
+    assert tr.status is Status.HORIZON and tr.t_final == pytest.approx(0.5, abs=1e-15)
+
+
+def test_weak_push_reports_apex_in_contact():
+    """With a soft spring the body peaks while both feet are still down."""
+    tr = simulate("liftoff", 0.05, (0.0, 0.0, 0.0), params=BipedParams(k=8.0))
+    assert tr.status is Status.APEX_IN_CONTACT
+    assert tr.mode_final is not AIR
+
+
+def test_samples_have_events_twice_and_end_at_t_final():
+    tr = simulate("touchdown", 0.1, (2.0, 0.5), sample_dt=0.01)
+    times = tr.samples[:, 0]
+    assert np.all(np.diff(times) >= 0)
+    for e in tr.contact_events:
+        rows = tr.samples[times == e.t]
+        assert [int(r[15]) for r in rows] == [e.mode_before, e.mode_after]
+    assert times[-1] == tr.t_final
+    np.testing.assert_array_equal(tr.samples[-1, 1:15], tr.state_final)
+
+
+def test_batch_equals_single_calls():
+    """The parallel batch path runs the same kernel: results agree bit for bit."""
+    grid = np.array([-0.2, -1e-3, 0.0, 1e-3, 0.17])
+    batch = simulate_batch("touchdown", grid, (2.0, 0.5))
+    for k, th in enumerate(grid):
+        tr = simulate("touchdown", th, (2.0, 0.5))
+        assert batch.outcome[k] == tr.outcome
+        assert batch.t_final[k] == tr.t_final
+        assert batch.mode_sequence(k) == tr.mode_sequence
+        np.testing.assert_array_equal(batch.event_times(k), tr.event_times)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        ({"maneuver": "hop", "theta0": 0.1}, InvalidInputError, "maneuver must be one of"),
+        ({"maneuver": "touchdown", "theta0": math.nan}, InvalidInputError, "theta0 must be finite"),
+        ({"maneuver": "touchdown", "theta0": 0.26}, InvalidInputError, "outside the valid range"),
+        ({"maneuver": "liftoff", "theta0": -0.31}, InvalidInputError, "outside the valid range"),
+        ({"maneuver": "touchdown", "theta0": 0.1, "inputs": (1.0, math.inf)}, InvalidInputError,
+         "u2 must be finite"),
+        ({"maneuver": "touchdown", "theta0": 0.1, "inputs": (1, 2, 3, 4)}, InvalidInputError,
+         "at most 3 inputs"),
+        ({"maneuver": "touchdown", "theta0": 0.1, "sample_dt": -1.0}, InvalidInputError,
+         "sample_dt"),
+    ],
+)
+def test_bad_arguments_raise_naming_the_argument(kwargs, error, match):
+    with pytest.raises(error, match=match):
+        simulate(**kwargs)
+
+
+def test_bad_options():
+    with pytest.raises(InvalidParameterError, match="rtol"):
+        SimulatorOptions(rtol=0.0)
+    with pytest.raises(InvalidParameterError, match="max_events"):
+        SimulatorOptions(max_events=0)

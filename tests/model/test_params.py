@@ -1,0 +1,39 @@
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from biped_opt.errors import BipedOptError, InvalidParameterError
+from biped_opt.model.modes import ContactMode
+from biped_opt.model.params import PARAM_ORDER, BipedParams
+
+
+def test_defaults_are_the_papers():
+    p = BipedParams()
+    assert (p.mb, p.Ib, p.mf, p.g, p.l0, p.w, p.k, p.c, p.gamma) == (
+        1.0, 0.5, 1.0, 1.0, 0.5, 0.25, 27.0, 0.0, 0.0)
+    assert list(p.as_array()) == [getattr(p, n) for n in PARAM_ORDER]
+
+
+def test_frozen():
+    with pytest.raises(AttributeError):
+        BipedParams().k = 1.0  # type: ignore[misc]
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "match"),
+    [("mb", 0.0, "mb must be positive"), ("k", -1.0, "k must be positive"),
+     ("c", -0.1, "c must be non-negative"), ("gamma", 1.5, "gamma must lie in"),
+     ("l0", math.nan, "l0 must be finite"), ("w", "a", "w must be a real number")],
+)
+def test_validation_names_the_field(field, value, match):
+    with pytest.raises(InvalidParameterError, match=match) as info:
+        BipedParams(**{field: value})
+    assert isinstance(info.value, (ValueError, BipedOptError))
+
+
+def test_contact_modes_are_bit_masks_matching_the_interface_constants():
+    assert [int(m) for m in ContactMode] == [0, 1, 2, 3]
+    assert ContactMode.GROUND.active == (0, 1)
+    assert ContactMode.from_active({1}) is ContactMode.RIGHT

@@ -1,0 +1,61 @@
+"""The fixed-input nonsmoothness of MODEL.md Sec. 6: touchdown kink and liftoff jump at th0 = 0."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from biped_opt.fixed_sweep import fixed_sweep, outcome_breaks, theta_grid
+from biped_opt.hybrid import simulate
+from biped_opt.nonsmooth import one_sided
+
+
+def _outcome(maneuver, u):
+    return lambda th: simulate(maneuver, th, u).outcome
+
+
+def test_grid_holds_zero_exactly():
+    grid = theta_grid(-0.25, 0.25, 400)  # an even count would straddle 0
+    assert 0.0 in grid and np.all(np.diff(grid) > 0)
+
+
+def test_touchdown_kink_slopes_and_continuity():
+    """One-sided slopes at 0 within 1e-6 of MODEL.md (its reference is itself ~1e-9 accurate;
+    our extrapolated slopes agree with each other to ~1e-8), limits equal to outcome(0) = 0."""
+    f = _outcome("touchdown", (2.0, 0.5))
+    left, right = one_sided(f, 0.0, -1), one_sided(f, 0.0, +1)
+    assert abs(right.derivative - 0.714366448) < 1e-6
+    assert abs(left.derivative - 0.796243869) < 1e-6
+    assert abs(left.limit) < 1e-9 and abs(right.limit) < 1e-9 and f(0.0) == 0.0
+
+
+def test_touchdown_without_inputs_is_smooth_at_zero():
+    f = _outcome("touchdown", (0.0, 0.0))
+    left, right = one_sided(f, 0.0, -1), one_sided(f, 0.0, +1)
+    assert abs(left.derivative - 0.823536373) < 1e-6
+    assert abs(right.derivative - 0.823536373) < 1e-6
+
+
+def test_liftoff_jump_limits():
+    """One-sided limits within 1e-7 of MODEL.md; the value at 0 itself is 0 (symmetric push)."""
+    f = _outcome("liftoff", (1.5, 3.0, 0.0))
+    left, right = one_sided(f, 0.0, -1), one_sided(f, 0.0, +1)
+    assert abs(left.limit - 0.026283950) < 1e-7
+    assert abs(right.limit - (-0.006532702)) < 1e-7
+    assert f(0.0) == 0.0
+
+
+def test_liftoff_without_inputs_is_continuous():
+    f = _outcome("liftoff", (0.0, 0.0, 0.0))
+    left, right = one_sided(f, 0.0, -1), one_sided(f, 0.0, +1)
+    assert abs(left.limit - right.limit) < 1e-9
+
+
+@pytest.mark.parametrize(("maneuver", "kind"), [("touchdown", "kink"), ("liftoff", "jump")])
+def test_sweep_finds_exactly_one_break_at_zero(maneuver, kind):
+    limit = 0.25 if maneuver == "touchdown" else 0.3
+    sweep = fixed_sweep(maneuver, theta_grid(-limit, limit, 101))
+    assert sweep.success.all()
+    (brk,) = outcome_breaks(maneuver, sweep)
+    assert brk.kind == kind
+    assert abs(brk.theta0) <= 1e-10
