@@ -33,7 +33,7 @@ class SimulatorOptions:
 
     rtol: float = 1e-12  # relative tolerance of the DOP853 error estimate
     atol: float = 1e-12  # absolute tolerance
-    h_max: float = 0.05  # largest step [time]; bounds how far a double crossing can hide
+    h_max: float = 0.25  # largest step [time]; the RK stages probe guards inside each step
     t_end: float = 10.0  # time horizon [time]
     max_events: int = 16  # contact events allowed before giving up
 
