@@ -93,12 +93,14 @@ def parse_maneuver(value: Maneuver | str) -> Maneuver:
         raise InvalidInputError(f"maneuver must be one of {names}; got {value!r}") from None
 
 
-def spec(maneuver: Maneuver | str) -> ManeuverSpec:
+def spec(maneuver: Maneuver | str | ManeuverSpec) -> ManeuverSpec:
     """The :class:`ManeuverSpec` of ``maneuver``."""
+    if isinstance(maneuver, ManeuverSpec):
+        return maneuver
     return _SPECS[parse_maneuver(maneuver)]
 
 
-def check_theta0(maneuver: Maneuver | str, theta0: float) -> float:
+def check_theta0(maneuver: Maneuver | str | ManeuverSpec, theta0: float) -> float:
     """theta0 as a float, validated against the maneuver's range; the error names ``theta0``."""
     s = spec(maneuver)
     try:
@@ -116,11 +118,11 @@ def check_theta0(maneuver: Maneuver | str, theta0: float) -> float:
 
 
 def initial_state(
-    maneuver: Maneuver | str, theta0: float, params: BipedParams | None = None
+    maneuver: Maneuver | str | ManeuverSpec, theta0: float, params: BipedParams | None = None
 ) -> tuple[npt.NDArray[np.float64], ContactMode]:
     """Initial state y0 = (q, q') and contact mode of ``maneuver`` at body pitch ``theta0``."""
     s = spec(maneuver)
-    th = check_theta0(s.maneuver, theta0)
+    th = check_theta0(s, theta0)
     p = params if params is not None else BipedParams()
     y0 = np.zeros(NSTATE)
     ct, st = math.cos(th), math.sin(th)

@@ -8,6 +8,7 @@ and call the same compiled kernel (:mod:`biped_opt.hybrid._kernel`).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -33,7 +34,7 @@ class SimulatorOptions:
 
     rtol: float = 1e-12  # relative tolerance of the DOP853 error estimate
     atol: float = 1e-12  # absolute tolerance
-    h_max: float = 0.25  # largest step [time]; the RK stages probe guards inside each step
+    h_max: float = 0.5  # largest step [time]; the RK stages probe guards inside each step
     t_end: float = 10.0  # time horizon [time]
     max_events: int = 16  # contact events allowed before giving up
 
@@ -75,10 +76,12 @@ def check_inputs(inputs: npt.ArrayLike | None) -> Array:
     return out
 
 
+@functools.lru_cache(maxsize=64)
 def kernel_config(
     s: ManeuverSpec, options: SimulatorOptions, sample_dt: float = 0.0
 ) -> Array:
-    """The ``cfg`` vector of :func:`biped_opt.hybrid._kernel.simulate_kernel`."""
+    """The ``cfg`` vector of :func:`biped_opt.hybrid._kernel.simulate_kernel` (read-only, cached:
+    a maneuver's configuration is built once, not per trajectory)."""
     cfg = np.empty(K.CFG_SIZE)
     cfg[K.CFG_TERM_SIGN] = s.term_sign
     cfg[K.CFG_TERM_AFTER_TOUCHDOWN] = float(s.term_after_touchdown)
@@ -89,6 +92,7 @@ def kernel_config(
     cfg[K.CFG_ATOL] = options.atol
     cfg[K.CFG_H_MAX] = options.h_max
     cfg[K.CFG_SAMPLE_DT] = sample_dt
+    cfg.flags.writeable = False
     return cfg
 
 
@@ -109,7 +113,7 @@ def simulate(
     """
     s = spec(maneuver)
     params = params if params is not None else DEFAULT_PARAMS
-    y0, mode0 = initial_state(s.maneuver, theta0, params)
+    y0, mode0 = initial_state(s, theta0, params)
     u = check_inputs(inputs)
     if sample_dt is not None:
         if not (math.isfinite(sample_dt) and sample_dt > 0):
