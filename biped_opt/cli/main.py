@@ -18,6 +18,10 @@ from biped_opt.errors import BipedOptError
 COMMAND_MODULES = (
     "simulate_cmd",
     "demo_cmd",
+    "bench_cmd",
+    "optimise_cmd",
+    "sweep_cmd",
+    "nonsmooth_cmd",
 )
 
 EXIT_USAGE = 2
