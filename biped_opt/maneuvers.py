@@ -29,6 +29,8 @@ from biped_opt.model.params import BipedParams
 
 __all__ = ["Maneuver", "ManeuverSpec", "spec", "initial_state", "parse_maneuver"]
 
+_DEFAULT_PARAMS = BipedParams()
+
 
 class Maneuver(str, enum.Enum):
     """The two maneuvers of the paper."""
@@ -76,6 +78,8 @@ _SPECS = {
     ),
 }
 
+_SPECS_BY_NAME = {m.value: s for m, s in _SPECS.items()}
+
 #: initial body height of the touchdown maneuver [length]
 TOUCHDOWN_HEIGHT = 1.0
 #: initial leg compression of the liftoff maneuver [length]
@@ -97,7 +101,8 @@ def spec(maneuver: Maneuver | str | ManeuverSpec) -> ManeuverSpec:
     """The :class:`ManeuverSpec` of ``maneuver``."""
     if isinstance(maneuver, ManeuverSpec):
         return maneuver
-    return _SPECS[parse_maneuver(maneuver)]
+    found = _SPECS_BY_NAME.get(maneuver) if isinstance(maneuver, str) else None
+    return found if found is not None else _SPECS[parse_maneuver(maneuver)]
 
 
 def check_theta0(maneuver: Maneuver | str | ManeuverSpec, theta0: float) -> float:
@@ -123,20 +128,14 @@ def initial_state(
     """Initial state y0 = (q, q') and contact mode of ``maneuver`` at body pitch ``theta0``."""
     s = spec(maneuver)
     th = check_theta0(s, theta0)
-    p = params if params is not None else BipedParams()
-    y0 = np.zeros(NSTATE)
-    ct, st = math.cos(th), math.sin(th)
-    y0[2] = th
+    p = params if params is not None else _DEFAULT_PARAMS
+    wc, ws = p.w * math.cos(th), p.w * math.sin(th)
     if s.maneuver is Maneuver.TOUCHDOWN:
         # legs at rest length, perpendicular to the body: foot_j = body + R(th) (s_j w, -l0)
-        y0[1] = TOUCHDOWN_HEIGHT
-        for j, side in enumerate((-1.0, 1.0)):
-            y0[3 + 2 * j] = side * p.w * ct + p.l0 * st
-            y0[4 + 2 * j] = TOUCHDOWN_HEIGHT + side * p.w * st - p.l0 * ct
+        z = TOUCHDOWN_HEIGHT
+        lx, lz = p.l0 * math.sin(th), p.l0 * math.cos(th)
+        q = [0.0, z, th, -wc + lx, z - ws - lz, wc + lx, z + ws - lz]
     else:
         # vertical legs, feet on the ground directly below the hips, both compressed
-        y0[1] = p.l0 - LIFTOFF_COMPRESSION
-        for j, side in enumerate((-1.0, 1.0)):
-            y0[3 + 2 * j] = side * p.w * ct
-            y0[4 + 2 * j] = 0.0
-    return y0, s.initial_mode
+        q = [0.0, p.l0 - LIFTOFF_COMPRESSION, th, -wc, 0.0, wc, 0.0]
+    return np.array(q + [0.0] * (NSTATE - len(q))), s.initial_mode

@@ -31,7 +31,7 @@ import numba as nb
 import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as _dop853
 
-from biped_opt.model.biped import NSTATE, apply_impact, dynamics, generalised_forces
+from biped_opt.model.biped import NSTATE, apply_impact, dynamics, dynamics_at, generalised_forces
 
 # --- Status codes (mirrored by biped_opt.hybrid.trajectory.Status) ---------------------------
 OK = 0
@@ -71,17 +71,17 @@ _MAX_STEPS = 100_000
 def _step(p, mode, u, term_sign, y, f, h, K, y_new, f_new, lam_new, tmp, rtol, atol, probe):
     """One DOP853 step of size h from (y, f = dy/dt at y) in mode ``mode``.
 
-    K: stage derivatives, shape (16, 14); rows 0-11 stages, row 12 = f_new on return.
-    Writes y_new, f_new, lam_new (reactions at y_new); returns the scaled error norm.
-    probe[i] receives the smallest stage abscissa c_s at which guard i was <= 0 on the stage
-    state (2.0 if never): the stages sample the step's interior for free, which catches a guard
-    that dips below zero and comes back within one step.
+    K: stage derivatives, flat (16 * 14,): stage s occupies K[14 s : 14 (s + 1)]; stages 0-11,
+    then f_new in stage 12 on return. Writes y_new, f_new, lam_new (reactions at y_new); returns
+    the scaled error norm. probe[i] receives the smallest stage abscissa c_s at which guard i was
+    <= 0 on the stage state (2.0 if never): the stages sample the step's interior for free, which
+    catches a guard that dips below zero and comes back within one step.
     """
     n = y.shape[0]
     for i in range(NGUARDS):
         probe[i] = 2.0
     for i in range(n):
-        K[0, i] = f[i]
+        K[i] = f[i]
     for s in range(1, _NSTAGES):
         for i in range(n):
             tmp[i] = y[i]
@@ -89,8 +89,8 @@ def _step(p, mode, u, term_sign, y, f, h, K, y_new, f_new, lam_new, tmp, rtol, a
             a = h * _A[s, r]
             if a != 0.0:
                 for i in range(n):
-                    tmp[i] += a * K[r, i]
-        dynamics(p, mode, tmp, u, K[s], lam_new)
+                    tmp[i] += a * K[r * n + i]
+        dynamics_at(p, mode, tmp, u, K, s * n, lam_new)
         c = _C[s]
         for j in range(2):
             g = lam_new[j] if mode >> j & 1 else tmp[4 + 2 * j]
@@ -104,18 +104,18 @@ def _step(p, mode, u, term_sign, y, f, h, K, y_new, f_new, lam_new, tmp, rtol, a
         b = h * _B[r]
         if b != 0.0:
             for i in range(n):
-                y_new[i] += b * K[r, i]
-    dynamics(p, mode, y_new, u, f_new, lam_new)
+                y_new[i] += b * K[r * n + i]
+    dynamics_at(p, mode, y_new, u, K, _NSTAGES * n, lam_new)
     err5 = 0.0
     err3 = 0.0
     for i in range(n):
-        K[_NSTAGES, i] = f_new[i]
+        f_new[i] = K[_NSTAGES * n + i]
         scale = atol + rtol * max(abs(y[i]), abs(y_new[i]))
         e5 = 0.0
         e3 = 0.0
         for r in range(_NSTAGES + 1):
-            e5 += _E5[r] * K[r, i]
-            e3 += _E3[r] * K[r, i]
+            e5 += _E5[r] * K[r * n + i]
+            e3 += _E3[r] * K[r * n + i]
         err5 += (e5 / scale) ** 2
         err3 += (e3 / scale) ** 2
     if err5 == 0.0 and err3 == 0.0:
@@ -134,8 +134,8 @@ def _dense_coefficients(p, mode, u, y, f, h, K, y_new, f_new, F, tmp, lam):
             a = h * _A[s, r]
             if a != 0.0:
                 for i in range(n):
-                    tmp[i] += a * K[r, i]
-        dynamics(p, mode, tmp, u, K[s], lam)
+                    tmp[i] += a * K[r * n + i]
+        dynamics_at(p, mode, tmp, u, K, s * n, lam)
     for i in range(n):
         dy = y_new[i] - y[i]
         F[0, i] = dy
@@ -144,7 +144,7 @@ def _dense_coefficients(p, mode, u, y, f, h, K, y_new, f_new, F, tmp, lam):
         for r in range(4):
             acc = 0.0
             for s in range(16):
-                acc += _D[r, s] * K[s, i]
+                acc += _D[r, s] * K[s * n + i]
             F[3 + r, i] = h * acc
 
 
@@ -306,7 +306,7 @@ def simulate_kernel(p, y0, mode0, u, cfg, samples, events, y_out):
     sample_dt = cfg[CFG_SAMPLE_DT]
 
     n = NSTATE
-    K = np.empty((16, n))
+    K = np.empty(16 * n)
     F = np.empty((7, n))
     y = y0.copy()
     f = np.empty(n)

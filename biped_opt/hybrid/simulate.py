@@ -32,7 +32,7 @@ Array = npt.NDArray[np.float64]
 class SimulatorOptions:
     """Integrator and bookkeeping settings of the hybrid simulator."""
 
-    rtol: float = 1e-12  # relative tolerance of the DOP853 error estimate
+    rtol: float = 1e-11  # relative tolerance of the DOP853 error estimate
     atol: float = 1e-12  # absolute tolerance
     h_max: float = 0.5  # largest step [time]; the RK stages probe guards inside each step
     t_end: float = 10.0  # time horizon [time]
@@ -60,9 +60,18 @@ DEFAULT_PARAMS = BipedParams()
 
 def check_inputs(inputs: npt.ArrayLike | None) -> Array:
     """Inputs as (u1, u2, u12), zero-padded; the error names the offending input."""
-    out = np.zeros(3)
     if inputs is None:
-        return out
+        return np.zeros(3)
+    if isinstance(inputs, (tuple, list)) and len(inputs) <= 3:
+        try:
+            values = [float(v) for v in inputs]
+        except (TypeError, ValueError):
+            raise InvalidInputError(f"inputs must be numbers, got {inputs!r}") from None
+        for name, value in zip(INPUT_NAMES, values):
+            if not math.isfinite(value):
+                raise InvalidInputError(f"{name} must be finite, got {value}")
+        return np.array(values + [0.0] * (3 - len(values)))
+    out = np.zeros(3)
     try:
         values = np.asarray(inputs, dtype=np.float64).ravel()
     except (TypeError, ValueError):
@@ -133,19 +142,9 @@ def simulate(
     if n_s > samples.shape[0]:  # cannot happen while capacity covers t_end / sample_dt
         raise SimulationError(f"sample buffer overflow: {n_s} > {samples.shape[0]}")
     n_rows = n_ev + (1 if status in (K.OK, K.APEX_IN_CONTACT) else 0)
-    return Trajectory(
-        maneuver=s.maneuver.value,
-        theta0=float(theta0),
-        inputs=u,
-        status=Status(status),
-        t_final=t_f,
-        state_final=y_out,
-        mode_final=ContactMode(mode_f),
-        event_rows=events[:n_rows],
-        samples=samples[:n_s] if sample_dt is not None else None,
-        nfev=nfev,
-        nsteps=nsteps,
-        nrejected=nrej,
+    return Trajectory.from_kernel(
+        s.maneuver.value, float(theta0), u, status, t_f, y_out, mode_f, events[:n_rows],
+        samples[:n_s] if sample_dt is not None else None, nfev, nsteps, nrej,
     )
 
 

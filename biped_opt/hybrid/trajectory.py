@@ -76,6 +76,10 @@ class Segment:
     t_end: float
 
 
+_STATUSES = tuple(Status)
+_MODES = tuple(ContactMode)
+
+
 def _legs(mask: int) -> tuple[int, ...]:
     return tuple(j + 1 for j in range(2) if mask >> j & 1)
 
@@ -101,6 +105,23 @@ class Trajectory:
     nfev: int
     nsteps: int
     nrejected: int
+
+    @classmethod
+    def from_kernel(
+        cls, maneuver: str, theta0: float, inputs: Array, status: int, t_final: float,
+        state_final: Array, mode_final: int, event_rows: Array, samples: Array | None,
+        nfev: int, nsteps: int, nrejected: int,
+    ) -> Trajectory:
+        """Build from the kernel's outputs without the frozen-dataclass ``__init__`` (which sets
+        each field through ``object.__setattr__``): this is on the per-trajectory hot path."""
+        self = object.__new__(cls)
+        self.__dict__.update(
+            maneuver=maneuver, theta0=theta0, inputs=inputs, status=_STATUSES[status],
+            t_final=t_final, state_final=state_final, mode_final=_MODES[mode_final],
+            event_rows=event_rows, samples=samples, nfev=nfev, nsteps=nsteps,
+            nrejected=nrejected,
+        )
+        return self
 
     @property
     def success(self) -> bool:

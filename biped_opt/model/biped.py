@@ -36,6 +36,7 @@ __all__ = [
     "Biped",
     "generalised_forces",
     "dynamics",
+    "dynamics_at",
     "apply_impact",
     "energy",
 ]
@@ -58,34 +59,36 @@ def generalised_forces(
 ) -> None:
     """Write f_J(q, q', u) into ``f[off:off + 7]`` (MODEL.md Sec. 2).
 
-    p: parameters (:data:`~biped_opt.model.params.PARAM_ORDER`), shape (9,);
-    mode: contact mode bit mask; y: state, shape (14,); u: inputs (u1, u2, u12), shape (3,).
+    p: packed parameters (:meth:`~biped_opt.model.params.BipedParams.as_array`); mode: contact
+    mode bit mask; y: state, shape (14,); u: inputs (u1, u2, u12), shape (3,).
 
     Leg j's force F_j = k (l0 - L_j) - c L_j' + ubar_j(J) pushes the hip away from the foot along
     the unit leg vector n_j; ubar_j(J) = u_j iff J = {j} (force coupling).
     """
-    mb, ib_unused, mf, g, l0, w, k, c = p[0], p[1], p[2], p[3], p[4], p[5], p[6], p[7]
+    mb, mf, g, l0, w, k, c = p[0], p[2], p[3], p[4], p[5], p[6], p[7]
     th = y[2]
-    ct = math.cos(th)
-    st = math.sin(th)
+    wct = w * math.cos(th)
+    wst = w * math.sin(th)
     fx = 0.0
     fz = 0.0
     torque = 0.0
     for j in range(2):
         s = -1.0 if j == 0 else 1.0
-        ex = y[0] + s * w * ct - y[3 + 2 * j]
-        ez = y[1] + s * w * st - y[4 + 2 * j]
-        vx = y[7] - s * w * st * y[9] - y[10 + 2 * j]
-        vz = y[8] + s * w * ct * y[9] - y[11 + 2 * j]
+        ex = y[0] + s * wct - y[3 + 2 * j]
+        ez = y[1] + s * wst - y[4 + 2 * j]
+        vx = y[7] - s * wst * y[9] - y[10 + 2 * j]
+        vz = y[8] + s * wct * y[9] - y[11 + 2 * j]
         length = math.sqrt(ex * ex + ez * ez)
-        nx = ex / length
-        nz = ez / length
+        inv = 1.0 / length
+        nx = ex * inv
+        nz = ez * inv
         force = k * (l0 - length) - c * (nx * vx + nz * vz)
         if mode == 1 << j:
             force += u[j]
         fx += force * nx
         fz += force * nz
-        torque += s * w * (ct * nz - st * nx) * force
+        # w (cos th n_z - sin th n_x) is the lever arm of the leg force about the body's centre
+        torque += s * (wct * nz - wst * nx) * force
         f[off + 3 + 2 * j] = -force * nx
         f[off + 4 + 2 * j] = -force * nz - mf * g
     if mode == 3:
@@ -96,27 +99,36 @@ def generalised_forces(
 
 
 @nb.njit(cache=True, error_model="numpy")
-def dynamics(p: Array, mode: int, y: Array, u: Array, dy: Array, lam: Array) -> None:
-    """Vector field of mode J: dy = (q', q''), and reaction forces lam (shape (2,)), Eq. (1a).
+def dynamics_at(
+    p: Array, mode: int, y: Array, u: Array, out: Array, off: int, lam: Array
+) -> None:
+    """Vector field of mode J written to ``out[off:off + 14]`` = (q', q''), reactions to lam.
 
-    M is diagonal and Da_j = e_{z_j}, so Eq. (1a) reduces to lambda_j = -f_J[z_j] =
-    mf g + F_j n_jz and z_j'' = 0 for every active constraint j; inactive entries of lam are 0.
+    Eq. (1a): M is diagonal and Da_j = e_{z_j}, so lambda_j = -f_J[z_j] = mf g + F_j n_jz and
+    z_j'' = 0 for every active constraint j; inactive entries of lam are 0. (The offset form lets
+    the integrator write stages into one flat buffer without creating array views.)
     """
-    generalised_forces(p, mode, y, u, dy, NDOF)
-    mb, ib, mf = p[0], p[1], p[2]
-    dy[7] /= mb
-    dy[8] /= mb
-    dy[9] /= ib
+    generalised_forces(p, mode, y, u, out, off + NDOF)
+    inv_mb, inv_ib, inv_mf = p[9], p[10], p[11]
+    out[off + 7] *= inv_mb
+    out[off + 8] *= inv_mb
+    out[off + 9] *= inv_ib
     for j in range(2):
-        dy[10 + 2 * j] /= mf
+        out[off + 10 + 2 * j] *= inv_mf
         if mode >> j & 1:
-            lam[j] = -dy[11 + 2 * j] * mf
-            dy[11 + 2 * j] = 0.0
+            lam[j] = -out[off + 11 + 2 * j]
+            out[off + 11 + 2 * j] = 0.0
         else:
             lam[j] = 0.0
-            dy[11 + 2 * j] /= mf
+            out[off + 11 + 2 * j] *= inv_mf
     for i in range(NDOF):
-        dy[i] = y[NDOF + i]
+        out[off + i] = y[NDOF + i]
+
+
+@nb.njit(cache=True, error_model="numpy")
+def dynamics(p: Array, mode: int, y: Array, u: Array, dy: Array, lam: Array) -> None:
+    """Vector field of mode J: dy = (q', q''), and reaction forces lam (shape (2,)), Eq. (1a)."""
+    dynamics_at(p, mode, y, u, dy, 0, lam)
 
 
 @nb.njit(cache=True, error_model="numpy")

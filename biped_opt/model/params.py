@@ -52,13 +52,17 @@ class BipedParams:
                 )
         if not 0.0 <= self.gamma <= 1.0:
             raise InvalidParameterError(f"gamma must lie in [0, 1], got {self.gamma}")
-        packed = np.array([getattr(self, name) for name in PARAM_ORDER], dtype=np.float64)
+        packed = np.array(
+            [getattr(self, name) for name in PARAM_ORDER]
+            + [1.0 / self.mb, 1.0 / self.Ib, 1.0 / self.mf],
+            dtype=np.float64,
+        )
         packed.flags.writeable = False
         object.__setattr__(self, "_array", packed)
 
     def as_array(self) -> npt.NDArray[np.float64]:
-        """Parameters packed for the compiled kernels, in the order of :data:`PARAM_ORDER`
-        (read-only, computed once)."""
+        """Parameters packed for the compiled kernels: :data:`PARAM_ORDER`, then the inverse
+        masses 1/mb, 1/Ib, 1/mf (read-only, computed once)."""
         return self._array
 
     def as_dict(self) -> dict[str, float]:

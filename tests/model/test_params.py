@@ -13,7 +13,9 @@ def test_defaults_are_the_papers():
     p = BipedParams()
     assert (p.mb, p.Ib, p.mf, p.g, p.l0, p.w, p.k, p.c, p.gamma) == (
         1.0, 0.5, 1.0, 1.0, 0.5, 0.25, 27.0, 0.0, 0.0)
-    assert list(p.as_array()) == [getattr(p, n) for n in PARAM_ORDER]
+    packed = p.as_array()
+    assert list(packed[:9]) == [getattr(p, n) for n in PARAM_ORDER]
+    assert list(packed[9:]) == [1 / p.mb, 1 / p.Ib, 1 / p.mf]
 
 
 def test_frozen():

@@ -93,7 +93,8 @@ def test_mode_must_fit_constraints():
 @pytest.mark.parametrize("mode", [0, 1, 2, 3])
 def test_biped_specialised_dynamics_equal_generic_eq1(mode):
     """The compiled biped vector field equals Eq. (1a) evaluated with general linear algebra."""
-    params = BipedParams(c=0.3)  # damping on, so every force term is exercised
+    # damping on and no unit masses, so every force term and every mass scaling is exercised
+    params = BipedParams(c=0.3, mb=1.3, Ib=0.4, mf=0.7, g=1.1)
     biped = Biped(params)
     rng = np.random.default_rng(100 + mode)
     for _ in range(5):
