@@ -28,6 +28,8 @@ class OneSided:
     derivative: float
     #: change of the extrapolated derivative when the ladder's coarsest point is dropped
     derivative_error: float
+    #: second derivative of the same fit (meaningful when f is C^2 on that side)
+    second_derivative: float = float("nan")
 
 
 def one_sided(
@@ -56,6 +58,7 @@ def one_sided(
         limit=float(coeffs[0]),
         derivative=float(coeffs[1]),
         derivative_error=float(abs(coeffs[1] - coarse[1])),
+        second_derivative=float(2.0 * coeffs[2]) if levels > 2 else float("nan"),
     )
 
 

@@ -1,0 +1,425 @@
+"""Where outcome, policy and value fail to be C^1 in th0, and why ([1]_ Sec. III, MODEL.md Sec. 6).
+
+Along a sweep every quantity is smooth while three discrete things stay fixed: the mode order of
+the (optimal) trajectory, which decision acts, and which bound, if any, holds it. Nonsmoothness
+can only arise where one of them changes, so the analysis
+
+1. labels every grid point with (mode order, acting decision, active bound) - for fixed inputs
+   the mode order alone;
+2. locates every change of label to a bracket of width <= 1e-10 in th0 by bisection
+   (:func:`biped_opt.nonsmooth.locate_switch`); changes closer than :data:`MERGE_TOL` (the band
+   of simultaneous events around th0 = 0) are one point, put at 0 when the band holds 0;
+3. measures one-sided limits, first and second derivatives of each quantity there
+   (:func:`biped_opt.nonsmooth.one_sided`) and classifies: **jump** (limits differ), **kink**
+   (continuous, first derivatives differ), **second-derivative** (C^1, second derivatives differ;
+   outcome and value only: the policy's second differences are dominated by the optimiser's
+   tolerance);
+4. names the cause from the labels on both sides (mode order change, optimal branch switch,
+   change of acting input, bound reached or left).
+
+A change of label hidden between two grid points that cancels out (left and right labels equal)
+is not seen; a finer grid finds it.
+
+.. [1] B. Banjanin and S. A. Burden, "Nonsmooth optimal value and policy functions in mechanical
+   systems subject to unilateral constraints", IEEE Control Systems Letters 4(2), 2020.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from biped_opt.errors import InvalidInputError
+from biped_opt.fixed_sweep import FIXED_INPUTS
+from biped_opt.hybrid import SimulatorOptions, simulate
+from biped_opt.hybrid.simulate import DEFAULT_OPTIONS, check_inputs
+from biped_opt.maneuvers import spec
+from biped_opt.model.params import BipedParams
+from biped_opt.nonsmooth import OneSided, locate_switch, one_sided
+from biped_opt.optimal.problems import OptimalControlProblem
+from biped_opt.optimal.solve import OptimalResult, branch_label, optimal_policy
+from biped_opt.optimal.sweep import Progress, _bar, sweep_fixed, sweep_grid, sweep_optimal
+
+__all__ = [
+    "NonsmoothPoint",
+    "NonsmoothReport",
+    "find_nonsmooth_fixed",
+    "find_nonsmooth_optimal",
+    "LOCATE_TOL",
+]
+
+#: width of the th0 bracket every point is located to
+LOCATE_TOL = 1e-10
+#: label changes closer than this are one point (simultaneous-event band is ~1e-9 wide)
+MERGE_TOL = 1e-7
+#: one-sided limits further apart than this are a jump (outcome/value error ~1e-11; the policy's
+#: own tolerance, ~1e-8 from the bounded Brent stop rule, sets its larger threshold)
+JUMP_TOL = {"outcome": 1e-7, "value": 1e-7, "policy": 1e-5}
+#: absolute part of the kink threshold on one-sided first derivatives
+KINK_TOL = {"outcome": 1e-5, "value": 1e-5, "policy": 1e-3}
+#: relative threshold on second derivatives (C^1 quantities only)
+SECOND_TOL = 1e-2
+#: largest and smallest one-sided steps [rad]
+H0 = 1e-2
+H_MIN = 1e-6
+#: shrink factor of the one-sided step between ladders
+SHRINK = 8.0
+
+
+def _one_sided_converged(
+    f: Callable[[float], float], x: float, side: int, h: float, h_min: float
+) -> OneSided:
+    """One-sided limit and derivatives from ladders shrinking by SHRINK until two agree.
+
+    A coarse ladder over a strongly curved piece (a policy that turns sharply before a bound)
+    extrapolates badly; two successive ladders agreeing in limit and slope means the finer one
+    has left that regime (and is more accurate in the second derivative).
+    """
+    est = one_sided(f, x, side, h0=h)
+    best, best_gap = est, math.inf
+    while h / SHRINK >= h_min:
+        h /= SHRINK
+        finer = one_sided(f, x, side, h0=h)
+        scale = max(1.0, abs(est.derivative), abs(finer.derivative))
+        gap = abs(finer.derivative - est.derivative) / scale
+        if abs(finer.limit - est.limit) <= 1e-9 * max(1.0, abs(est.limit)) + 1e-3 * h:
+            if gap <= 1e-3:
+                return finer
+            if gap < best_gap:
+                best, best_gap = est, gap
+        est = finer
+    # no two ladders agreed: noise grows as the step shrinks, keep the most consistent coarse one
+    return best if math.isfinite(best_gap) else est
+
+
+@dataclass(frozen=True)
+class NonsmoothPoint:
+    """A th0 where one quantity is not C^1 (or, for C^1 quantities, not C^2).
+
+    ``left``/``right`` are what differs: the one-sided limits for a jump, first derivatives for
+    a kink, second derivatives for a second-derivative jump; all three pairs are kept as well.
+    """
+
+    theta0: float
+    quantity: str  #: "outcome", "policy" or "value"
+    input: str | None  #: the policy component (None for outcome and value)
+    kind: str  #: "jump", "kink" or "second-derivative"
+    left: float
+    right: float
+    cause: str
+    limits: tuple[float, float]
+    derivatives: tuple[float, float]
+    second_derivatives: tuple[float, float]
+    at: float  #: the quantity at theta0 itself
+    bracket: tuple[float, float]  #: width <= LOCATE_TOL (wider only for a simultaneous band)
+    labels: tuple[str, str]  #: mode order left | right
+
+    def as_dict(self) -> dict:
+        return {
+            "theta0": self.theta0,
+            "quantity": self.quantity,
+            "input": self.input,
+            "kind": self.kind,
+            "left": self.left,
+            "right": self.right,
+            "cause": self.cause,
+            "limits": list(self.limits),
+            "derivatives": list(self.derivatives),
+            "second_derivatives": list(self.second_derivatives),
+            "at": self.at,
+            "bracket": list(self.bracket),
+            "modes": list(self.labels),
+        }
+
+
+@dataclass(frozen=True)
+class NonsmoothReport:
+    """Every nonsmooth point found along a sweep, sorted by th0."""
+
+    subject: str  #: maneuver (fixed inputs) or problem name
+    optimal: bool
+    theta0_range: tuple[float, float]
+    grid_size: int
+    points: tuple[NonsmoothPoint, ...]
+    nsim: int = field(default=0)
+
+    def as_dict(self) -> dict:
+        return {
+            "subject": self.subject,
+            "optimal": self.optimal,
+            "theta0_range": list(self.theta0_range),
+            "grid_size": self.grid_size,
+            "points": [p.as_dict() for p in self.points],
+        }
+
+    def to_json(self, **kwargs: object) -> str:
+        return json.dumps(self.as_dict(), **kwargs)  # type: ignore[arg-type]
+
+    def table(self) -> str:
+        """A plain-text table, one line per point."""
+        lines = [f"{'theta0':>16} {'quantity':<10} {'kind':<17} {'left':>14} {'right':>14}  cause"]
+        for p in self.points:
+            q = p.quantity if p.input is None else f"{p.quantity}:{p.input}"
+            lines.append(
+                f"{p.theta0:>16.10g} {q:<10} {p.kind:<17} {p.left:>14.9g} {p.right:>14.9g}  "
+                f"{p.cause}"
+            )
+        return "\n".join(lines)
+
+
+# --- evaluation samples ----------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Sample:
+    label: Hashable
+    values: dict[str, float]  # "outcome", "value", "policy:u1"...
+    branch: str
+    active: str | None = None
+    bound: str | None = None
+    result: OptimalResult | None = None
+
+
+class _Evaluator:
+    """th0 -> _Sample with a cache (bisection and one-sided ladders revisit points)."""
+
+    def __init__(self, fn: Callable[[float], _Sample]) -> None:
+        self.fn = fn
+        self.cache: dict[float, _Sample] = {}
+
+    def __call__(self, th: float) -> _Sample:
+        th = float(th)
+        if th not in self.cache:
+            self.cache[th] = self.fn(th)
+        return self.cache[th]
+
+    def label(self, th: float) -> Hashable:
+        return self(th).label
+
+
+def _optimal_sample(r: OptimalResult) -> _Sample:
+    values = {"outcome": r.outcome, "value": r.value}
+    values.update({f"policy:{d}": v for d, v in r.policy.items()})
+    return _Sample(label=(r.branch, r.active, r.bound), values=values, branch=r.branch,
+                   active=r.active, bound=r.bound, result=r)
+
+
+# --- the engine -------------------------------------------------------------------------------
+def _switches(ev: _Evaluator, grid: npt.NDArray[np.float64], progress: Progress
+              ) -> list[tuple[float, float, Hashable, Hashable]]:
+    """Located label changes as (lo, hi, label_left, label_right), merged across bands."""
+    labels = [ev.label(x) for x in grid]
+    raw = []
+    pairs = [k for k in range(grid.size - 1) if labels[k] != labels[k + 1]]
+    for i, k in enumerate(pairs):
+        lo, hi = locate_switch(ev.label, float(grid[k]), float(grid[k + 1]), tol=LOCATE_TOL)
+        raw.append((lo, hi, labels[k], labels[k + 1]))
+        progress.update(i + 1, max(len(pairs), 1))
+    merged: list[tuple[float, float, Hashable, Hashable]] = []
+    for lo, hi, la, lb in raw:
+        if merged and lo - merged[-1][1] <= MERGE_TOL:
+            plo, _, pla, _ = merged[-1]
+            merged[-1] = (plo, hi, pla, lb)
+        else:
+            merged.append((lo, hi, la, lb))
+    return merged
+
+
+def _classify(
+    name: str, left: OneSided, right: OneSided, at: float
+) -> tuple[str, float, float] | None:
+    family = name.split(":")[0]
+    if abs(right.limit - left.limit) > JUMP_TOL[family] * max(1.0, abs(left.limit)):
+        return "jump", left.limit, right.limit
+    scale = max(1.0, abs(left.derivative), abs(right.derivative))
+    noise = 10.0 * (left.derivative_error + right.derivative_error)
+    if abs(right.derivative - left.derivative) > max(KINK_TOL[family] * scale, noise):
+        return "kink", left.derivative, right.derivative
+    if family != "policy":
+        d2l, d2r = left.second_derivative, right.second_derivative
+        if abs(d2r - d2l) > SECOND_TOL * max(1.0, abs(d2l), abs(d2r)):
+            return "second-derivative", d2l, d2r
+    return None
+
+
+def _cause(sl: _Sample, sr: _Sample, optimal: bool, policy_jumps: bool) -> str:
+    causes = []
+    if sl.branch != sr.branch:
+        # the optimum changes branch although both branches exist on both sides: the global
+        # minimum jumps between two local minima (not a change of which modes are possible)
+        both = (
+            sl.result is not None and sr.result is not None
+            and sr.branch in {c.branch for c in sl.result.candidates}
+            and sl.branch in {c.branch for c in sr.result.candidates}
+        )
+        if optimal and policy_jumps and both:
+            causes.append(
+                f"optimal branch switches: {sl.branch} | {sr.branch} "
+                "(the global minimum moves to another local minimum)"
+            )
+        else:
+            causes.append(f"mode order changes: {sl.branch} | {sr.branch}")
+    if optimal and sl.active != sr.active:
+        causes.append(f"acting input changes: {sl.active or 'none'} | {sr.active or 'none'}")
+    if optimal and sl.bound != sr.bound and sl.active == sr.active and sl.result is not None:
+        d = sl.active
+        problem = sl.result.problem
+        if d is not None:
+            lo, hi = problem.bound(d)
+            if sr.bound is not None:
+                which = sr.bound
+                value = lo if which == "lower" else hi
+                verb = "reaches" if sl.bound is None else "moves to"
+                causes.append(f"input {d} {verb} its {which} bound {value:g}")
+            else:
+                which = sl.bound
+                value = lo if which == "lower" else hi
+                causes.append(f"input {d} leaves its {which} bound {value:g}")
+    return "; ".join(causes) if causes else "change of label without a mode change"
+
+
+def _analyse(
+    ev: _Evaluator,
+    grid: npt.NDArray[np.float64],
+    quantities: list[str],
+    limit: float,
+    optimal: bool,
+    progress: Progress,
+) -> list[NonsmoothPoint]:
+    switches = _switches(ev, grid, progress)
+    points: list[NonsmoothPoint] = []
+    xs = [0.0 if lo <= 0.0 <= hi else 0.5 * (lo + hi) for lo, hi, _, _ in switches]
+    for i, (lo, hi, _, _) in enumerate(switches):
+        x = xs[i]
+        left_gap = x - (xs[i - 1] if i > 0 else -limit)
+        right_gap = (xs[i + 1] if i + 1 < len(xs) else limit) - x
+        # stay inside the smooth pieces on each side, and beyond the bracket/band
+        h = min(H0, 0.45 * left_gap, 0.45 * right_gap)
+        h_min = max(H_MIN, 64.0 * (hi - lo))
+        h = max(h, h_min)
+        sides = {}
+        for q in quantities:
+            f = (lambda name: (lambda th: ev(th).values[name]))(q)
+            sides[q] = (_one_sided_converged(f, x, -1, h, h_min),
+                        _one_sided_converged(f, x, +1, h, h_min))
+        policy_jumps = any(
+            abs(sides[q][1].limit - sides[q][0].limit) > JUMP_TOL["policy"]
+            for q in quantities if q.startswith("policy:")
+        )
+        sl = ev(x - h / 16)
+        sr = ev(x + h / 16)
+        cause = _cause(sl, sr, optimal, policy_jumps)
+        for q in quantities:
+            left, right = sides[q]
+            found = _classify(q, left, right, ev(x).values[q])
+            if found is None:
+                continue
+            kind, a, b = found
+            family, _, comp = q.partition(":")
+            points.append(
+                NonsmoothPoint(
+                    theta0=x,
+                    quantity=family,
+                    input=comp or None,
+                    kind=kind,
+                    left=a,
+                    right=b,
+                    cause=cause,
+                    limits=(left.limit, right.limit),
+                    derivatives=(left.derivative, right.derivative),
+                    second_derivatives=(left.second_derivative, right.second_derivative),
+                    at=ev(x).values[q],
+                    bracket=(lo, hi),
+                    labels=(sl.branch, sr.branch),
+                )
+            )
+    return points
+
+
+# --- public API -------------------------------------------------------------------------------
+def find_nonsmooth_fixed(
+    maneuver: str,
+    theta0: npt.ArrayLike | None = None,
+    inputs: npt.ArrayLike | None = None,
+    *,
+    params: BipedParams | None = None,
+    options: SimulatorOptions = DEFAULT_OPTIONS,
+    num: int = 401,
+    progress: bool = False,
+) -> NonsmoothReport:
+    """Nonsmooth points of the outcome th_f(th0) at fixed inputs (default: the paper's).
+
+    ``theta0`` is the sweep grid (default: ``num`` points over the valid range, 0 included).
+    """
+    s = spec(maneuver)
+    name = s.maneuver.value
+    u = check_inputs(FIXED_INPUTS[name] if inputs is None else inputs)
+    grid = sweep_grid(name, num=num) if theta0 is None else np.asarray(theta0, dtype=float)
+    sweep = sweep_fixed(name, grid, u, params=params, options=options, progress=progress)
+    nsim = [0]
+
+    def sample(th: float) -> _Sample:
+        tr = simulate(name, th, u, params=params, options=options)
+        nsim[0] += 1
+        label = branch_label(tr.mode_sequence, tr.success, tr.status.name)
+        return _Sample(label=label, values={"outcome": tr.outcome}, branch=label)
+
+    ev = _Evaluator(sample)
+    for k, th in enumerate(sweep.theta0):
+        ev.cache[float(th)] = _Sample(
+            label=sweep.branch[k], values={"outcome": float(sweep.outcome[k])},
+            branch=sweep.branch[k],
+        )
+    bar = _bar(progress, 1, f"{name} locating")
+    points = _analyse(ev, sweep.theta0, ["outcome"], s.theta0_limit, False, bar)
+    return NonsmoothReport(
+        subject=name,
+        optimal=False,
+        theta0_range=(float(sweep.theta0[0]), float(sweep.theta0[-1])),
+        grid_size=int(sweep.theta0.size),
+        points=tuple(points),
+        nsim=nsim[0] + int(sweep.theta0.size),
+    )
+
+
+def find_nonsmooth_optimal(
+    problem: OptimalControlProblem,
+    theta0: npt.ArrayLike | None = None,
+    *,
+    num: int = 201,
+    progress: bool = False,
+) -> NonsmoothReport:
+    """Nonsmooth points of the optimal outcome, policy and value (Eqs. (5), (6) of [1]_).
+
+    ``theta0`` is the sweep grid (default: ``num`` points over the valid range, 0 included).
+    """
+    if not isinstance(problem, OptimalControlProblem):
+        raise InvalidInputError(f"problem must be an OptimalControlProblem, got {problem!r}")
+    grid = (sweep_grid(problem.maneuver, num=num) if theta0 is None
+            else np.asarray(theta0, dtype=float))
+    sweep = sweep_optimal(problem, grid, progress=progress)
+    nsim = [0]
+
+    def sample(th: float) -> _Sample:
+        r = optimal_policy(problem, th)
+        nsim[0] += r.nsim
+        return _optimal_sample(r)
+
+    ev = _Evaluator(sample)
+    for r in sweep.results:
+        ev.cache[float(r.theta0)] = _optimal_sample(r)
+    quantities = ["outcome", *(f"policy:{d}" for d in problem.decisions), "value"]
+    bar = _bar(progress, 1, f"{problem.name} locating")
+    points = _analyse(ev, sweep.theta0, quantities, spec(problem.maneuver).theta0_limit, True,
+                      bar)
+    return NonsmoothReport(
+        subject=problem.name,
+        optimal=True,
+        theta0_range=(float(sweep.theta0[0]), float(sweep.theta0[-1])),
+        grid_size=int(sweep.theta0.size),
+        points=tuple(points),
+        nsim=nsim[0] + int(sweep.nsim.sum()),
+    )
