@@ -15,7 +15,7 @@ it and returns a JSON-ready dict:
   most accurate is biped_opt at its default tolerance (checked against itself at rtol 1e-14 in
   ``reference_self_check``), and biped_opt's own entry is its error against solve_ivp;
 - ``sweep_s``: a 401-point fixed-input sweep per maneuver through the batch path
-  (:func:`biped_opt.fixed_sweep.fixed_sweep`), median of a few repeats after warm-up;
+  (:func:`biped_opt.optimal.sweep.sweep_fixed`, one batch), median of a few repeats after warm-up;
 - ``compile_s``: a fresh interpreter importing biped_opt and simulating once, with
   ``NUMBA_CACHE_DIR`` an empty directory (cold compile) and then the same directory (cached).
 """
@@ -184,7 +184,8 @@ def run_benchmark(
     interpreters and reports their entries as None.
     """
     import biped_opt
-    from biped_opt.fixed_sweep import fixed_sweep, theta_grid
+    from biped_opt.fixed_sweep import theta_grid
+    from biped_opt.optimal.sweep import sweep_fixed
 
     cases = make_cases(n_cases, seed)
     rounds = 1 if quick else 3
@@ -251,11 +252,11 @@ def run_benchmark(
     sweep = {}
     for m in THETA_LIMIT:
         grid = theta_grid(-THETA_LIMIT[m], THETA_LIMIT[m], sweep_points)
-        fixed_sweep(m, grid)
+        sweep_fixed(m, grid, chunks=1)
         times = []
         for _ in range(sweep_repeats):
             t0 = time.perf_counter()
-            result = fixed_sweep(m, grid)
+            result = sweep_fixed(m, grid, chunks=1)
             times.append(time.perf_counter() - t0)
         if not np.all(result.success):
             raise RuntimeError(f"the {m} sweep has failed trajectories")

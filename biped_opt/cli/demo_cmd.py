@@ -1,41 +1,25 @@
-"""``biped-opt demo``: the paper's fixed-input sweeps and the nonsmooth points they reveal."""
+"""``biped-opt demo``: the paper's full reproduction (figures and the nonsmooth table)."""
 
 from __future__ import annotations
 
 import argparse
-import time
-
-from biped_opt.fixed_sweep import FIXED_INPUTS, fixed_sweep, outcome_breaks, theta_grid
-from biped_opt.maneuvers import spec
+from pathlib import Path
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("demo", help="run the paper's fixed-input sweeps and locate kink and jump")
-    p.add_argument("--num", type=int, default=401, help="grid points per sweep (default 401)")
+    p = sub.add_parser("demo", help="reproduce the paper: sweeps, nonsmooth table, figures")
+    p.add_argument("--out", type=Path, default=Path("out"), help="output directory (default out/)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.num < 3:
-        from biped_opt.errors import InvalidInputError
+    from biped_opt.plots.reproduce import reproduce
 
-        raise InvalidInputError(f"--num must be at least 3, got {args.num}")
-    print("Fixed-input sweeps of the outcome th(t_f) over th0 (MODEL.md Secs. 5-6)")
-    for maneuver in ("touchdown", "liftoff"):
-        limit = spec(maneuver).theta0_limit
-        grid = theta_grid(-limit, limit, args.num)
-        start = time.perf_counter()
-        sweep = fixed_sweep(maneuver, grid)
-        elapsed = time.perf_counter() - start
-        u = FIXED_INPUTS[maneuver]
-        print(
-            f"\n{maneuver}: {grid.size} angles in [{-limit}, {limit}], inputs "
-            f"(u1, u2, u12) = {u}, {int(sweep.success.sum())} ok, {elapsed * 1e3:.1f} ms"
-        )
-        for b in outcome_breaks(maneuver, sweep):
-            print(f"  {b.kind} at th0 = {b.theta0:+.3e}")
-            print(f"    sequences   {' -> '.join(b.sequence_left)}  |  "
-                  f"{' -> '.join(b.sequence_right)}")
-            print(f"    limits      left {b.left_limit:+.9f}   right {b.right_limit:+.9f}")
-            print(f"    slopes      left {b.left_slope:+.9f}   right {b.right_slope:+.9f}")
+    result = reproduce(args.out / "figures", progress=False)
+    print("Nonsmooth points of outcomes, optimal policies and values (left | right)\n")
+    print(result.table())
+    print()
+    for path in (*result.figures, result.captions):
+        print(f"wrote {path}")
+    print(f"reproduction took {result.seconds:.1f} s")
     return 0

@@ -22,6 +22,7 @@ COMMAND_MODULES = (
     "optimise_cmd",
     "sweep_cmd",
     "nonsmooth_cmd",
+    "figures_cmd",
 )
 
 EXIT_USAGE = 2

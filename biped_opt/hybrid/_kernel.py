@@ -47,7 +47,7 @@ EVENT_WIDTH = 6 + 2 * NSTATE
 SAMPLE_WIDTH = 1 + NSTATE + 3
 
 NGUARDS = 3
-#: |guard| below which a second armed guard moving toward zero flips with the first (MODEL.md Sec. 3)
+#: |guard| below which another armed guard moving toward zero flips with the first (MODEL.md 3)
 SIMULTANEOUS_TOL = 1e-9
 #: a flipped guard stays disarmed until it is farther than this from zero
 REARM_TOL = 1e-10
@@ -125,7 +125,7 @@ def _step(p, mode, u, term_sign, y, f, h, K, y_new, f_new, lam_new, tmp, rtol, a
 
 @nb.njit(cache=True, error_model="numpy")
 def _dense_coefficients(p, mode, u, y, f, h, K, y_new, f_new, F, tmp, lam):
-    """Coefficients F (7, 14) of the 7th-order interpolant on the step just taken (3 more stages)."""
+    """Coefficients F (7, 14) of the 7th-order interpolant on the step just taken (3 stages)."""
     n = y.shape[0]
     for s in range(_NSTAGES + 1, 16):
         for i in range(n):

@@ -72,7 +72,8 @@ class FixedSweepData:
     event_times: Sequence[Array]
     modes: Sequence[Sequence[int]]
     t_final: Array
-    marks: Sequence[NonsmoothMark] = field(default=())
+    marks: Sequence[NonsmoothMark] = field(default=())  #: on the outcome panels
+    cost_marks: Sequence[NonsmoothMark] = field(default=())  #: on the cost panels
 
 
 @dataclass(frozen=True)
@@ -121,13 +122,13 @@ def figure2(touchdown: FixedSweepData, liftoff: FixedSweepData, path: Path) -> P
         ax.set_title(f"({'ab'[col]}) {data.maneuver} outcome, u = ({u})", fontsize=10)
         ax.set_xlabel(r"initial pitch $\theta_0$ [rad]")
         ax.set_ylabel(r"outcome $\theta(t_f)$ [rad]")
-        _annotate(ax, [m for m in data.marks if m.label != "cost"])
+        _annotate(ax, data.marks)
         ax = axes[1, col]
         ax.plot(data.theta0, data.cost, ".", ms=2.5, color="k")
         ax.set_title(f"({'cd'[col]}) {data.maneuver} cost at fixed inputs", fontsize=10)
         ax.set_xlabel(r"initial pitch $\theta_0$ [rad]")
         ax.set_ylabel(r"cost $c(\theta_0, u)$ [rad$^2$]")
-        _annotate(ax, [m for m in data.marks if m.label == "cost"])
+        _annotate(ax, data.cost_marks)
     fig.suptitle("Fig. 2: outcomes and costs at fixed inputs")
     return _finish(fig, path)
 

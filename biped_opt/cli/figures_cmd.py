@@ -1,0 +1,33 @@
+"""``biped-opt figures``: the paper's Figs. 2-4 as PNG, with captions and the nonsmooth table."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from biped_opt.errors import InvalidInputError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("figures", help="reproduce the paper's figures (PNG) and nonsmooth table")
+    p.add_argument("--out", type=Path, default=Path("out/figures"), help="output directory")
+    p.add_argument("--fixed-num", type=int, default=401, help="angles per fixed sweep")
+    p.add_argument("--optimal-num", type=int, default=201, help="angles per optimal sweep")
+    p.add_argument("--progress", action="store_true", help="progress bars on stderr")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    for name in ("fixed_num", "optimal_num"):
+        if getattr(args, name) < 5:
+            raise InvalidInputError(f"--{name.replace('_', '-')} must be at least 5")
+    from biped_opt.plots.reproduce import reproduce  # matplotlib only when drawing
+
+    result = reproduce(args.out, fixed_num=args.fixed_num, optimal_num=args.optimal_num,
+                       progress=args.progress)
+    print(result.table())
+    print()
+    for path in (*result.figures, result.captions):
+        print(f"wrote {path}")
+    print(f"reproduction took {result.seconds:.1f} s")
+    return 0
