@@ -243,9 +243,12 @@ def run_benchmark(
         th = np.array([cases[k][1] for k in idx])
         u = np.array([cases[k][2] for k in idx])
         biped_opt.simulate_batch(m, th, u)
-        t0 = time.perf_counter()
-        batch = biped_opt.simulate_batch(m, th, u)
-        batch_times.append(time.perf_counter() - t0)
+        best = float("inf")
+        for _ in range(5):  # fastest of a few repeats, as for the per-call timings
+            t0 = time.perf_counter()
+            batch = biped_opt.simulate_batch(m, th, u)
+            best = min(best, time.perf_counter() - t0)
+        batch_times.append(best)
         if np.max(np.abs(batch.outcome - out_bo[idx])) > 1e-12:
             raise RuntimeError(f"simulate_batch and simulate disagree on the {m} cases")
 

@@ -18,7 +18,7 @@ import numpy.typing as npt
 from biped_opt.errors import InvalidInputError, InvalidParameterError, SimulationError
 from biped_opt.hybrid import _kernel as K
 from biped_opt.hybrid.trajectory import Status, Trajectory
-from biped_opt.maneuvers import ManeuverSpec, check_theta0, initial_state, parse_maneuver, spec
+from biped_opt.maneuvers import ManeuverSpec, initial_state, parse_maneuver, spec
 from biped_opt.model.biped import NSTATE
 from biped_opt.model.modes import ContactMode
 from biped_opt.model.params import BipedParams
@@ -199,22 +199,28 @@ def simulate_batch(
         raise InvalidInputError(f"theta0 must be a 1-D array of angles, got shape {th.shape}")
     n = th.size
     u_arr = np.zeros((n, 3))
-    raw = np.zeros(0) if inputs is None else np.asarray(inputs, dtype=np.float64)
+    try:
+        raw = np.zeros(0) if inputs is None else np.asarray(inputs, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"inputs must be numbers, got {inputs!r}") from None
     if raw.ndim <= 1:
         u_arr[:] = check_inputs(raw)
-    elif raw.ndim == 2 and raw.shape[0] == n:
-        for k in range(n):
-            u_arr[k] = check_inputs(raw[k])
+    elif raw.ndim == 2 and raw.shape[0] == n and raw.shape[1] <= 3:
+        u_arr[:, : raw.shape[1]] = raw
+        bad = np.argwhere(~np.isfinite(u_arr))
+        if bad.size:
+            k, i = bad[0]
+            raise InvalidInputError(
+                f"{INPUT_NAMES[i]} of case {k} must be finite, got {u_arr[k, i]}"
+            )
     else:
         raise InvalidInputError(
             f"inputs must have shape (<=3,) or ({n}, <=3) for {n} angles, got {raw.shape}"
         )
     y0s = np.empty((n, NSTATE))
-    modes0 = np.empty(n, dtype=np.int64)
     for k in range(n):
-        check_theta0(s.maneuver, th[k])
-        y0s[k], mode0 = initial_state(s.maneuver, th[k], params)
-        modes0[k] = int(mode0)
+        y0s[k] = initial_state(s, th[k], params)[0]  # validates each angle
+    modes0 = np.full(n, int(s.initial_mode), dtype=np.int64)
     events = np.zeros((n, options.max_events + 1, K.EVENT_WIDTH))
     y_out = np.empty((n, NSTATE))
     info = np.empty((n, 8))

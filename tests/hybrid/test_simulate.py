@@ -218,6 +218,15 @@ def test_bad_arguments_raise_naming_the_argument(kwargs, error, match):
         simulate(**kwargs)
 
 
+def test_batch_validates_every_case():
+    with pytest.raises(InvalidInputError, match="u12 of case 1 must be finite"):
+        simulate_batch("liftoff", [0.1, 0.2], [[1.5, 3.0, 0.0], [1.5, 3.0, math.nan]])
+    with pytest.raises(InvalidInputError, match="outside the valid range"):
+        simulate_batch("touchdown", [0.1, 0.3], (2.0, 0.5))
+    with pytest.raises(InvalidInputError, match="inputs must have shape"):
+        simulate_batch("touchdown", [0.1, 0.2], np.zeros((3, 2)))
+
+
 def test_bad_options():
     with pytest.raises(InvalidParameterError, match="rtol"):
         SimulatorOptions(rtol=0.0)
