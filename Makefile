@@ -6,7 +6,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench venv clean
+.PHONY: demo test lint bench venv clean
 
 venv: $(STAMP)
 
@@ -19,8 +19,11 @@ $(STAMP): requirements.txt requirements-dev.txt setup.py
 demo: $(STAMP)
 	$(VENV)/bin/biped-opt demo
 
-test: $(STAMP)
+test: $(STAMP) lint
 	$(PY) -m pytest
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check biped_opt tests bench launch
 
 bench: $(STAMP)
 	$(VENV)/bin/biped-opt bench

@@ -1,5 +1,6 @@
 """Packaging for biped_opt: an ament_python package that also installs with plain pip."""
 
+from glob import glob
 from pathlib import Path
 
 from setuptools import find_packages, setup
@@ -22,6 +23,12 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{package_name}"]),
         (f"share/{package_name}", ["package.xml"]),
+        (f"share/{package_name}/launch", sorted(glob("launch/*_launch.py"))),
+        (f"share/{package_name}/config", sorted(glob("config/*.yaml"))),
+        # the interface definitions the built-in DDS backend generates its types from
+        (f"share/{package_name}/msg_defs", ["msg_defs/package.xml", "msg_defs/CMakeLists.txt"]),
+        (f"share/{package_name}/msg_defs/msg", sorted(glob("msg_defs/msg/*.msg"))),
+        (f"share/{package_name}/msg_defs/srv", sorted(glob("msg_defs/srv/*.srv"))),
     ],
     install_requires=pinned_requirements(),
     python_requires=">=3.10",
@@ -33,6 +40,9 @@ setup(
     entry_points={
         "console_scripts": [
             "biped-opt = biped_opt.cli.main:main",
+            "simulator = biped_opt.nodes.simulator:main",
+            "optimiser = biped_opt.nodes.optimiser:main",
+            "recorder = biped_opt.nodes.recorder:main",
         ],
     },
 )

@@ -1,0 +1,284 @@
+"""MCAP files of biped_opt sweeps in the ROS 2 profile (MCAP.md).
+
+Every file opens in ``ros2 bag info/play``, Foxglove and the ``mcap``/``rosbags`` readers:
+
+- header profile ``ros2``; messages ``cdr``, serialized from the ``msg_defs/`` definitions;
+- schemas ``ros2msg``: the ``.msg`` text followed by each dependency after a line of 80 ``=`` and
+  ``MSG: pkg/Type`` (rosbags' ``generate_msgdef``);
+- channel metadata ``offered_qos_profiles`` (rosbag2's YAML with integer enums, which Humble
+  requires) and ``topic_type_hash`` (RIHS01);
+- zstd chunks with message indexes, statistics and summary offsets (the ``mcap`` writer's
+  defaults, which ``ros2 bag`` needs to list topics);
+- a ``biped_opt.sweep`` metadata record with the sweep's parameters.
+
+Log times are integer nanoseconds: a sample's simulation time offset by the start of its sweep
+point, so a sweep replays in order. :class:`SweepWriter` is a context manager; it finishes the file
+on normal exit and on exceptions, and :meth:`SweepWriter.finish_on_signals` makes SIGINT/SIGTERM
+finish it too: a signal that arrives while a write is under way is held until the write is done, so
+the file never ends in the middle of a batch.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from pathlib import Path
+from types import FrameType
+from typing import IO, Any
+
+import numpy as np
+import numpy.typing as npt
+from mcap.writer import CompressionType, Writer
+
+import biped_opt
+from biped_opt.errors import BipedOptError
+from biped_opt.record.cdr import FixedLayout, compile_layout, numpy_dtype
+from biped_opt.ros.interfaces import load_interfaces
+
+__all__ = [
+    "RecordError",
+    "TOPICS",
+    "SweepWriter",
+    "qos_yaml",
+    "NS",
+]
+
+NS = 1_000_000_000
+
+#: the recorded topics: name -> (ROS type, offered QoS as rosbag2 integer enums)
+#: history 1 = KEEP_LAST, reliability 1 = RELIABLE / 2 = BEST_EFFORT, durability 1 =
+#: TRANSIENT_LOCAL / 2 = VOLATILE, liveliness 1 = AUTOMATIC
+TOPICS: dict[str, tuple[str, dict[str, int]]] = {
+    "/biped/state": (
+        "biped_opt_interfaces/msg/BipedState",
+        {"history": 1, "depth": 5, "reliability": 2, "durability": 2},
+    ),
+    "/biped/contact_mode": (
+        "biped_opt_interfaces/msg/ContactMode",
+        {"history": 1, "depth": 10, "reliability": 1, "durability": 1},
+    ),
+    "/biped/sweep": (
+        "biped_opt_interfaces/msg/SweepPoint",
+        {"history": 1, "depth": 10, "reliability": 1, "durability": 2},
+    ),
+}
+
+
+class RecordError(BipedOptError, OSError):
+    """A recording cannot be written or read."""
+
+
+def qos_yaml(profile: Mapping[str, int]) -> str:
+    """rosbag2's ``offered_qos_profiles`` YAML for one publisher, enums as integers."""
+    lines = [
+        f"- history: {profile['history']}",
+        f"  depth: {profile['depth']}",
+        f"  reliability: {profile['reliability']}",
+        f"  durability: {profile['durability']}",
+    ]
+    for name in ("deadline", "lifespan", "liveliness_lease_duration"):
+        lines += [f"  {name}:", "    sec: 2147483647", "    nsec: 4294967295"]
+    lines += ["  liveliness: 1", "  avoid_ros_namespace_conventions: false"]
+    return "\n".join(lines)
+
+
+class SweepWriter:
+    """Write a sweep (SweepPoints, states, contact modes) to one MCAP file.
+
+    ``output`` is a path or a binary stream (tests use ``BytesIO``). Use as a context manager, or
+    call :meth:`finish` yourself; writing after finishing raises :class:`RecordError`.
+    """
+
+    def __init__(
+        self,
+        output: str | Path | IO[bytes],
+        *,
+        metadata: Mapping[str, str] | None = None,
+        chunk_size: int = 1 << 20,
+        compression: str = "zstd",
+    ) -> None:
+        try:
+            kind = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
+                    "none": CompressionType.NONE}[compression]
+        except KeyError:
+            raise RecordError(
+                f"compression must be zstd, lz4 or none, got {compression!r}"
+            ) from None
+        self.path = Path(output) if isinstance(output, (str, Path)) else None
+        if self.path is not None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._stream: IO[bytes] = open(self.path, "wb")  # noqa: SIM115 - closed in finish()
+        else:
+            self._stream = output  # type: ignore[assignment]
+        self._lock = threading.RLock()
+        self._busy = 0
+        self._pending_signal: int | None = None
+        self._writer = Writer(self._stream, chunk_size=chunk_size, compression=kind)
+        self._writer.start(profile="ros2", library=f"biped_opt {biped_opt.__version__}")
+        self.typestore = load_interfaces().typestore
+        self._channels: dict[str, int] = {}
+        self._layouts: dict[tuple[str, str], FixedLayout] = {}
+        self.counts: dict[str, int] = {topic: 0 for topic in TOPICS}
+        self._sequence = 0
+        self.finished = False
+        for topic, (typename, qos) in TOPICS.items():
+            text, _ = self.typestore.generate_msgdef(typename, ros_version=2)
+            schema = self._writer.register_schema(
+                name=typename, encoding="ros2msg", data=text.encode()
+            )
+            self._channels[topic] = self._writer.register_channel(
+                topic=topic,
+                message_encoding="cdr",
+                schema_id=schema,
+                metadata={
+                    "offered_qos_profiles": qos_yaml(qos),
+                    "topic_type_hash": self.typestore.hash_rihs01(typename),
+                },
+            )
+        if metadata:
+            self._writer.add_metadata("biped_opt.sweep", {k: str(v) for k, v in metadata.items()})
+
+    # -- lifecycle -------------------------------------------------------------------------
+    def __enter__(self) -> SweepWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.finish()
+
+    def finish(self) -> None:
+        """Write the summary (indexes, statistics) and close; safe to call twice."""
+        with self._lock:
+            if self.finished:
+                return
+            self.finished = True
+            self._writer.finish()
+            if self.path is not None:
+                self._stream.close()
+
+    def _check_open(self) -> None:
+        if self.finished:
+            raise RecordError("the recording is already finished")
+
+    @contextlib.contextmanager
+    def _critical(self) -> Iterator[None]:
+        """Hold signals handled by :meth:`finish_on_signals` until the write is complete."""
+        self._busy += 1
+        try:
+            yield
+        finally:
+            self._busy -= 1
+        if not self._busy and self._pending_signal is not None:
+            self._on_signal(self._pending_signal, None)
+
+    def _on_signal(self, signum: int, frame: FrameType | None) -> None:
+        if self._busy:
+            self._pending_signal = signum
+            return
+        self.finish()
+        if signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        raise SystemExit(128 + signum)
+
+    def finish_on_signals(
+        self, signals: Iterable[int] = (signal.SIGINT, signal.SIGTERM)
+    ) -> Callable[[], None]:
+        """Finish the file on ``signals``, then raise KeyboardInterrupt (SIGINT) or SystemExit
+        (128 + signal number). Call from the main thread; returns a function that restores the
+        previous handlers."""
+        previous = {sig: signal.getsignal(sig) for sig in signals}
+        for sig in signals:
+            signal.signal(sig, self._on_signal)
+
+        def restore() -> None:
+            for sig, old in previous.items():
+                signal.signal(sig, old)
+
+        return restore
+
+    # -- messages --------------------------------------------------------------------------
+    def write_raw(self, topic: str, data: bytes, log_time_ns: int) -> None:
+        """One pre-serialized CDR message (encapsulation header included)."""
+        with self._lock, self._critical():
+            self._check_open()
+            self._writer.add_message(
+                self._channels[topic], log_time=int(log_time_ns), data=data,
+                publish_time=int(log_time_ns), sequence=self._sequence,
+            )
+            self._sequence += 1
+            self.counts[topic] += 1
+
+    def write(self, topic: str, fields: Mapping[str, Any], log_time_ns: int) -> None:
+        """One message built from nested field values (dicts for nested messages)."""
+        typename = TOPICS[topic][0]
+        msg = _build(self.typestore, typename, fields)
+        self.write_raw(topic, bytes(self.typestore.serialize_cdr(msg, typename)), log_time_ns)
+
+    def write_states(
+        self,
+        *,
+        maneuver: str,
+        theta0: float,
+        samples: npt.NDArray[np.float64],
+        stamp_offset_ns: int,
+        frame_id: str = "biped",
+    ) -> int:
+        """All samples of one trajectory on ``/biped/state`` in one vectorised pass.
+
+        ``samples`` has the columns of :attr:`biped_opt.hybrid.Trajectory.samples`
+        (t, y (14), mode, lambda_1, lambda_2). Header stamps and log times are
+        ``stamp_offset_ns`` + t. Returns the number written.
+        """
+        key = (maneuver, frame_id)
+        layout = self._layouts.get(key)
+        if layout is None:
+            layout = compile_layout(
+                self.typestore, TOPICS["/biped/state"][0],
+                {"header.frame_id": frame_id, "maneuver": maneuver},
+            )
+            self._layouts[key] = layout
+        n = samples.shape[0]
+        stamps = stamp_offset_ns + np.round(samples[:, 0] * NS).astype(np.int64)
+        msgs = layout.empty(n)
+        msgs["header.stamp.sec"] = stamps // NS
+        msgs["header.stamp.nanosec"] = stamps % NS
+        msgs["theta0"] = theta0
+        msgs["t"] = samples[:, 0]
+        msgs["q"] = samples[:, 1:8]
+        msgs["qdot"] = samples[:, 8:15]
+        msgs["contact_mode"] = samples[:, 15].astype(np.uint8)
+        msgs["contact_force"] = samples[:, 16:18]
+        channel = self._channels["/biped/state"]
+        with self._lock, self._critical():
+            self._check_open()
+            add = self._writer.add_message
+            seq = self._sequence
+            for data, stamp in zip(layout.serialize(msgs), stamps.tolist()):
+                add(channel, log_time=stamp, data=data, publish_time=stamp, sequence=seq)
+                seq += 1
+            self._sequence = seq
+            self.counts["/biped/state"] += n
+        return n
+
+
+def _build(typestore: Any, typename: str, fields: Mapping[str, Any]) -> Any:
+    """A rosbags message object of ``typename`` from (nested) field values."""
+    cls = typestore.types[typename]
+    _consts, defs = typestore.fielddefs[typename]
+    kwargs: dict[str, Any] = {}
+    for name, (kind, spec) in defs:
+        kind = getattr(kind, "name", kind)
+        value = fields.get(name)
+        if kind == "NAME":
+            kwargs[name] = _build(typestore, spec, value or {})
+        elif kind in ("ARRAY", "SEQUENCE"):
+            (_, (base, _)), _count = spec
+            kwargs[name] = np.asarray(value if value is not None else [], dtype=numpy_dtype(base))
+        else:
+            base = spec[0]
+            default: Any = "" if base == "string" else (False if base == "bool" else 0)
+            kwargs[name] = value if value is not None else default
+            if base.startswith("float"):
+                kwargs[name] = float(kwargs[name])
+    return cls(**kwargs)

@@ -1,0 +1,129 @@
+"""One import point for biped_opt's ROS 2 nodes: real rclpy, or the built-in Cyclone DDS backend.
+
+``from biped_opt import ros`` gives the rclpy subset the nodes use (``ros.init``, ``ros.Node``,
+``ros.spin``, executors, QoS profiles...) plus the interface types
+``ros.msgs.BipedState``, ``ros.srvs.OptimalPolicy`` (with ``.Request``/``.Response``).
+The backend is chosen once, at import:
+
+- ``rclpy``: real rclpy and the built ``biped_opt_interfaces`` package are importable;
+- ``dds``: the built-in backend (:mod:`biped_opt.ros.dds`) on PyPI ``cyclonedds``, which speaks
+  rmw_cyclonedds' wire conventions and generates its types from ``msg_defs/`` at run time.
+
+``BIPED_OPT_BACKEND=auto|rclpy|dds`` overrides the choice (``auto`` prefers rclpy).
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import types
+
+from biped_opt.errors import BipedOptError
+
+__all__ = [
+    "BACKEND", "BackendError", "msgs", "srvs", "std_msgs",
+    "init", "shutdown", "try_shutdown", "ok", "spin", "spin_once", "spin_until_future_complete",
+    "Context", "Node", "Future", "Parameter", "SingleThreadedExecutor", "MultiThreadedExecutor",
+    "MutuallyExclusiveCallbackGroup", "ReentrantCallbackGroup", "QoSProfile", "HistoryPolicy",
+    "ReliabilityPolicy", "DurabilityPolicy", "qos_profile_sensor_data",
+    "qos_profile_services_default", "qos_profile_system_default",
+]
+
+
+class BackendError(BipedOptError, ImportError):
+    """The requested ROS backend cannot be imported."""
+
+
+def _rclpy_available() -> bool:
+    try:
+        importlib.import_module("rclpy")
+        importlib.import_module("biped_opt_interfaces.msg")
+    except ImportError:
+        return False
+    return True
+
+
+def _choose() -> str:
+    wanted = os.environ.get("BIPED_OPT_BACKEND", "auto").strip().lower() or "auto"
+    if wanted not in ("auto", "rclpy", "dds"):
+        raise BackendError(f"BIPED_OPT_BACKEND must be auto, rclpy or dds, got {wanted!r}")
+    if wanted == "dds":
+        return "dds"
+    if _rclpy_available():
+        return "rclpy"
+    if wanted == "rclpy":
+        raise BackendError("BIPED_OPT_BACKEND=rclpy but rclpy or biped_opt_interfaces "
+                           "cannot be imported (source the ROS setup and the built workspace)")
+    return "dds"
+
+
+BACKEND = _choose()
+
+if BACKEND == "rclpy":
+    import biped_opt_interfaces.msg as msgs  # type: ignore[import-not-found, no-redef]
+    import biped_opt_interfaces.srv as srvs  # type: ignore[import-not-found, no-redef]
+    import std_msgs.msg as std_msgs  # type: ignore[import-not-found, no-redef]
+    from rclpy import (  # type: ignore[import-not-found, no-redef]
+        init,
+        ok,
+        shutdown,
+        spin,
+        spin_once,
+        spin_until_future_complete,
+        try_shutdown,
+    )
+    from rclpy.callback_groups import (  # type: ignore[import-not-found, no-redef]
+        MutuallyExclusiveCallbackGroup,
+        ReentrantCallbackGroup,
+    )
+    from rclpy.context import Context  # type: ignore[import-not-found, no-redef]
+    from rclpy.executors import (  # type: ignore[import-not-found, no-redef]
+        MultiThreadedExecutor,
+        SingleThreadedExecutor,
+    )
+    from rclpy.node import Node  # type: ignore[import-not-found, no-redef]
+    from rclpy.parameter import Parameter  # type: ignore[import-not-found, no-redef]
+    from rclpy.qos import (  # type: ignore[import-not-found, no-redef]
+        DurabilityPolicy,
+        HistoryPolicy,
+        QoSProfile,
+        ReliabilityPolicy,
+        qos_profile_sensor_data,
+        qos_profile_services_default,
+        qos_profile_system_default,
+    )
+    from rclpy.task import Future  # type: ignore[import-not-found, no-redef]
+else:
+    from .dds import (
+        Context,
+        DurabilityPolicy,
+        Future,
+        HistoryPolicy,
+        MultiThreadedExecutor,
+        MutuallyExclusiveCallbackGroup,
+        Node,
+        Parameter,
+        QoSProfile,
+        ReentrantCallbackGroup,
+        ReliabilityPolicy,
+        SingleThreadedExecutor,
+        init,
+        ok,
+        qos_profile_sensor_data,
+        qos_profile_services_default,
+        qos_profile_system_default,
+        shutdown,
+        spin,
+        spin_once,
+        spin_until_future_complete,
+        try_shutdown,
+    )
+    from .interfaces import PACKAGE, load_interfaces
+
+    _ifc = load_interfaces()
+    msgs = types.SimpleNamespace(**{
+        name.rsplit("/", 1)[1]: _ifc.message_class(name) for name in _ifc.msg_names})
+    srvs = types.SimpleNamespace(**{
+        name.rsplit("/", 1)[1]: svc for name, svc in _ifc.services.items()})
+    std_msgs = types.SimpleNamespace(Header=_ifc.message_class("std_msgs/msg/Header"))
+    del _ifc, PACKAGE

@@ -1,0 +1,64 @@
+"""Built-in ROS 2 backend: the rclpy subset of biped_opt on Cyclone DDS (ROS.md Sec. 4).
+
+Wire-compatible with rmw_cyclonedds_cpp (ROS.md Sec. 2), so its nodes, topics and services are
+visible to and callable from a ROS 2 graph running Cyclone DDS.
+"""
+
+from __future__ import annotations
+
+from .context import (
+    Context,
+    NotInitializedError,
+    get_default_context,
+    init,
+    localhost_only,
+    loopback_config,
+    ok,
+    shutdown,
+    try_shutdown,
+)
+from .executors import (
+    Executor,
+    MultiThreadedExecutor,
+    SingleThreadedExecutor,
+    spin,
+    spin_once,
+    spin_until_future_complete,
+)
+from .futures import Future
+from .node import (
+    Client,
+    Clock,
+    MutuallyExclusiveCallbackGroup,
+    Node,
+    Parameter,
+    ParameterNotDeclaredException,
+    Publisher,
+    ReentrantCallbackGroup,
+    Service,
+    Subscription,
+    Time,
+    Timer,
+    parse_ros_args,
+)
+from .qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_parameters,
+    qos_profile_sensor_data,
+    qos_profile_services_default,
+    qos_profile_system_default,
+)
+
+__all__ = [
+    "Context", "NotInitializedError", "get_default_context", "init", "localhost_only",
+    "loopback_config", "ok", "shutdown", "try_shutdown", "Executor", "MultiThreadedExecutor",
+    "SingleThreadedExecutor", "spin", "spin_once", "spin_until_future_complete", "Future",
+    "Client", "Clock", "MutuallyExclusiveCallbackGroup", "Node", "Parameter",
+    "ParameterNotDeclaredException", "Publisher", "ReentrantCallbackGroup", "Service",
+    "Subscription", "Time", "Timer", "parse_ros_args", "DurabilityPolicy", "HistoryPolicy",
+    "QoSProfile", "ReliabilityPolicy", "qos_profile_parameters", "qos_profile_sensor_data",
+    "qos_profile_services_default", "qos_profile_system_default",
+]

@@ -1,0 +1,221 @@
+"""Contexts of the built-in backend: one Cyclone DDS participant per ``init``.
+
+Mirrors ``rclpy.context.Context``: ``init(args=None, *, context=None, domain_id=None)`` creates the
+participant on ``domain_id`` (else ``$ROS_DOMAIN_ID``, else 0), with participant USER_DATA
+``enclave=/;`` and the ``ros_discovery_info`` writer. ``ROS_LOCALHOST_ONLY=1`` (Humble) and
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (Jazzy) select a loopback-only Cyclone configuration
+unless ``CYCLONEDDS_URI`` gives one.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from typing import Any
+
+from cyclonedds.core import GuardCondition, Policy, Qos
+from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.pub import DataWriter
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+from biped_opt.errors import BipedOptError
+
+from . import graph
+
+__all__ = [
+    "Context", "NotInitializedError", "get_default_context", "init", "shutdown", "try_shutdown",
+    "ok", "localhost_only", "loopback_config",
+]
+
+
+class NotInitializedError(BipedOptError, RuntimeError):
+    """A context was used before ``init`` or after ``shutdown``."""
+
+
+def localhost_only() -> bool:
+    """True when the ROS environment asks for loopback-only discovery."""
+    if os.environ.get("ROS_LOCALHOST_ONLY", "0").strip() == "1":
+        return True
+    return os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "").strip().upper() == "LOCALHOST"
+
+
+def loopback_config() -> str:
+    """Cyclone XML restricting a domain to the loopback interface with unicast discovery.
+
+    Loopback multicast is unreliable in containers, so peers are found by unicast on
+    localhost over the first participant indices.
+    """
+    return (
+        "<CycloneDDS><Domain Id=\"any\"><General><Interfaces>"
+        "<NetworkInterface address=\"127.0.0.1\"/></Interfaces>"
+        "<AllowMulticast>false</AllowMulticast></General>"
+        "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
+        "<MaxAutoParticipantIndex>60</MaxAutoParticipantIndex>"
+        "<Peers><Peer Address=\"localhost\"/></Peers></Discovery>"
+        "</Domain></CycloneDDS>"
+    )
+
+
+_DOMAINS: dict[int, Domain] = {}
+_DOMAIN_LOCK = threading.Lock()
+
+
+def _domain_id(domain_id: int | None) -> int:
+    if domain_id is None:
+        text = os.environ.get("ROS_DOMAIN_ID", "").strip()
+        domain_id = int(text) if text else 0
+    domain_id = int(domain_id)
+    if not 0 <= domain_id <= 232:
+        raise ValueError(f"domain_id must be in 0..232, got {domain_id}")
+    return domain_id
+
+
+def _ensure_domain(domain_id: int) -> None:
+    # A Domain object pins the configuration of a domain id for this process; it must exist
+    # before the first participant on that id and is kept for the process lifetime.
+    if not localhost_only() or os.environ.get("CYCLONEDDS_URI"):
+        return
+    with _DOMAIN_LOCK:
+        if domain_id not in _DOMAINS:
+            _DOMAINS[domain_id] = Domain(domain_id, config=loopback_config())
+
+
+class Context:
+    """A ROS context: one DDS participant, its graph writer and its nodes."""
+
+    def __init__(self) -> None:
+        self._lock = threading.RLock()
+        self._participant: DomainParticipant | None = None
+        self._nodes: list[Any] = []
+        self._guards: list[GuardCondition] = []
+        self._on_shutdown: list[Any] = []
+        self._graph_writer: DataWriter | None = None
+        self.domain_id: int | None = None
+        self.args: list[str] = []
+
+    # -- lifecycle ---------------------------------------------------------------------------
+    def init(self, args: list[str] | None = None, *, domain_id: int | None = None) -> None:
+        with self._lock:
+            if self._participant is not None:
+                raise RuntimeError("Context.init() must only be called once")
+            self.domain_id = _domain_id(domain_id)
+            self.args = list(args) if args is not None else []
+            _ensure_domain(self.domain_id)
+            qos = Qos(Policy.Userdata(data=b"enclave=/;"))
+            self._participant = DomainParticipant(self.domain_id, qos=qos)
+            self._layout = graph.graph_layout()
+            gid_t, node_t, info_t = graph.graph_types(self._layout)
+            self._graph_types = (gid_t, node_t, info_t)
+            topic = Topic(self._participant, graph.GRAPH_TOPIC, info_t, qos=Qos(
+                Policy.DataRepresentation(use_cdrv0_representation=True)))
+            self._graph_writer = DataWriter(self._participant, topic, qos=Qos(
+                Policy.DataRepresentation(use_cdrv0_representation=True),
+                Policy.Reliability.Reliable(max_blocking_time=duration(seconds=1)),
+                Policy.Durability.TransientLocal,
+                Policy.History.KeepLast(depth=1),
+            ))
+            self.publish_graph()
+
+    def ok(self) -> bool:
+        return self._participant is not None
+
+    def shutdown(self) -> None:
+        with self._lock:
+            if self._participant is None:
+                raise NotInitializedError("Context.shutdown(): context is not initialized")
+            self._teardown()
+
+    def try_shutdown(self) -> None:
+        with self._lock:
+            if self._participant is not None:
+                self._teardown()
+
+    def _teardown(self) -> None:
+        for node in list(self._nodes):
+            node.destroy_node()
+        participant, self._participant = self._participant, None
+        for guard in list(self._guards):
+            guard.set(True)
+        for callback in list(self._on_shutdown):
+            callback()
+        self._graph_writer = None
+        self._guards.clear()
+        self._global_executor = None
+        # Delete the DDS participant and, with it, every reader, writer and WaitSet below it.
+        participant.__del__()
+
+    def on_shutdown(self, callback: Any) -> None:
+        self._on_shutdown.append(callback)
+
+    # -- helpers for nodes and executors -----------------------------------------------------
+    @property
+    def participant(self) -> DomainParticipant:
+        if self._participant is None:
+            raise NotInitializedError("context is not initialized (call init() first)")
+        return self._participant
+
+    def new_guard(self) -> GuardCondition:
+        guard = GuardCondition(self.participant)
+        self._guards.append(guard)
+        return guard
+
+    def wake(self) -> None:
+        """Trigger every executor waiting on this context (node added, timer created...)."""
+        for guard in list(self._guards):
+            guard.set(True)
+
+    def add_node(self, node: Any) -> None:
+        with self._lock:
+            self._nodes.append(node)
+        self.publish_graph()
+
+    def remove_node(self, node: Any) -> None:
+        with self._lock:
+            if node in self._nodes:
+                self._nodes.remove(node)
+        self.publish_graph()
+
+    def publish_graph(self) -> None:
+        """Write this participant's ``ParticipantEntitiesInfo`` (nodes and endpoint GIDs)."""
+        with self._lock:
+            if self._participant is None or self._graph_writer is None:
+                return
+            gid_t, node_t, info_t = self._graph_types
+            nodes = []
+            for node in self._nodes:
+                readers, writers = node._endpoint_guids()
+                nodes.append(node_t(
+                    node_namespace=node.get_namespace(), node_name=node.get_name(),
+                    reader_gid_seq=[gid_t(data=graph.gid_bytes(g, self._layout))
+                                    for g in readers],
+                    writer_gid_seq=[gid_t(data=graph.gid_bytes(g, self._layout))
+                                    for g in writers],
+                ))
+            pgid = graph.gid_bytes(self._participant.get_guid().bytes, self._layout)
+            self._graph_writer.write(info_t(gid=gid_t(data=pgid), node_entities_info_seq=nodes))
+
+
+_default_context = Context()
+
+
+def get_default_context() -> Context:
+    return _default_context
+
+
+def init(args: list[str] | None = None, *, context: Context | None = None,
+         domain_id: int | None = None) -> None:
+    """``rclpy.init``: initialise ``context`` (the default context when None)."""
+    (context or _default_context).init(args, domain_id=domain_id)
+
+
+def shutdown(*, context: Context | None = None) -> None:
+    (context or _default_context).shutdown()
+
+
+def try_shutdown(*, context: Context | None = None) -> None:
+    (context or _default_context).try_shutdown()
+
+
+def ok(*, context: Context | None = None) -> bool:
+    return (context or _default_context).ok()

@@ -1,0 +1,234 @@
+"""Executors on a Cyclone DDS WaitSet: ``SingleThreadedExecutor``, ``MultiThreadedExecutor``.
+
+Each subscription, service and client contributes a ReadCondition to the executor's WaitSet; a
+GuardCondition wakes the wait when nodes, timers or futures change; timers bound the wait time.
+As in rclpy, ``spin_once`` runs at most one callback: ready work is queued and drained first.
+"""
+
+from __future__ import annotations
+
+import collections
+import os
+import threading
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+from cyclonedds.core import DDSException, WaitSet
+
+from . import context as _ctx
+from .futures import Future
+
+__all__ = ["Executor", "SingleThreadedExecutor", "MultiThreadedExecutor",
+           "spin", "spin_once", "spin_until_future_complete"]
+
+
+class Executor:
+    """Base executor: node set, WaitSet, ready queue."""
+
+    def __init__(self, *, context: Any = None) -> None:
+        self.context = context or _ctx.get_default_context()
+        self._nodes: list[Any] = []
+        self._lock = threading.RLock()
+        self._ready: collections.deque[tuple[Any, Callable[[], Any]]] = collections.deque()
+        self._waitset: WaitSet | None = None
+        self._waitset_owner: Any = None
+        self._guard: Any = None
+        self._attached: dict[int, Any] = {}
+        self._shutdown = False
+
+    # node set
+    def add_node(self, node: Any) -> bool:
+        with self._lock:
+            if node in self._nodes:
+                return False
+            self._nodes.append(node)
+        self._wake()
+        return True
+
+    def remove_node(self, node: Any) -> None:
+        with self._lock:
+            if node in self._nodes:
+                self._nodes.remove(node)
+        self._wake()
+
+    def get_nodes(self) -> list[Any]:
+        return list(self._nodes)
+
+    def shutdown(self, timeout_sec: float | None = None) -> bool:
+        self._shutdown = True
+        self._wake()
+        return True
+
+    def _wake(self) -> None:
+        guard = self._guard
+        if guard is not None:
+            try:
+                guard.set(True)
+            except DDSException:
+                pass  # guard of a participant that was shut down; replaced on next wait
+
+    # waiting
+    def _sync_waitset(self, entities: list[Any]) -> None:
+        participant = self.context.participant
+        if self._waitset is None or self._waitset_owner is not participant:
+            # First use, or the context was re-initialised with a new participant.
+            self._attached.clear()
+            self._waitset_owner = participant
+            self._waitset = WaitSet(participant)
+            self._guard = self.context.new_guard()
+            self._waitset.attach(self._guard)
+        wanted = {id(e.condition): e.condition for e in entities if e.condition is not None}
+        for key in list(self._attached):
+            if key not in wanted:
+                try:
+                    self._waitset.detach(self._attached.pop(key))
+                except Exception:  # condition already deleted with its reader
+                    pass
+        for key, cond in wanted.items():
+            if key not in self._attached:
+                self._waitset.attach(cond)
+                self._attached[key] = cond
+
+    def _collect(self, timeout_sec: float | None) -> None:
+        """Wait until something is ready (or timeout) and queue its callbacks."""
+        try:
+            self._collect_unguarded(timeout_sec)
+        except (DDSException, _ctx.NotInitializedError):
+            # Another thread shut the context down (deleting the DDS entities) meanwhile.
+            if self.context.ok():
+                raise
+
+    def _collect_unguarded(self, timeout_sec: float | None) -> None:
+        if not self.context.ok():
+            return
+        with self._lock:
+            entities = [e for node in self._nodes for e in node._waitables()]
+        self._sync_waitset(entities)
+        timers = [e for e in entities if hasattr(e, "time_until_next_call")]
+        wait_ns = None if timeout_sec is None or timeout_sec < 0 else int(timeout_sec * 1e9)
+        for timer in timers:
+            due = timer.time_until_next_call()
+            if due is not None:
+                wait_ns = max(due, 0) if wait_ns is None else min(wait_ns, max(due, 0))
+        # A WaitSet timeout is an int64 of nanoseconds; "forever" is the maximum.
+        self._waitset.wait(wait_ns if wait_ns is not None else (1 << 63) - 1)
+        self._guard.take()
+        if not self.context.ok():
+            return
+        for entity in entities:
+            if entity.condition is None and not hasattr(entity, "time_until_next_call"):
+                continue  # publishers: nothing to execute
+            if entity.condition is not None and not entity.condition.is_triggered():
+                continue
+            for task in entity._take():
+                self._ready.append((entity.callback_group, task))
+
+    def _next_task(self, timeout_sec: float | None) -> tuple[Any, Callable[[], Any]] | None:
+        if not self._ready:
+            self._collect(timeout_sec)
+        return self._ready.popleft() if self._ready else None
+
+    # spinning
+    def spin_once(self, timeout_sec: float | None = None) -> None:
+        task = self._next_task(timeout_sec)
+        if task is not None:
+            self._run(*task)
+
+    def _run(self, group: Any, task: Callable[[], Any]) -> None:
+        task()
+
+    def spin(self) -> None:
+        while self.context.ok() and not self._shutdown:
+            self.spin_once()
+
+    def spin_until_future_complete(self, future: Future, timeout_sec: float | None = None
+                                   ) -> None:
+        future.add_done_callback(lambda _f: self._wake())
+        deadline = None if timeout_sec is None else time.monotonic() + timeout_sec
+        while self.context.ok() and not future.done() and not self._shutdown:
+            remaining = None if deadline is None else deadline - time.monotonic()
+            if remaining is not None and remaining <= 0:
+                return
+            self.spin_once(remaining)
+
+
+class SingleThreadedExecutor(Executor):
+    """Runs every callback in the spinning thread."""
+
+
+class MultiThreadedExecutor(Executor):
+    """Runs callbacks on a thread pool; a MutuallyExclusiveCallbackGroup serialises its own."""
+
+    def __init__(self, num_threads: int | None = None, *, context: Any = None) -> None:
+        super().__init__(context=context)
+        self._pool = ThreadPoolExecutor(max_workers=num_threads or os.cpu_count() or 2)
+
+    def _run(self, group: Any, task: Callable[[], Any]) -> None:
+        lock = getattr(group, "lock", None)
+
+        def call() -> None:
+            try:
+                if lock is None:
+                    task()
+                else:
+                    with lock:
+                        task()
+            finally:
+                self._wake()  # let the spinning thread see completed futures at once
+        self._pool.submit(call)
+
+    def spin_once(self, timeout_sec: float | None = None) -> None:
+        # Dispatch everything that is ready, not just one callback, to keep workers busy.
+        task = self._next_task(timeout_sec)
+        while task is not None:
+            self._run(*task)
+            task = self._ready.popleft() if self._ready else None
+
+    def shutdown(self, timeout_sec: float | None = None) -> bool:
+        super().shutdown(timeout_sec)
+        self._pool.shutdown(wait=True)
+        return True
+
+
+def _executor_for(node: Any, executor: Executor | None) -> Executor:
+    if executor is not None:
+        return executor
+    ctx = node.context
+    if getattr(ctx, "_global_executor", None) is None:
+        ctx._global_executor = SingleThreadedExecutor(context=ctx)
+    return ctx._global_executor
+
+
+def spin_once(node: Any, *, executor: Executor | None = None,
+              timeout_sec: float | None = None) -> None:
+    ex = _executor_for(node, executor)
+    added = ex.add_node(node)
+    try:
+        ex.spin_once(timeout_sec=timeout_sec)
+    finally:
+        if added:
+            ex.remove_node(node)
+
+
+def spin(node: Any, executor: Executor | None = None) -> None:
+    ex = _executor_for(node, executor)
+    added = ex.add_node(node)
+    try:
+        while node.context.ok() and not ex._shutdown:
+            ex.spin_once()
+    finally:
+        if added:
+            ex.remove_node(node)
+
+
+def spin_until_future_complete(node: Any, future: Future, executor: Executor | None = None,
+                               timeout_sec: float | None = None) -> None:
+    ex = _executor_for(node, executor)
+    added = ex.add_node(node)
+    try:
+        ex.spin_until_future_complete(future, timeout_sec)
+    finally:
+        if added:
+            ex.remove_node(node)

@@ -1,0 +1,71 @@
+"""The ``ros_discovery_info`` graph topic of rmw_dds_common (ROS.md Sec. 2).
+
+Every context publishes one ``ParticipantEntitiesInfo`` sample listing its nodes and their
+reader/writer GIDs, which is what ``ros2 node list`` reads. ``Gid`` is ``char[24]`` on Humble
+(16-byte DDS GUID zero-padded) and ``char[16]`` on Jazzy; ``BIPED_OPT_GRAPH_LAYOUT=jazzy`` selects
+the latter. ``char`` is declared as an octet (Cyclone 0.10 peers crash on uint8 type objects).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from typing import Any
+
+from cyclonedds.idl import IdlMeta, IdlStruct
+from cyclonedds.idl import types as dt
+
+__all__ = ["GRAPH_TOPIC", "graph_layout", "graph_types", "gid_bytes"]
+
+GRAPH_TOPIC = "ros_discovery_info"
+_ENV_LAYOUT = "BIPED_OPT_GRAPH_LAYOUT"
+_SIZES = {"humble": 24, "jazzy": 16}
+_CACHE: dict[str, tuple[Any, Any, Any]] = {}
+
+
+def graph_layout() -> str:
+    """``humble`` (default) or ``jazzy`` from ``$BIPED_OPT_GRAPH_LAYOUT``."""
+    layout = os.environ.get(_ENV_LAYOUT, "humble").strip().lower() or "humble"
+    if layout not in _SIZES:
+        raise ValueError(f"{_ENV_LAYOUT} must be 'humble' or 'jazzy', got {layout!r}")
+    return layout
+
+
+def _struct(name: str, typename: str, fields: dict[str, tuple[Any, Any]]) -> Any:
+    ns = IdlMeta.__prepare__(name, (IdlStruct,), typename=typename)
+    ns["__annotations__"].update({k: v[0] for k, v in fields.items()})
+    ns.update({k: v[1] for k, v in fields.items()})
+    ns["__module__"] = __name__
+    return dataclasses.dataclass(IdlMeta(name, (IdlStruct,), ns, typename=typename))
+
+
+def graph_types(layout: str | None = None) -> tuple[Any, Any, Any]:
+    """(Gid, NodeEntitiesInfo, ParticipantEntitiesInfo) IdlStructs for one layout."""
+    layout = layout or graph_layout()
+    if layout in _CACHE:
+        return _CACHE[layout]
+    size = _SIZES[layout]
+    gid = _struct("Gid", "rmw_dds_common::msg::dds_::Gid_", {
+        "data": (dt.array[dt.byte, size],
+                 dataclasses.field(default_factory=lambda: [0] * size)),
+    })
+    node = _struct("NodeEntitiesInfo", "rmw_dds_common::msg::dds_::NodeEntitiesInfo_", {
+        "node_namespace": (dt.bounded_str[256], ""),
+        "node_name": (dt.bounded_str[256], ""),
+        "reader_gid_seq": (dt.sequence[gid], dataclasses.field(default_factory=list)),
+        "writer_gid_seq": (dt.sequence[gid], dataclasses.field(default_factory=list)),
+    })
+    info = _struct(
+        "ParticipantEntitiesInfo", "rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_", {
+            "gid": (gid, dataclasses.field(default_factory=gid)),
+            "node_entities_info_seq": (dt.sequence[node],
+                                       dataclasses.field(default_factory=list)),
+        })
+    _CACHE[layout] = (gid, node, info)
+    return _CACHE[layout]
+
+
+def gid_bytes(guid_bytes: bytes, layout: str | None = None) -> list[int]:
+    """A 16-byte DDS GUID as the ``data`` of a ``Gid`` (zero-padded on Humble)."""
+    size = _SIZES[layout or graph_layout()]
+    return list(guid_bytes[:16]) + [0] * (size - 16)
