@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import itertools
+import os
+
 import pytest
 
 from biped_opt.model.params import BipedParams
@@ -18,3 +21,21 @@ REFERENCE = {
 @pytest.fixture
 def params() -> BipedParams:
     return BipedParams()
+
+
+# ROS tests: loopback-only discovery keeps them off the network; set before any DDS participant
+# exists so subprocesses inherit it too.
+os.environ["ROS_LOCALHOST_ONLY"] = "1"
+os.environ.pop("CYCLONEDDS_URI", None)
+
+_DOMAIN_COUNTER = itertools.count()
+
+
+def unique_domain_id() -> int:
+    """A DDS domain id in 1..232 unlikely to collide with other test processes on the machine."""
+    return 1 + (os.getpid() * 37 + next(_DOMAIN_COUNTER) * 11) % 232
+
+
+@pytest.fixture()
+def domain_id() -> int:
+    return unique_domain_id()

@@ -23,6 +23,7 @@ COMMAND_MODULES = (
     "sweep_cmd",
     "nonsmooth_cmd",
     "figures_cmd",
+    "node_cmd",
 )
 
 EXIT_USAGE = 2

@@ -10,6 +10,7 @@ unless ``CYCLONEDDS_URI`` gives one.
 from __future__ import annotations
 
 import os
+import sys
 import threading
 from typing import Any
 
@@ -100,7 +101,8 @@ class Context:
             if self._participant is not None:
                 raise RuntimeError("Context.init() must only be called once")
             self.domain_id = _domain_id(domain_id)
-            self.args = list(args) if args is not None else []
+            # rclpy: args=None means the process's command line
+            self.args = list(args) if args is not None else list(sys.argv)
             _ensure_domain(self.domain_id)
             qos = Qos(Policy.Userdata(data=b"enclave=/;"))
             self._participant = DomainParticipant(self.domain_id, qos=qos)

@@ -112,6 +112,10 @@ class Executor:
             due = timer.time_until_next_call()
             if due is not None:
                 wait_ns = max(due, 0) if wait_ns is None else min(wait_ns, max(due, 0))
+        if threading.current_thread() is threading.main_thread():
+            # Python runs signal handlers only between bytecodes: wake up now and then so that
+            # Ctrl-C (KeyboardInterrupt) and SIGTERM handlers reach a main thread that spins.
+            wait_ns = _SIGNAL_SLICE_NS if wait_ns is None else min(wait_ns, _SIGNAL_SLICE_NS)
         # A WaitSet timeout is an int64 of nanoseconds; "forever" is the maximum.
         self._waitset.wait(wait_ns if wait_ns is not None else (1 << 63) - 1)
         self._guard.take()
@@ -152,6 +156,10 @@ class Executor:
             if remaining is not None and remaining <= 0:
                 return
             self.spin_once(remaining)
+
+
+#: longest uninterrupted wait of a main-thread executor [ns]
+_SIGNAL_SLICE_NS = 100_000_000
 
 
 class SingleThreadedExecutor(Executor):

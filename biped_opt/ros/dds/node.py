@@ -27,6 +27,7 @@ from cyclonedds.topic import Topic
 from biped_opt.errors import BipedOptError
 
 from ..interfaces import ServiceType, load_interfaces
+from ..params_file import load_parameters
 from . import context as _ctx
 from . import graph
 from .futures import Future
@@ -128,8 +129,10 @@ def _parse_value(text: str) -> Any:
     return value
 
 
-def parse_ros_args(args: Iterable[str] | None) -> dict[str, Any]:
-    """Parameter overrides ``-p name:=value`` found inside ``--ros-args ... [--]`` sections."""
+def parse_ros_args(args: Iterable[str] | None, node_name: str | None = None) -> dict[str, Any]:
+    """Parameter overrides inside ``--ros-args ... [--]`` sections: ``-p name:=value`` and, for
+    ``node_name``, ``--params-file FILE`` (its ``/**`` and ``node_name`` sections), later ones
+    overriding earlier ones as in rcl."""
     params: dict[str, Any] = {}
     inside = False
     items = list(args or [])
@@ -145,6 +148,10 @@ def parse_ros_args(args: Iterable[str] | None) -> dict[str, Any]:
             if not sep:
                 raise ValueError(f"--ros-args -p expects name:=value, got {items[i + 1]!r}")
             params[name] = _parse_value(value)
+            i += 1
+        elif inside and arg == "--params-file" and i + 1 < len(items):
+            if node_name is not None:
+                params.update(load_parameters(items[i + 1], node_name))
             i += 1
         i += 1
     return params
@@ -605,8 +612,8 @@ class Node:
         self._clock = Clock()
         self._overrides: dict[str, Any] = {}
         if use_global_arguments:
-            self._overrides.update(parse_ros_args(self.context.args))
-        self._overrides.update(parse_ros_args(cli_args))
+            self._overrides.update(parse_ros_args(self.context.args, node_name))
+        self._overrides.update(parse_ros_args(cli_args, node_name))
         for param in parameter_overrides or []:
             self._overrides[param.name] = param.value
         self._allow_undeclared = allow_undeclared_parameters

@@ -1,0 +1,138 @@
+"""``optimiser`` node: serves optimal-policy queries on ``/biped/optimal_policy``.
+
+For a request (maneuver, theta0) it solves the maneuver's optimal-control problem (paper Eqs. (4),
+(14), (15); :func:`biped_opt.optimal.optimal_policy`) and replies with the policy (touchdown
+[u1, u2], liftoff [u12]), value, outcome, final time, mode sequence, event times and the one-sided
+derivatives [left, right] of the value (envelope theorem: dV/dth0 = dc/dth0 at the optimum, with the
+outcome's one-sided sensitivities through the events).
+
+The problems' parameters are node parameters (``config/biped.yaml``): for each maneuver M,
+``M.theta_star``, ``M.alphas``, ``M.bounds`` (flattened [lo, hi] per decision) and
+``M.fixed_inputs`` ([u1, u2, u12]). Results are cached by (maneuver, theta0, problem). A bad
+request gets ``success = false`` and a message naming the field; the node logs it and keeps serving.
+Requests are served concurrently (reentrant callback group, multi-threaded executor).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+from typing import Any
+
+import numpy as np
+
+from biped_opt import ros
+from biped_opt.errors import BipedOptError
+from biped_opt.maneuvers import Maneuver
+from biped_opt.nodes import convert
+from biped_opt.optimal import OptimalControlProblem, OptimalResult, get_problem, optimal_policy
+from biped_opt.optimal.derivatives import outcome_sensitivity
+
+__all__ = ["OptimiserNode", "main", "value_derivative"]
+
+CACHE_SIZE = 4096
+
+
+def value_derivative(problem: OptimalControlProblem, result: OptimalResult) -> tuple[float, float]:
+    """[left, right] dV/dth0 by the envelope theorem (Theorem 1, Eq. (13)): the partial of the
+    cost c = (th_f - th*)^2 + sum alpha u^2 in th0 at the optimal inputs, with the outcome's
+    one-sided sensitivity through the events on each side."""
+    out = []
+    for side in (-1, +1):
+        s = outcome_sensitivity(
+            problem.maneuver.value, result.theta0, result.inputs,
+            direction=(side, 0.0, 0.0, 0.0), params=problem.params,
+        )
+        out.append(2.0 * (s.outcome - problem.theta_star) * s.gradient[0])
+    return out[0], out[1]
+
+
+class OptimiserNode(ros.Node):
+    """Serves ``/biped/optimal_policy`` (see the module docstring)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__("optimiser", **kwargs)
+        self._problems: dict[Maneuver, OptimalControlProblem] = {}
+        for maneuver in Maneuver:
+            default = get_problem(maneuver.value)
+            name = maneuver.value
+            self.declare_parameter(f"{name}.theta_star", default.theta_star)
+            self.declare_parameter(f"{name}.alphas", list(default.alphas))
+            self.declare_parameter(f"{name}.bounds", [b for pair in default.bounds for b in pair])
+            self.declare_parameter(f"{name}.fixed_inputs", list(default.fixed_inputs))
+            self._problems[maneuver] = self._problem_from_parameters(maneuver)
+        self._cache: OrderedDict[tuple, Any] = OrderedDict()
+        self._lock = threading.Lock()
+        self._group = ros.ReentrantCallbackGroup()
+        self._service = self.create_service(
+            ros.srvs.OptimalPolicy, "/biped/optimal_policy", self._on_request,
+            callback_group=self._group,
+        )
+
+    def _problem_from_parameters(self, maneuver: Maneuver) -> OptimalControlProblem:
+        name = maneuver.value
+        flat = [float(v) for v in self.get_parameter(f"{name}.bounds").value]
+        return get_problem(
+            name,
+            theta_star=float(self.get_parameter(f"{name}.theta_star").value),
+            alphas=tuple(float(v) for v in self.get_parameter(f"{name}.alphas").value),
+            bounds=tuple(zip(flat[0::2], flat[1::2])),
+            fixed_inputs=tuple(float(v) for v in self.get_parameter(f"{name}.fixed_inputs").value),
+        )
+
+    def solve(self, maneuver_text: str, theta0: float) -> tuple[OptimalResult, tuple[float, float]]:
+        """Validated, cached optimum and value derivative for one request."""
+        maneuver = convert.request_maneuver(maneuver_text)
+        th = convert.request_theta0(maneuver, theta0)
+        problem = self._problems[maneuver]
+        key = (maneuver, th, problem)
+        with self._lock:
+            if key in self._cache:
+                self._cache.move_to_end(key)
+                return self._cache[key]
+        result = optimal_policy(problem, th)
+        entry = (result, value_derivative(problem, result))
+        with self._lock:
+            self._cache[key] = entry
+            while len(self._cache) > CACHE_SIZE:
+                self._cache.popitem(last=False)
+        return entry
+
+    def _on_request(self, request: Any, response: Any) -> Any:
+        try:
+            result, dv = self.solve(request.maneuver, request.theta0)
+        except BipedOptError as exc:
+            self.get_logger().warning(f"rejected /biped/optimal_policy request: {exc}")
+            response.success = False
+            response.message = str(exc)
+            return response
+        response.success = bool(result.success)
+        response.message = result.message
+        response.policy = [float(v) for v in result.x]
+        response.value = float(result.value)
+        response.outcome = float(result.outcome)
+        response.t_final = float(result.trajectory.t_final) if result.trajectory else float("nan")
+        response.mode_sequence = [int(m) for m in result.modes]
+        response.event_times = [float(t) for t in np.asarray(result.event_times)]
+        response.value_derivative = [float(dv[0]), float(dv[1])]
+        response.inputs = [float(v) for v in result.inputs]
+        return response
+
+
+def main(args: list[str] | None = None) -> None:
+    ros.init(args=args)
+    node = OptimiserNode()
+    executor = ros.MultiThreadedExecutor(num_threads=4)
+    executor.add_node(node)
+    try:
+        executor.spin()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        ros.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()

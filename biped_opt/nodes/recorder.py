@@ -1,0 +1,270 @@
+"""``recorder`` node: records sweeps through the graph into MCAP files.
+
+A sweep is (maneuver, theta0 range, count, fixed-input or optimal, output path). For every angle of
+the grid (which always holds th0 = 0) the recorder
+
+1. asks the optimiser (``/biped/optimal_policy``) for the optimal policy, when ``optimal``;
+2. asks the simulator (``/biped/simulate``, real_time_factor 0) to run the maneuver with those
+   inputs (the paper's fixed inputs otherwise); the reply carries every state sample;
+3. writes the samples on ``/biped/state``, the contact modes on ``/biped/contact_mode`` (stamped at
+   the exact event times) and a SweepPoint on ``/biped/sweep`` to the MCAP file, and publishes the
+   SweepPoint live on ``/biped/sweep``.
+
+Samples come from the service reply, not the best-effort state topic, so a slow or lossy
+subscription never costs the file a sample. Log times are simulation times offset by each sweep
+point's start, so the file replays in order. The file is finished when the sweep ends, when the
+node is destroyed and on SIGINT/SIGTERM (see :func:`main`).
+
+Parameters: ``maneuver``, ``theta0_min``, ``theta0_max``, ``num``, ``optimal``, ``output``
+(path of the .mcap), ``fixed_inputs`` ([u1, u2, u12] for fixed-input sweeps; empty: the paper's),
+``autostart`` (record the parameters' sweep at start-up), ``service_timeout`` [s].
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from biped_opt import ros
+from biped_opt.errors import BipedOptError, InvalidInputError, SimulationError
+from biped_opt.fixed_sweep import FIXED_INPUTS, theta_grid
+from biped_opt.maneuvers import spec
+from biped_opt.nodes import convert
+from biped_opt.optimal import get_problem
+from biped_opt.record import SweepWriter
+
+__all__ = ["RecorderNode", "SweepRequest", "SweepSummary", "main"]
+
+#: pause between two sweep points on the log-time axis [s]
+GAP = 0.5
+
+
+@dataclass(frozen=True)
+class SweepRequest:
+    maneuver: str
+    theta0_min: float
+    theta0_max: float
+    num: int
+    optimal: bool
+    output: Path
+    fixed_inputs: tuple[float, ...] = ()
+
+    def validated(self) -> SweepRequest:
+        s = spec(convert.request_maneuver(self.maneuver))
+        for name in ("theta0_min", "theta0_max"):
+            convert.request_theta0(s.maneuver, getattr(self, name))
+        if not self.theta0_min < self.theta0_max:
+            raise InvalidInputError("theta0_min must be below theta0_max")
+        if not 2 <= int(self.num) <= 100_000:
+            raise InvalidInputError(f"num must be between 2 and 100000, got {self.num}")
+        return self
+
+
+@dataclass(frozen=True)
+class SweepSummary:
+    path: Path
+    points: int
+    failed: int
+    counts: dict[str, int]
+
+
+class RecorderNode(ros.Node):
+    """Records sweeps (see the module docstring)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__("recorder", **kwargs)
+        self.declare_parameter("maneuver", "touchdown")
+        self.declare_parameter("theta0_min", -0.2)
+        self.declare_parameter("theta0_max", 0.2)
+        self.declare_parameter("num", 41)
+        self.declare_parameter("optimal", False)
+        self.declare_parameter("output", "out/sweep.mcap")
+        self.declare_parameter("fixed_inputs", [0.0])
+        self.declare_parameter("autostart", False)
+        self.declare_parameter("service_timeout", 30.0)
+        group = ros.ReentrantCallbackGroup()
+        self._optimiser = self.create_client(
+            ros.srvs.OptimalPolicy, "/biped/optimal_policy", callback_group=group)
+        self._simulator = self.create_client(
+            ros.srvs.Simulate, "/biped/simulate", callback_group=group)
+        self._sweep_pub = self.create_publisher(ros.msgs.SweepPoint, "/biped/sweep", 10)
+        self._stop = threading.Event()
+        self._writer: SweepWriter | None = None
+        self._writer_lock = threading.Lock()
+        self.finished = threading.Event()
+        self.last_summary: SweepSummary | None = None
+        self.error: BaseException | None = None
+        if self.get_parameter("autostart").value:
+            threading.Thread(target=self._record_from_parameters, daemon=True).start()
+
+    # -- parameters -> request ----------------------------------------------------------
+    def request_from_parameters(self) -> SweepRequest:
+        g = self.get_parameter
+        fixed = tuple(float(v) for v in g("fixed_inputs").value)
+        return SweepRequest(
+            maneuver=str(g("maneuver").value),
+            theta0_min=float(g("theta0_min").value),
+            theta0_max=float(g("theta0_max").value),
+            num=int(g("num").value),
+            optimal=bool(g("optimal").value),
+            output=Path(str(g("output").value)),
+            fixed_inputs=fixed if any(fixed) else (),
+        )
+
+    def _record_from_parameters(self) -> None:
+        try:
+            self.record(self.request_from_parameters())
+        except BaseException as exc:  # reported through .error and the log
+            self.error = exc
+            self.get_logger().error(f"sweep failed: {exc}")
+        finally:
+            self.finished.set()
+
+    # -- service calls from a worker thread ------------------------------------------------
+    def _call(self, client: Any, request: Any) -> Any:
+        timeout = float(self.get_parameter("service_timeout").value)
+        if not client.wait_for_service(timeout_sec=timeout):
+            raise SimulationError(f"service {client.srv_name} is not available")
+        done = threading.Event()
+        future = client.call_async(request)
+        future.add_done_callback(lambda _f: done.set())
+        if not done.wait(timeout):
+            raise SimulationError(f"no reply from {client.srv_name} within {timeout} s")
+        return future.result()
+
+    # -- the sweep --------------------------------------------------------------------------
+    def record(self, req: SweepRequest) -> SweepSummary:
+        """Record one sweep to ``req.output`` (blocking; call from a thread other than the one
+        spinning this node)."""
+        req = req.validated()
+        maneuver = spec(req.maneuver).maneuver.value
+        grid = theta_grid(req.theta0_min, req.theta0_max, int(req.num))
+        fixed = req.fixed_inputs or FIXED_INPUTS[maneuver]
+        # a fixed-input point's value is the cost of the maneuver's default problem (Eqs. (14),
+        # (15)) at those inputs; an optimal point's comes from the optimiser
+        problem = get_problem(maneuver)
+        metadata = {
+            "maneuver": maneuver, "theta0_min": req.theta0_min, "theta0_max": req.theta0_max,
+            "num": grid.size, "optimal": req.optimal,
+            "fixed_inputs": "" if req.optimal else json.dumps(list(fixed)),
+            "cost": json.dumps(problem.describe()),
+        }
+        writer = SweepWriter(req.output, metadata={k: str(v) for k, v in metadata.items()})
+        with self._writer_lock:
+            self._writer = writer
+        failed = 0
+        offset = 0
+        try:
+            for k, th in enumerate(grid):
+                if self._stop.is_set():
+                    break
+                ok, t_final = self._record_point(writer, maneuver, float(th), req.optimal,
+                                                 fixed, problem, offset)
+                failed += not ok
+                offset += int(round((t_final + GAP) * convert.NS))
+                self.get_logger().debug(f"{maneuver} {k + 1}/{grid.size} th0 = {th:+.4f}")
+        finally:
+            writer.finish()
+            with self._writer_lock:
+                self._writer = None
+        summary = SweepSummary(path=req.output, points=grid.size, failed=failed,
+                               counts=dict(writer.counts))
+        self.get_logger().info(
+            f"recorded {grid.size} {maneuver} points to {req.output}: "
+            + ", ".join(f"{topic} {n}" for topic, n in summary.counts.items()))
+        self.last_summary = summary
+        return summary
+
+    def _record_point(self, writer: SweepWriter, maneuver: str, th: float, optimal: bool,
+                      fixed: tuple[float, ...], problem: Any, offset: int) -> tuple[bool, float]:
+        policy: list[float] = []
+        value = float("nan")
+        inputs = np.zeros(3)
+        inputs[: len(fixed)] = fixed
+        if optimal:
+            q = ros.srvs.OptimalPolicy.Request()
+            q.maneuver, q.theta0 = maneuver, th
+            reply = self._call(self._optimiser, q)
+            if not reply.success:
+                raise SimulationError(f"optimiser failed at th0 = {th}: {reply.message}")
+            policy = [float(v) for v in np.asarray(reply.policy)]
+            value = float(reply.value)
+            inputs = np.asarray(reply.inputs, dtype=float)
+        else:
+            policy = [float(v) for v in inputs]
+        q = ros.srvs.Simulate.Request()
+        q.maneuver, q.theta0, q.inputs, q.real_time_factor = maneuver, th, inputs.tolist(), 0.0
+        reply = self._call(self._simulator, q)
+        if not reply.states and not reply.success:
+            raise SimulationError(f"simulator failed at th0 = {th}: {reply.message}")
+        samples = np.array(
+            [[s.t, *np.asarray(s.q), *np.asarray(s.qdot), s.contact_mode,
+              *np.asarray(s.contact_force)] for s in reply.states], dtype=float,
+        )
+        writer.write_states(maneuver=maneuver, theta0=th, samples=samples, stamp_offset_ns=offset)
+        modes = [int(m) for m in np.asarray(reply.mode_sequence)]
+        times = [0.0, *[float(t) for t in np.asarray(reply.event_times)]]
+        for t, mode in zip(times, modes):
+            ns = offset + int(round(t * convert.NS))
+            writer.write("/biped/contact_mode", {"header": _header_fields(ns), "mode": mode}, ns)
+        if not optimal:
+            value = float(problem.cost(reply.outcome, inputs))
+        point = {
+            "header": _header_fields(offset), "maneuver": maneuver, "theta0": th,
+            "optimal": optimal, "policy": policy, "value": value, "outcome": reply.outcome,
+            "t_final": reply.t_final, "mode_sequence": modes, "event_times": times[1:],
+        }
+        end = offset + int(round(reply.t_final * convert.NS))
+        writer.write("/biped/sweep", point, end)
+        msg = ros.msgs.SweepPoint()
+        msg.header = convert.header(offset)
+        for name in ("maneuver", "theta0", "optimal", "policy", "value", "outcome", "t_final",
+                     "mode_sequence", "event_times"):
+            setattr(msg, name, point[name])
+        msg.outcome, msg.t_final = float(reply.outcome), float(reply.t_final)
+        self._sweep_pub.publish(msg)
+        return bool(reply.success), float(reply.t_final)
+
+    def close(self) -> None:
+        """Stop after the current point and finish any open file."""
+        self._stop.set()
+        with self._writer_lock:
+            writer = self._writer
+        if writer is not None:
+            writer.finish()
+
+    def destroy_node(self) -> None:
+        self.close()
+        super().destroy_node()
+
+
+def _header_fields(ns: int) -> dict[str, Any]:
+    return {"stamp": {"sec": ns // convert.NS, "nanosec": ns % convert.NS}, "frame_id": "biped"}
+
+
+def main(args: list[str] | None = None) -> None:
+    # SIGTERM ends the node like SIGINT: spin returns, the file is finished, exit status 0
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    ros.init(args=args)
+    node = RecorderNode()
+    executor = ros.MultiThreadedExecutor(num_threads=2)
+    executor.add_node(node)
+    try:
+        executor.spin()
+    except KeyboardInterrupt:
+        pass
+    except BipedOptError as exc:
+        node.get_logger().error(str(exc))
+    finally:
+        node.destroy_node()
+        ros.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()

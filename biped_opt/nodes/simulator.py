@@ -1,0 +1,172 @@
+"""``simulator`` node: plays a maneuver's trajectory on ``/biped/state`` and its contact modes.
+
+Parameters: ``maneuver``, ``theta0``, ``inputs`` ([u1, u2, u12]), ``publish_rate_hz`` (samples per
+unit of simulation time, default 200), ``real_time_factor`` (default 1; 0 = as fast as possible),
+``loop`` (replay the trajectory forever), ``autostart`` (play the parameters' run at start-up).
+
+- ``/biped/state`` (BipedState, sensor-data QoS): the dense trajectory, sampled every
+  1 / publish_rate_hz of simulation time plus before and after each event;
+- ``/biped/contact_mode`` (ContactMode, reliable + transient-local): the initial mode and every
+  change, stamped with the exact event time (run start + t_event);
+- ``/biped/simulate`` (Simulate.srv): simulate and start playing a new run; the reply carries the
+  outcome, the mode sequence, the event times and every state sample (so a recorder loses nothing
+  to the best-effort topic).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any
+
+from biped_opt import ros
+from biped_opt.errors import BipedOptError, InvalidInputError
+from biped_opt.hybrid import simulate
+from biped_opt.hybrid.trajectory import Trajectory
+from biped_opt.nodes import convert
+
+__all__ = ["SimulatorNode", "main", "CONTACT_MODE_QOS"]
+
+CONTACT_MODE_QOS = ros.QoSProfile(
+    depth=10,
+    reliability=ros.ReliabilityPolicy.RELIABLE,
+    durability=ros.DurabilityPolicy.TRANSIENT_LOCAL,
+    history=ros.HistoryPolicy.KEEP_LAST,
+)
+
+
+@dataclass
+class _Playback:
+    trajectory: Trajectory
+    states: list[Any]
+    modes: list[tuple[float, Any]]
+    rate: float  # real-time factor; 0 = everything at once
+    wall_start: float
+    next_state: int = 0
+    next_mode: int = 0
+
+
+class SimulatorNode(ros.Node):
+    """Simulates maneuvers and publishes them as they would unfold (see the module docstring)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__("simulator", **kwargs)
+        self.declare_parameter("maneuver", "touchdown")
+        self.declare_parameter("theta0", 0.1)
+        self.declare_parameter("inputs", [2.0, 0.5, 0.0])
+        self.declare_parameter("publish_rate_hz", 200.0)
+        self.declare_parameter("real_time_factor", 1.0)
+        self.declare_parameter("loop", False)
+        self.declare_parameter("autostart", True)
+        self._state_pub = self.create_publisher(
+            ros.msgs.BipedState, "/biped/state", ros.qos_profile_sensor_data
+        )
+        self._mode_pub = self.create_publisher(
+            ros.msgs.ContactMode, "/biped/contact_mode", CONTACT_MODE_QOS
+        )
+        self._service = self.create_service(
+            ros.srvs.Simulate, "/biped/simulate", self._on_simulate
+        )
+        self._lock = threading.Lock()
+        self._playback: _Playback | None = None
+        self._timer = self.create_timer(0.005, self._on_tick)
+        if self.get_parameter("autostart").value:
+            try:
+                self.start(
+                    str(self.get_parameter("maneuver").value),
+                    float(self.get_parameter("theta0").value),
+                    list(self.get_parameter("inputs").value),
+                    float(self.get_parameter("real_time_factor").value),
+                )
+            except BipedOptError as exc:
+                self.get_logger().error(f"cannot start from the parameters: {exc}")
+
+    # -- running --------------------------------------------------------------------------
+    def run(self, maneuver: str, theta0: float, inputs: Any) -> Trajectory:
+        """Validate a request and simulate it with the node's sampling rate."""
+        m = convert.request_maneuver(maneuver)
+        th = convert.request_theta0(m, theta0)
+        u = convert.request_inputs(inputs)
+        rate = float(self.get_parameter("publish_rate_hz").value)
+        if not (convert.finite(rate) and rate > 0):
+            raise InvalidInputError(f"publish_rate_hz must be positive, got {rate}")
+        return simulate(m, th, u, sample_dt=1.0 / rate)
+
+    def start(
+        self, maneuver: str, theta0: float, inputs: Any, real_time_factor: float
+    ) -> Trajectory:
+        if not (convert.finite(real_time_factor) and real_time_factor >= 0):
+            raise InvalidInputError(
+                f"real_time_factor must be >= 0 (0: as fast as possible), got {real_time_factor}"
+            )
+        tr = self.run(maneuver, theta0, inputs)
+        start_ns = self.get_clock().now().nanoseconds
+        playback = _Playback(
+            trajectory=tr,
+            states=convert.state_messages(tr, start_ns),
+            modes=convert.contact_mode_messages(tr, start_ns),
+            rate=real_time_factor,
+            wall_start=time.monotonic(),
+        )
+        with self._lock:
+            self._playback = playback
+        self._on_tick()
+        return tr
+
+    def _on_tick(self) -> None:
+        with self._lock:
+            pb = self._playback
+            if pb is None:
+                return
+            sim_now = float("inf") if pb.rate == 0 else (time.monotonic() - pb.wall_start) * pb.rate
+            while pb.next_mode < len(pb.modes) and pb.modes[pb.next_mode][0] <= sim_now:
+                self._mode_pub.publish(pb.modes[pb.next_mode][1])
+                pb.next_mode += 1
+            while pb.next_state < len(pb.states) and pb.states[pb.next_state].t <= sim_now:
+                self._state_pub.publish(pb.states[pb.next_state])
+                pb.next_state += 1
+            done = pb.next_state == len(pb.states) and pb.next_mode == len(pb.modes)
+            if done:
+                if self.get_parameter("loop").value and pb.rate > 0:
+                    pb.next_state = pb.next_mode = 0
+                    pb.wall_start = time.monotonic()
+                else:
+                    self._playback = None
+
+    # -- service --------------------------------------------------------------------------
+    def _on_simulate(self, request: Any, response: Any) -> Any:
+        try:
+            tr = self.start(request.maneuver, request.theta0, request.inputs,
+                            request.real_time_factor)
+        except BipedOptError as exc:
+            self.get_logger().warning(f"rejected /biped/simulate request: {exc}")
+            response.success = False
+            response.message = str(exc)
+            return response
+        response.success = tr.success
+        response.message = tr.message
+        response.outcome = tr.outcome
+        response.t_final = tr.t_final
+        response.mode_sequence = [int(m) for m in tr.mode_sequence]
+        response.event_times = [float(t) for t in tr.event_times]
+        with self._lock:
+            response.states = list(self._playback.states) if self._playback else \
+                convert.state_messages(tr, 0)
+        return response
+
+
+def main(args: list[str] | None = None) -> None:
+    ros.init(args=args)
+    node = SimulatorNode()
+    try:
+        ros.spin(node)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        node.destroy_node()
+        ros.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()

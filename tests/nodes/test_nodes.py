@@ -1,0 +1,215 @@
+"""The three nodes launched in-process on real DDS: a fresh Context, unique domain and executor
+thread per test (the Graph), clients in a separate test node of the same context."""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from biped_opt import ros
+from biped_opt.fixed_sweep import theta_grid
+from biped_opt.hybrid import simulate
+from biped_opt.nodes.graph import Graph
+from biped_opt.nodes.recorder import SweepRequest
+from biped_opt.optimal import get_problem, optimal_policy
+from biped_opt.record import read_recording
+
+NS = 1_000_000_000
+
+
+@pytest.fixture()
+def graph(domain_id):
+    g = Graph(domain_id=domain_id, overrides={"simulator": {"autostart": False}})
+    yield g
+    g.close()
+
+
+@pytest.fixture()
+def probe(graph):
+    """A test node in the graph's context, spun by the graph's executor."""
+    node = ros.Node("probe", context=graph.context)
+    graph.executor.add_node(node)
+    yield node
+    graph.executor.remove_node(node)
+    node.destroy_node()
+
+
+def call(node, srv, name, timeout=30.0, **fields):
+    client = node.create_client(srv, name)
+    assert client.wait_for_service(timeout_sec=10.0)
+    request = srv.Request()
+    for key, value in fields.items():
+        setattr(request, key, value)
+    done = threading.Event()
+    future = client.call_async(request)
+    future.add_done_callback(lambda _f: done.set())
+    assert done.wait(timeout)
+    return future.result()
+
+
+def test_state_stream_has_the_modes_and_exact_event_stamps(graph, probe):
+    states, modes = [], []
+    probe.create_subscription(ros.msgs.BipedState, "/biped/state", states.append,
+                              ros.qos_profile_sensor_data)
+    probe.create_subscription(ros.msgs.ContactMode, "/biped/contact_mode", modes.append,
+                              ros.QoSProfile(depth=10, reliability=ros.ReliabilityPolicy.RELIABLE,
+                                             durability=ros.DurabilityPolicy.TRANSIENT_LOCAL))
+    time.sleep(0.5)  # discovery
+    reply = call(probe, ros.srvs.Simulate, "/biped/simulate", maneuver="touchdown", theta0=0.1,
+                 inputs=[2.0, 0.5, 0.0], real_time_factor=2.0)
+    assert reply.success
+    tr = simulate("touchdown", 0.1, (2.0, 0.5), sample_dt=1 / 200)
+    assert list(reply.mode_sequence) == [0, 1, 3]
+    assert reply.outcome == tr.outcome  # same kernel, same numbers
+    assert len(reply.states) == len(tr.samples)
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline and (len(modes) < 3 or len(states) < len(tr.samples)):
+        time.sleep(0.05)
+    # contact modes: every change, stamped at start + exact event time (to the nanosecond)
+    assert [m.mode for m in modes] == [0, 1, 3]
+    start = modes[0].header.stamp.sec * NS + modes[0].header.stamp.nanosec
+    for m, t_event in zip(modes[1:], tr.event_times):
+        stamp = m.header.stamp.sec * NS + m.header.stamp.nanosec
+        assert abs(stamp - start - round(t_event * NS)) <= 1
+    # the state stream, in time order, with the modes switching at the events
+    times = [s.t for s in states]
+    assert times == sorted(times)
+    seen = [s.contact_mode for s in states]
+    assert [k for i, k in enumerate(seen) if i == 0 or seen[i - 1] != k] == [0, 1, 3]
+    # loopback in one process at 2x real time: a best-effort stream still delivers (nearly) all
+    assert len(states) >= 0.95 * len(tr.samples)
+
+
+def test_optimiser_replies_equal_the_core(graph, probe):
+    for maneuver, theta0 in (("touchdown", 0.05), ("touchdown", -0.03), ("liftoff", 0.01)):
+        reply = call(probe, ros.srvs.OptimalPolicy, "/biped/optimal_policy", maneuver=maneuver,
+                     theta0=theta0)
+        core = optimal_policy(get_problem(maneuver), theta0)
+        assert reply.success, reply.message
+        np.testing.assert_array_equal(np.asarray(reply.policy), core.x)
+        assert reply.value == core.value and reply.outcome == core.outcome
+        assert list(reply.mode_sequence) == [int(m) for m in core.modes]
+        left, right = np.asarray(reply.value_derivative)
+        assert math.isfinite(left) and left == pytest.approx(right, rel=1e-9)  # smooth here
+    # R5 through the service
+    reply = call(probe, ros.srvs.OptimalPolicy, "/biped/optimal_policy", maneuver="touchdown",
+                 theta0=0.05)
+    assert abs(reply.value - 0.0194158739483) < 1e-8
+    assert abs(reply.policy[0] - 1.2776719) < 1e-6
+
+
+@pytest.mark.parametrize(
+    ("maneuver", "theta0", "field"),
+    [("touchdown", math.nan, "theta0"), ("liftoff", 0.5, "theta0"), ("hop", 0.1, "maneuver"),
+     ("", 0.0, "maneuver"), ("touchdown", math.inf, "theta0")],
+)
+def test_bad_requests_are_refused_and_the_node_keeps_serving(graph, probe, maneuver, theta0,
+                                                             field):
+    reply = call(probe, ros.srvs.OptimalPolicy, "/biped/optimal_policy", maneuver=maneuver,
+                 theta0=theta0)
+    assert not reply.success and reply.message.startswith(f"{field}:")
+    good = call(probe, ros.srvs.OptimalPolicy, "/biped/optimal_policy", maneuver="touchdown",
+                theta0=0.02)
+    assert good.success
+    bad_sim = call(probe, ros.srvs.Simulate, "/biped/simulate", maneuver="touchdown",
+                   theta0=0.1, inputs=[math.nan], real_time_factor=0.0)
+    assert not bad_sim.success and bad_sim.message.startswith("inputs:")
+
+
+def test_eight_concurrent_clients_get_their_own_replies(graph, probe):
+    """8 clients x 100 calls in flight together; every reply must belong to its request."""
+    angles = np.linspace(-0.2, 0.2, 9)
+    expected = {}
+    for th in angles:  # fill the cache, and know each angle's answer
+        r = call(probe, ros.srvs.OptimalPolicy, "/biped/optimal_policy", maneuver="touchdown",
+                 theta0=float(th))
+        expected[float(th)] = (r.value, tuple(np.asarray(r.policy)))
+    errors: list[str] = []
+
+    def client_loop(k: int) -> None:
+        client = probe.create_client(ros.srvs.OptimalPolicy, "/biped/optimal_policy")
+        assert client.wait_for_service(timeout_sec=10.0)
+        for i in range(100):
+            th = float(angles[(k + i) % len(angles)])
+            request = ros.srvs.OptimalPolicy.Request()
+            request.maneuver, request.theta0 = "touchdown", th
+            done = threading.Event()
+            future = client.call_async(request)
+            future.add_done_callback(lambda _f, done=done: done.set())
+            if not done.wait(20.0):
+                errors.append(f"client {k} call {i}: no reply")
+                return
+            r = future.result()
+            if (r.value, tuple(np.asarray(r.policy))) != expected[th]:
+                errors.append(f"client {k} call {i}: reply for another request")
+
+    threads = [threading.Thread(target=client_loop, args=(k,)) for k in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(120.0)
+    assert errors == []
+
+
+def test_recorder_records_every_sample_through_the_graph(graph, tmp_path):
+    """The file holds every sample of every trajectory: counts equal the trajectories' sample
+    counts (the recorder takes them from the Simulate reply, not the best-effort topic)."""
+    out = tmp_path / "sweep.mcap"
+    summary = graph.recorder.record(SweepRequest(
+        maneuver="liftoff", theta0_min=-0.1, theta0_max=0.1, num=5, optimal=True, output=out))
+    rec = read_recording(out)
+    assert rec.complete and summary.failed == 0
+    points = rec.sweep_points()
+    np.testing.assert_array_equal([p.theta0 for p in points], theta_grid(-0.1, 0.1, 5))
+    assert 0.0 in [p.theta0 for p in points]
+    total = 0
+    for p in points:
+        core = optimal_policy(get_problem("liftoff"), p.theta0)
+        assert p.value == core.value and p.optimal
+        tr = simulate("liftoff", p.theta0, core.inputs, sample_dt=1 / 200)
+        assert len(rec.states_of(p.theta0)) == len(tr.samples)
+        total += len(tr.samples)
+    assert rec.counts["/biped/state"] == total
+    assert rec.counts["/biped/contact_mode"] == sum(len(p.mode_sequence) for p in points)
+
+
+def test_node_in_a_subprocess_exits_cleanly_on_sigint(domain_id):
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "biped_opt.nodes.optimiser", "--ros-args", "-p",
+         "touchdown.theta_star:=-0.05"],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        ctx = ros.Context()
+        ros.init(args=[], context=ctx, domain_id=domain_id)
+        node = ros.Node("probe", context=ctx)
+        client = node.create_client(ros.srvs.OptimalPolicy, "/biped/optimal_policy")
+        executor = ros.SingleThreadedExecutor(context=ctx)
+        executor.add_node(node)
+        assert client.wait_for_service(timeout_sec=30.0)
+        request = ros.srvs.OptimalPolicy.Request()
+        request.maneuver, request.theta0 = "touchdown", 0.05
+        future = client.call_async(request)
+        executor.spin_until_future_complete(future, timeout_sec=60.0)
+        reply = future.result()
+        # the parameter given on the command line reached the node
+        expected = optimal_policy(get_problem("touchdown", theta_star=-0.05), 0.05)
+        assert reply.success and reply.value == expected.value
+        executor.shutdown()
+        node.destroy_node()
+        ros.try_shutdown(context=ctx)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err
