@@ -24,6 +24,7 @@ COMMAND_MODULES = (
     "nonsmooth_cmd",
     "figures_cmd",
     "node_cmd",
+    "record_cmd",
 )
 
 EXIT_USAGE = 2

@@ -1,0 +1,41 @@
+"""``biped-opt record``: bring up the graph in-process and record one sweep to MCAP."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+from pathlib import Path
+
+from biped_opt.cli.simulate_cmd import finite_float
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("record", help="record a sweep through the ROS graph to an MCAP file")
+    p.add_argument("--maneuver", required=True)
+    p.add_argument("--theta0-min", required=True, type=finite_float("--theta0-min"))
+    p.add_argument("--theta0-max", required=True, type=finite_float("--theta0-max"))
+    p.add_argument("--num", required=True, type=int, help="angles (th0 = 0 is always added)")
+    p.add_argument("--optimal", action="store_true", help="optimal policies (else fixed inputs)")
+    p.add_argument("--out", required=True, type=Path, help="output .mcap file")
+    p.add_argument("--params-file", type=Path, default=None, help="ROS 2 parameter file")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from biped_opt.nodes.graph import Graph
+    from biped_opt.nodes.recorder import SweepRequest
+
+    request = SweepRequest(maneuver=args.maneuver, theta0_min=args.theta0_min,
+                           theta0_max=args.theta0_max, num=args.num, optimal=args.optimal,
+                           output=args.out).validated()
+    # SIGTERM stops like Ctrl-C: the recorder finishes the file before the process exits
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    with Graph(params_file=args.params_file,
+               overrides={"simulator": {"autostart": False}}) as graph:
+        summary = graph.recorder.record(request)
+    print(summary.path)
+    for topic, count in summary.counts.items():
+        print(f"  {topic:22s} {count:8d} messages")
+    if summary.failed:
+        print(f"  {summary.failed} of {summary.points} sweep points did not reach their end")
+    return 0 if not summary.failed else 1
