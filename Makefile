@@ -6,7 +6,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint bench venv clean
+.PHONY: demo test lint bench venv clean clean-cache
 
 venv: $(STAMP)
 
@@ -28,5 +28,10 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(VENV)/bin/biped-opt bench
 
-clean:
+# Numba's on-disk cache is keyed by each file's own source, not by the kernels it inlines from
+# other files: after editing biped_opt/model or biped_opt/hybrid, drop it (a fresh clone has none).
+clean-cache:
+	find biped_opt -name '*.nbi' -o -name '*.nbc' | xargs rm -f
+
+clean: clean-cache
 	rm -rf $(VENV) build *.egg-info
