@@ -25,6 +25,9 @@ COMMAND_MODULES = (
     "figures_cmd",
     "node_cmd",
     "record_cmd",
+    "replay_cmd",
+    "report_cmd",
+    "info_cmd",
 )
 
 EXIT_USAGE = 2

@@ -112,10 +112,22 @@ def _finish(fig, path: Path) -> Path:
     return path
 
 
-def figure2(touchdown: FixedSweepData, liftoff: FixedSweepData, path: Path) -> Path:
-    """Fig. 2: outcomes (a, b) and costs (c, d) over th0 at fixed inputs."""
+def _not_recorded(axes: Sequence, maneuver: str) -> None:
+    """An empty column for a maneuver the data does not hold (e.g. a report of one file)."""
+    for ax in axes:
+        ax.text(0.5, 0.5, f"{maneuver}: not in the data", ha="center", va="center",
+                transform=ax.transAxes, color="0.5")
+        ax.set_xticks([])
+        ax.set_yticks([])
+
+
+def figure2(touchdown: FixedSweepData | None, liftoff: FixedSweepData | None, path: Path) -> Path:
+    """Fig. 2: outcomes (a, b) and costs (c, d) over th0 at fixed inputs (None: not drawn)."""
     fig, axes = plt.subplots(2, 2, figsize=(10, 7), constrained_layout=True)
     for col, data in enumerate((touchdown, liftoff)):
+        if data is None:
+            _not_recorded(axes[:, col], ("touchdown", "liftoff")[col])
+            continue
         u = ", ".join(f"{v:g}" for v in data.inputs)
         ax = axes[0, col]
         ax.plot(data.theta0, data.outcome, ".", ms=2.5, color="k")
@@ -145,12 +157,15 @@ def mode_image(data: FixedSweepData, times: Array) -> Array:
     return img
 
 
-def figure3(touchdown: FixedSweepData, liftoff: FixedSweepData, path: Path) -> Path:
+def figure3(touchdown: FixedSweepData | None, liftoff: FixedSweepData | None, path: Path) -> Path:
     """Fig. 3: contact mode over time t and initial pitch th0, at fixed inputs."""
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), constrained_layout=True)
     cmap = ListedColormap([MODE_COLOURS[m] for m in ContactMode])
     for col, data in enumerate((touchdown, liftoff)):
         ax = axes[col]
+        if data is None:
+            _not_recorded([ax], ("touchdown", "liftoff")[col])
+            continue
         t_max = float(np.max(data.t_final))
         times = np.linspace(0.0, t_max, 800)
         img = mode_image(data, times)
@@ -174,10 +189,14 @@ def figure3(touchdown: FixedSweepData, liftoff: FixedSweepData, path: Path) -> P
     return _finish(fig, path)
 
 
-def figure4(touchdown: OptimalSweepData, liftoff: OptimalSweepData, path: Path) -> Path:
+def figure4(touchdown: OptimalSweepData | None, liftoff: OptimalSweepData | None,
+            path: Path) -> Path:
     """Fig. 4: optimal outcome (a, b), policy (c, d) and value (e, f) over th0."""
     fig, axes = plt.subplots(3, 2, figsize=(10, 10), constrained_layout=True)
     for col, data in enumerate((touchdown, liftoff)):
+        if data is None:
+            _not_recorded(axes[:, col], ("touchdown", "liftoff")[col])
+            continue
         ax = axes[0, col]
         ax.plot(data.theta0, data.outcome, ".", ms=2.5, color="k")
         ax.set_title(f"({'ab'[col]}) {data.maneuver}: optimal outcome", fontsize=10)

@@ -1,0 +1,439 @@
+"""Offline analysis of recorded sweeps: the paper's figures and a nonsmoothness table.
+
+Nothing runs but this code: the SweepPoints of one or more recordings (``/biped/sweep``: angle,
+policy, value, outcome, final time, mode sequence, event times) and each file's ``biped_opt.sweep``
+metadata record (maneuver, fixed-input or optimal, inputs, cost) are turned into the plain arrays
+of :mod:`biped_opt.plots.figures` through the helpers of :mod:`biped_opt.plots.reproduce`:
+
+- Fig. 2 (outcome and cost at fixed inputs) and Fig. 3 (contact mode over t and th0, drawn from
+  the recorded mode sequences and event times) from fixed-input sweeps;
+- Fig. 4 (optimal outcome, policy, value; Eqs. (5), (6) of [1]_) from optimal sweeps.
+
+A maneuver no file holds leaves its column of the figure empty ("not in the data").
+
+**Nonsmoothness at grid resolution.** Along a sweep, outcome, policy and value are smooth while
+the mode order (and, for optima, which bound holds the policy) stays fixed ([1]_ Sec. III), so
+every change of that label between neighbouring recorded angles brackets a candidate point; for
+optimal sweeps a policy step much larger than its neighbours' (the optimum moving to another local
+minimum with the same mode order) is one too. A label held by a single angle between two others
+(th0 = 0, where both feet touch down or lift off at once) is one point at that angle. On each side
+a cubic through the 4 nearest recorded points of that side is extrapolated to the point to give
+one-sided limits and slopes; the difference to the quadratic through the 3 nearest is the error
+estimate. Limits further apart than 3x their errors are a **jump**, else slopes further apart than
+3x theirs a **kink**. These are estimates from the recording, as good as its grid: the bracket
+width (the recorded spacing) bounds the location error, and the table says so. ``refine=True``
+re-locates every point to 1e-10 with the core (:mod:`biped_opt.optimal.nonsmooth`, which simulates
+and optimises again) and prints both.
+
+.. [1] B. Banjanin and S. A. Burden, "Nonsmooth optimal value and policy functions in mechanical
+   systems subject to unilateral constraints", IEEE Control Systems Letters 4(2), 2020.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from biped_opt.errors import BipedOptError
+from biped_opt.hybrid.simulate import INPUT_NAMES
+from biped_opt.model.modes import ContactMode
+from biped_opt.optimal import OptimalControlProblem, get_problem
+from biped_opt.optimal.nonsmooth import NonsmoothPoint, NonsmoothReport
+from biped_opt.optimal.sweep import FixedSweep, OptimalSweep
+from biped_opt.record.reader import read_raw
+from biped_opt.ros.interfaces import load_interfaces
+
+__all__ = [
+    "ReportError",
+    "RecordedSweep",
+    "GridPoint",
+    "Report",
+    "load_sweep",
+    "grid_nonsmooth",
+    "grid_table",
+    "report",
+]
+
+Array = npt.NDArray[np.float64]
+
+#: one-sided fits use this many recorded points per side (a cubic); the error estimate drops one
+FIT_POINTS = 4
+#: a difference counts when it exceeds this many times the summed extrapolation error estimates
+SIGNIFICANCE = 3.0
+#: a policy within this of a bound is held by it (the optimiser stops ~1e-8 from a bound)
+BOUND_TOL = 1e-7
+#: a policy step this many times larger than both neighbouring steps is a jump candidate
+STEP_RATIO = 10.0
+
+
+class ReportError(BipedOptError, ValueError):
+    """A recording holds no sweep that can be analysed."""
+
+
+@dataclass(frozen=True, eq=False)
+class RecordedSweep:
+    """The SweepPoints of one recording as arrays, sorted by th0."""
+
+    path: Path
+    maneuver: str
+    optimal: bool
+    problem: OptimalControlProblem  #: the cost (Eqs. (14), (15)) the recorder used
+    inputs: Array  #: (u1, u2, u12) of a fixed-input sweep (NaN for optimal sweeps)
+    theta0: Array
+    outcome: Array
+    value: Array
+    t_final: Array
+    policy: dict[str, Array]  #: decision -> values (optimal) or u1, u2, u12 (fixed)
+    mode_sequences: tuple[tuple[int, ...], ...]
+    event_times: tuple[tuple[float, ...], ...]
+    metadata: dict[str, str]
+    complete: bool
+    note: str
+
+    @property
+    def branch(self) -> tuple[str, ...]:
+        return tuple("->".join(ContactMode(m).name for m in s) if s else "FAILED"
+                     for s in self.mode_sequences)
+
+    @property
+    def kind(self) -> str:
+        return "optimal" if self.optimal else "fixed"
+
+
+def _problem(meta: dict[str, str], maneuver: str) -> OptimalControlProblem:
+    text = meta.get("cost")
+    if not text:
+        return get_problem(maneuver)
+    d = json.loads(text)
+    decisions = tuple(d["decisions"])
+    fixed = tuple(float(d.get("fixed_inputs", {}).get(n, 0.0)) for n in INPUT_NAMES)
+    return OptimalControlProblem(
+        name=str(d.get("name", maneuver)), maneuver=d.get("maneuver", maneuver),
+        decisions=decisions, fixed_inputs=fixed,  # type: ignore[arg-type]
+        bounds=tuple(tuple(d["bounds"][k]) for k in decisions),  # type: ignore[arg-type]
+        theta_star=float(d["theta_star"]), alphas=tuple(float(d["alphas"][k]) for k in decisions),
+    )
+
+
+def load_sweep(path: str | Path) -> RecordedSweep:
+    """Read the SweepPoints (only) of a recording; unfinished files are recovered."""
+    raw = read_raw(path, topics=["/biped/sweep"])
+    if not raw.messages:
+        raise ReportError(f"{raw.path}: no /biped/sweep messages ({raw.note})")
+    ts = load_interfaces().typestore
+    typename = raw.channels["/biped/sweep"].type
+    points: dict[float, Any] = {}
+    for m in raw.messages:
+        msg = ts.deserialize_cdr(m.data, typename)
+        points[float(msg.theta0)] = msg  # a repeated angle: the later point wins
+    msgs = [points[k] for k in sorted(points)]
+    meta = raw.metadata.get("biped_opt.sweep", {})
+    maneuver = meta.get("maneuver") or msgs[0].maneuver
+    optimal = (meta["optimal"] == "True") if "optimal" in meta else bool(msgs[0].optimal)
+    problem = _problem(meta, maneuver)
+    pol = np.array([np.asarray(m.policy, dtype=float) for m in msgs])
+    if optimal:
+        names: Sequence[str] = problem.decisions
+        inputs = np.full(3, np.nan)
+    else:
+        names = INPUT_NAMES[: pol.shape[1]]
+        text = meta.get("fixed_inputs")
+        inputs = np.zeros(3)
+        given = json.loads(text) if text else pol[0].tolist()
+        inputs[: len(given)] = given
+    if pol.shape[1] != len(names):
+        raise ReportError(f"{raw.path}: policy has {pol.shape[1]} entries, expected "
+                          f"{len(names)} ({', '.join(names)})")
+    return RecordedSweep(
+        path=raw.path, maneuver=maneuver, optimal=optimal, problem=problem, inputs=inputs,
+        theta0=np.array([m.theta0 for m in msgs]), outcome=np.array([m.outcome for m in msgs]),
+        value=np.array([m.value for m in msgs]), t_final=np.array([m.t_final for m in msgs]),
+        policy={n: pol[:, k] for k, n in enumerate(names)},
+        mode_sequences=tuple(tuple(int(v) for v in m.mode_sequence) for m in msgs),
+        event_times=tuple(tuple(float(v) for v in m.event_times) for m in msgs),
+        metadata=dict(meta), complete=raw.complete, note=raw.note,
+    )
+
+
+# --- nonsmoothness from the recorded grid ------------------------------------------------------
+@dataclass(frozen=True)
+class GridPoint:
+    """A nonsmooth point estimated from the recorded grid (see the module docstring).
+
+    ``point`` carries the estimate in the core's form (limits and slopes at ``point.theta0``;
+    second derivatives are not estimated: NaN); ``*_error`` are the extrapolation error estimates
+    (left, right); ``bracket`` is the recorded interval that holds the point.
+    """
+
+    point: NonsmoothPoint
+    limit_error: tuple[float, float]
+    slope_error: tuple[float, float]
+
+    @property
+    def width(self) -> float:
+        return self.point.bracket[1] - self.point.bracket[0]
+
+
+def _labels(s: RecordedSweep) -> list[tuple[Any, ...]]:
+    if not s.optimal:
+        return [(b,) for b in s.branch]
+    out = []
+    for k, b in enumerate(s.branch):
+        held = []
+        for d in s.problem.decisions:
+            lo, hi = s.problem.bound(d)
+            v = s.policy[d][k]
+            held.append("lower" if abs(v - lo) <= BOUND_TOL else
+                        "upper" if abs(v - hi) <= BOUND_TOL else None)
+        out.append((b, tuple(held)))
+    return out
+
+
+def _quantities(s: RecordedSweep) -> dict[str, Array]:
+    q = {"outcome": s.outcome}
+    if s.optimal:
+        q.update({f"policy:{d}": s.policy[d] for d in s.problem.decisions})
+    q["value"] = s.value
+    return q
+
+
+def _one_side(x: Array, y: Array, x0: float) -> tuple[float, float, float, float]:
+    """(limit, slope, limit error, slope error) at x0 from points ordered nearest first."""
+    n = min(FIT_POINTS, x.size)
+    if n == 0:
+        return math.nan, math.nan, math.inf, math.inf
+    if n == 1:
+        return float(y[0]), math.nan, math.inf, math.inf
+    c = np.polyfit(x[:n] - x0, y[:n], n - 1)
+    c2 = np.polyfit(x[: n - 1] - x0, y[: n - 1], n - 2)
+    slope, slope2 = float(c[-2]), (float(c2[-2]) if n > 2 else math.nan)
+    return (float(c[-1]), slope, abs(float(c[-1]) - float(c2[-1])),
+            abs(slope - slope2) if n > 2 else math.inf)
+
+
+def _events(s: RecordedSweep) -> list[tuple[int, int, int | None, str]]:
+    """(last index left, first index right, isolated index or None, cause) per candidate."""
+    labels = _labels(s)
+    n = len(labels)
+    runs: list[tuple[int, int]] = []
+    start = 0
+    for k in range(1, n + 1):
+        if k == n or labels[k] != labels[start]:
+            runs.append((start, k - 1))
+            start = k
+    events = []
+    r = 0
+    while r < len(runs) - 1:
+        a, b = runs[r], runs[r + 1]
+        if b[0] == b[1] and r + 2 < len(runs):
+            c = runs[r + 2]
+            events.append((a[1], c[0], b[0], _cause(s, labels, a[1], c[0], b[0])))
+            r += 2
+        else:
+            events.append((a[1], b[0], None, _cause(s, labels, a[1], b[0], None)))
+            r += 1
+    if s.optimal:
+        # the optimum may jump to another local minimum with the same mode order
+        known = {(lo, hi) for lo, hi, _, _ in events}
+        for d in s.problem.decisions:
+            step = np.abs(np.diff(s.policy[d]))
+            for k in range(1, step.size - 1):
+                big = step[k] > STEP_RATIO * max(step[k - 1], step[k + 1]) and step[k] > 1e-6
+                if big and labels[k] == labels[k + 1] and (k, k + 1) not in known:
+                    events.append((k, k + 1, None,
+                                   f"policy {d} steps with the mode order unchanged "
+                                   "(the optimum moves to another local minimum)"))
+                    known.add((k, k + 1))
+    return sorted(events)
+
+
+def _cause(s: RecordedSweep, labels: list[Any], i: int, j: int, mid: int | None) -> str:
+    left, right = s.branch[i], s.branch[j]
+    parts = []
+    if left != right:
+        via = f" (th0 = {s.theta0[mid]:g}: {s.branch[mid]})" if mid is not None else ""
+        parts.append(f"mode order changes: {left} | {right}{via}")
+    if s.optimal:
+        for d, hl, hr in zip(s.problem.decisions, labels[i][1], labels[j][1]):
+            if hl != hr:
+                what = (f"reaches its {hr} bound" if hl is None else
+                        f"leaves its {hl} bound" if hr is None else f"moves to its {hr} bound")
+                parts.append(f"input {d} {what}")
+    return "; ".join(parts) or "label change"
+
+
+def grid_nonsmooth(s: RecordedSweep) -> list[GridPoint]:
+    """Nonsmooth points estimated from the recorded angles (see the module docstring)."""
+    out = []
+    th = s.theta0
+    for i, j, mid, cause in _events(s):
+        lo, hi = float(th[i]), float(th[j])
+        x0 = float(th[mid]) if mid is not None else (0.0 if lo < 0.0 < hi else 0.5 * (lo + hi))
+        left_idx = np.arange(i, -1, -1)  # nearest first
+        right_idx = np.arange(j, th.size)
+        for name, y in _quantities(s).items():
+            ll, sl, el, esl = _one_side(th[left_idx], y[left_idx], x0)
+            lr, sr, er, esr = _one_side(th[right_idx], y[right_idx], x0)
+            scale = max(1.0, abs(ll), abs(lr))
+            if abs(lr - ll) > SIGNIFICANCE * (el + er) + 1e-12 * scale:
+                kind, a, b = "jump", ll, lr
+            elif abs(sr - sl) > SIGNIFICANCE * (esl + esr) + 1e-9 * max(1.0, abs(sl), abs(sr)):
+                kind, a, b = "kink", sl, sr
+            else:
+                continue
+            at = float(y[mid]) if mid is not None else 0.5 * (ll + lr)
+            family, _, comp = name.partition(":")
+            point = NonsmoothPoint(
+                theta0=x0, quantity=family, input=comp or None, kind=kind, left=a, right=b,
+                cause=cause, limits=(ll, lr), derivatives=(sl, sr),
+                second_derivatives=(math.nan, math.nan), at=at, bracket=(lo, hi),
+                labels=(s.branch[i], s.branch[j]))
+            out.append(GridPoint(point, (el, er), (esl, esr)))
+    return out
+
+
+def grid_table(s: RecordedSweep, points: Sequence[GridPoint]) -> str:
+    """Plain-text table of grid-resolution estimates, headed by what they are."""
+    spacing = np.diff(s.theta0)
+    head = [
+        f"== {s.maneuver} ({'optimal' if s.optimal else 'fixed inputs'}) from {s.path.name}: "
+        f"{s.theta0.size} recorded angles in [{s.theta0[0]:g}, {s.theta0[-1]:g}], "
+        f"spacing {spacing.min():.3g}..{spacing.max():.3g} ==",
+        "GRID-RESOLUTION ESTIMATES from the recording: each point lies in the recorded bracket "
+        "[lo, hi] (width = location",
+        "uncertainty); left/right are one-sided limits (jump) or slopes (kink) extrapolated by a "
+        "cubic through the 4 nearest",
+        "recorded angles of each side; +- is the change from the quadratic through 3 (error "
+        "estimate). --refine locates to 1e-10.",
+    ]
+    if not s.complete:
+        head.append(f"(recording RECOVERED: {s.note})")
+    lines = [f"{'theta0':>12} {'bracket [lo, hi]':>25} {'width':>9} {'quantity':<12} "
+             f"{'kind':<5} {'left':>12} {'+-':>8} {'right':>12} {'+-':>8}  cause"]
+    for g in points:
+        p = g.point
+        err = g.limit_error if p.kind == "jump" else g.slope_error
+        q = p.quantity if p.input is None else f"{p.quantity}:{p.input}"
+        lines.append(
+            f"{p.theta0:>12.6g} [{p.bracket[0]:>+11.6g}, {p.bracket[1]:>+11.6g}] "
+            f"{g.width:>9.2g} {q:<12} {p.kind:<5} {p.left:>12.6g} {err[0]:>8.1g} "
+            f"{p.right:>12.6g} {err[1]:>8.1g}  {p.cause}")
+    if not points:
+        lines.append("(no jump or kink resolved at this grid resolution)")
+    return "\n".join(head + lines)
+
+
+# --- figures and the report --------------------------------------------------------------------
+@dataclass(frozen=True)
+class Report:
+    figures: tuple[Path, ...]
+    table_path: Path
+    table: str
+    sweeps: tuple[RecordedSweep, ...]
+    grid_points: dict[str, tuple[GridPoint, ...]]
+    refined: tuple[NonsmoothReport, ...] = ()
+
+
+def _fixed_sweep(s: RecordedSweep) -> FixedSweep:
+    n = s.theta0.size
+    return FixedSweep(
+        maneuver=s.maneuver, inputs=s.inputs, theta0=s.theta0, outcome=s.outcome,
+        t_final=s.t_final, status=("OK",) * n, branch=s.branch, event_times=s.event_times,
+        nfev=np.zeros(n, dtype=np.int64))
+
+
+def _optimal_sweep(s: RecordedSweep) -> OptimalSweep:
+    n = s.theta0.size
+    labels = _labels(s)
+    bound = []
+    for lab in labels:
+        held = [h for h in lab[1] if h is not None]
+        bound.append(held[0] if held else None)
+    return OptimalSweep(
+        problem=s.problem, theta0=s.theta0, policy=dict(s.policy), value=s.value,
+        outcome=s.outcome, branch=s.branch, active=(None,) * n, bound=tuple(bound),
+        success=np.ones(n, dtype=bool), nsim=np.zeros(n, dtype=np.int64),
+        nfev=np.zeros(n, dtype=np.int64), results=())
+
+
+def report(paths: Sequence[str | Path], out_dir: str | Path, *, refine: bool = False
+           ) -> Report:
+    """Figures (whichever the recordings allow) and the nonsmoothness table into ``out_dir``."""
+    from biped_opt.plots.figures import figure2, figure3, figure4
+    from biped_opt.plots.reproduce import fixed_data, nonsmooth_table, optimal_data
+
+    if not paths:
+        raise ReportError("no recordings given")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    sweeps = [load_sweep(p) for p in paths]
+    by_key: dict[tuple[str, str], RecordedSweep] = {}
+    for s in sweeps:
+        by_key[(s.kind, s.maneuver)] = s  # a later file of the same kind and maneuver wins
+    grid: dict[str, tuple[GridPoint, ...]] = {}
+    blocks = []
+    fixed, optimal = {}, {}
+    for (kind, maneuver), s in by_key.items():
+        pts = grid_nonsmooth(s)
+        grid[f"{kind}:{maneuver}"] = tuple(pts)
+        blocks.append(grid_table(s, pts))
+        core = [g.point for g in pts]
+        if kind == "fixed":
+            fixed[maneuver] = fixed_data(_fixed_sweep(s), s.problem, core)
+        else:
+            optimal[maneuver] = optimal_data(_optimal_sweep(s), core)
+    figures = []
+    if fixed:
+        td, lo = fixed.get("touchdown"), fixed.get("liftoff")
+        figures += [figure2(td, lo, out / "fig2.png"), figure3(td, lo, out / "fig3.png")]
+    if optimal:
+        figures.append(figure4(optimal.get("touchdown"), optimal.get("liftoff"),
+                               out / "fig4.png"))
+    refined: list[NonsmoothReport] = []
+    if refine:
+        from biped_opt.optimal.nonsmooth import find_nonsmooth_fixed, find_nonsmooth_optimal
+
+        for (kind, _maneuver), s in by_key.items():
+            if kind == "fixed":
+                refined.append(find_nonsmooth_fixed(s.maneuver, s.theta0, s.inputs))
+            else:
+                refined.append(find_nonsmooth_optimal(s.problem, s.theta0))
+        blocks.append("REFINED with the core (simulated/optimised again, located to 1e-10):\n\n"
+                      + nonsmooth_table(refined))
+        blocks.append(_comparison(grid, list(by_key.values()), refined))
+    table = "\n\n".join(blocks) + "\n"
+    table_path = out / "nonsmooth_recorded.txt"
+    table_path.write_text(table)
+    return Report(figures=tuple(figures), table_path=table_path, table=table,
+                  sweeps=tuple(by_key.values()), grid_points=grid, refined=tuple(refined))
+
+
+def _comparison(grid: dict[str, tuple[GridPoint, ...]], sweeps: list[RecordedSweep],
+                refined: list[NonsmoothReport]) -> str:
+    lines = ["Grid estimate vs refined (same quantity and kind, nearest refined point):",
+             f"{'sweep':<22} {'quantity':<12} {'kind':<5} {'theta0 grid':>12} "
+             f"{'theta0 refined':>16} {'left grid':>12} {'left refined':>13} {'right grid':>12} "
+             f"{'right refined':>14}"]
+    for s, rep in zip(sweeps, refined):
+        for g in grid[f"{s.kind}:{s.maneuver}"]:
+            p = g.point
+            same = [r for r in rep.points
+                    if (r.quantity, r.input, r.kind) == (p.quantity, p.input, p.kind)]
+            q = p.quantity if p.input is None else f"{p.quantity}:{p.input}"
+            if not same:
+                lines.append(f"{s.kind + ':' + s.maneuver:<22} {q:<12} {p.kind:<5} "
+                             f"{p.theta0:>12.6g} {'(not confirmed)':>16}")
+                continue
+            r = min(same, key=lambda r: abs(r.theta0 - p.theta0))
+            lines.append(
+                f"{s.kind + ':' + s.maneuver:<22} {q:<12} {p.kind:<5} {p.theta0:>12.6g} "
+                f"{r.theta0:>16.10g} {p.left:>12.6g} {r.left:>13.9g} {p.right:>12.6g} "
+                f"{r.right:>14.9g}")
+    return "\n".join(lines)
