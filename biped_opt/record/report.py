@@ -204,18 +204,40 @@ def _quantities(s: RecordedSweep) -> dict[str, Array]:
     return q
 
 
-def _one_side(x: Array, y: Array, x0: float) -> tuple[float, float, float, float]:
-    """(limit, slope, limit error, slope error) at x0 from points ordered nearest first."""
+def _fit(x: Array, y: Array, xref: float) -> tuple[Array, Array | None]:
+    """Polynomials in (x - xref) through the FIT_POINTS nearest points (nearest first) and
+    through one point fewer (for an error estimate); None where too few points."""
     n = min(FIT_POINTS, x.size)
-    if n == 0:
-        return math.nan, math.nan, math.inf, math.inf
-    if n == 1:
-        return float(y[0]), math.nan, math.inf, math.inf
-    c = np.polyfit(x[:n] - x0, y[:n], n - 1)
-    c2 = np.polyfit(x[: n - 1] - x0, y[: n - 1], n - 2)
-    slope, slope2 = float(c[-2]), (float(c2[-2]) if n > 2 else math.nan)
-    return (float(c[-1]), slope, abs(float(c[-1]) - float(c2[-1])),
-            abs(slope - slope2) if n > 2 else math.inf)
+    c = np.polyfit(x[:n] - xref, y[:n], max(n - 1, 0))
+    c2 = np.polyfit(x[: n - 1] - xref, y[: n - 1], n - 2) if n > 2 else None
+    return c, c2
+
+
+def _at(fit: tuple[Array, Array | None], dx: float) -> tuple[float, float, float, float]:
+    """(value, slope, value error, slope error) of a fit at offset dx."""
+    c, c2 = fit
+    value = float(np.polyval(c, dx))
+    slope = float(np.polyval(np.polyder(c), dx)) if c.size > 1 else math.nan
+    if c2 is None:
+        return value, slope, math.inf, math.inf
+    return (value, slope, abs(value - float(np.polyval(c2, dx))),
+            abs(slope - float(np.polyval(np.polyder(c2), dx))) if c2.size > 1 else math.inf)
+
+
+def _crossing(left: tuple[Array, Array | None], right: tuple[Array, Array | None],
+              lo: float, hi: float) -> float | None | bool:
+    """Where the two one-sided fits meet inside the bracket [lo, hi] (offsets from the fits'
+    reference): the continuous quantity's kink. None if they do not meet there (a jump); True if
+    they coincide (no break at all)."""
+    diff = np.polysub(left[0], right[0])
+    scale = max(1.0, float(np.max(np.abs(left[0]))), float(np.max(np.abs(right[0]))))
+    if np.all(np.abs(diff) <= 1e-12 * scale):
+        return True
+    diff = np.trim_zeros(diff, "f")
+    if diff.size <= 1:
+        return None
+    roots = [r.real for r in np.roots(diff) if abs(r.imag) <= 1e-12 and lo <= r.real <= hi]
+    return min(roots, key=lambda r: abs(r - 0.5 * (lo + hi))) if roots else None
 
 
 def _events(s: RecordedSweep) -> list[tuple[int, int, int | None, str]]:
@@ -270,24 +292,51 @@ def _cause(s: RecordedSweep, labels: list[Any], i: int, j: int, mid: int | None)
 
 
 def grid_nonsmooth(s: RecordedSweep) -> list[GridPoint]:
-    """Nonsmooth points estimated from the recorded angles (see the module docstring)."""
+    """Nonsmooth points estimated from the recorded angles (see the module docstring).
+
+    Each quantity gets a cubic through the 4 nearest recorded angles on each side of a bracket.
+    Where the two meet inside the bracket the quantity is continuous there and the meeting point
+    locates its kink; where they do not, it jumps. The bracket's location is the isolated
+    recorded angle between the sides if there is one (th0 = 0 with its simultaneous events),
+    else the kink of the continuous quantity whose slopes differ most, else the bracket's
+    centre (0 when the bracket straddles it); all quantities are evaluated there.
+    """
     out = []
     th = s.theta0
+    quantities = _quantities(s)
     for i, j, mid, cause in _events(s):
         lo, hi = float(th[i]), float(th[j])
-        x0 = float(th[mid]) if mid is not None else (0.0 if lo < 0.0 < hi else 0.5 * (lo + hi))
+        xref = float(th[mid]) if mid is not None else (0.0 if lo < 0.0 < hi else 0.5 * (lo + hi))
         left_idx = np.arange(i, -1, -1)  # nearest first
         right_idx = np.arange(j, th.size)
-        for name, y in _quantities(s).items():
-            ll, sl, el, esl = _one_side(th[left_idx], y[left_idx], x0)
-            lr, sr, er, esr = _one_side(th[right_idx], y[right_idx], x0)
+        fits = {name: (_fit(th[left_idx], y[left_idx], xref), _fit(th[right_idx], y[right_idx],
+                                                                   xref))
+                for name, y in quantities.items()}
+        meets = {name: _crossing(L, R, lo - xref, hi - xref) for name, (L, R) in fits.items()}
+        x0 = xref
+        if mid is None:
+            best = 0.0
+            for name, where in meets.items():
+                if isinstance(where, float):
+                    L, R = fits[name]
+                    jump_in_slope = abs(_at(L, where)[1] - _at(R, where)[1])
+                    if jump_in_slope > best:
+                        best, x0 = jump_in_slope, xref + where
+        for name, (L, R) in fits.items():
+            ll, sl, el, esl = _at(L, x0 - xref)
+            lr, sr, er, esr = _at(R, x0 - xref)
             scale = max(1.0, abs(ll), abs(lr))
-            if abs(lr - ll) > SIGNIFICANCE * (el + er) + 1e-12 * scale:
+            continuous = meets[name] is not None or mid is not None
+            if meets[name] is None and abs(lr - ll) > SIGNIFICANCE * (el + er) + 1e-12 * scale:
                 kind, a, b = "jump", ll, lr
-            elif abs(sr - sl) > SIGNIFICANCE * (esl + esr) + 1e-9 * max(1.0, abs(sl), abs(sr)):
+            elif mid is not None and abs(lr - ll) > SIGNIFICANCE * (el + er) + 1e-12 * scale:
+                kind, a, b = "jump", ll, lr
+            elif continuous and abs(sr - sl) > SIGNIFICANCE * (esl + esr) + 1e-9 * max(
+                    1.0, abs(sl), abs(sr)):
                 kind, a, b = "kink", sl, sr
             else:
                 continue
+            y = quantities[name]
             at = float(y[mid]) if mid is not None else 0.5 * (ll + lr)
             family, _, comp = name.partition(":")
             point = NonsmoothPoint(
@@ -307,11 +356,13 @@ def grid_table(s: RecordedSweep, points: Sequence[GridPoint]) -> str:
         f"{s.theta0.size} recorded angles in [{s.theta0[0]:g}, {s.theta0[-1]:g}], "
         f"spacing {spacing.min():.3g}..{spacing.max():.3g} ==",
         "GRID-RESOLUTION ESTIMATES from the recording: each point lies in the recorded bracket "
-        "[lo, hi] (width = location",
-        "uncertainty); left/right are one-sided limits (jump) or slopes (kink) extrapolated by a "
-        "cubic through the 4 nearest",
-        "recorded angles of each side; +- is the change from the quadratic through 3 (error "
-        "estimate). --refine locates to 1e-10.",
+        "[lo, hi]; left/right are one-sided",
+        "limits (jump) or slopes (kink) of cubics through the 4 nearest recorded angles of each "
+        "side, at theta0: the isolated",
+        "angle inside the bracket, else where the cubics of a continuous quantity meet (its "
+        "kink), else the bracket's centre;",
+        "+- is the change from the quadratic through 3 (error estimate). --refine locates to "
+        "1e-10.",
     ]
     if not s.complete:
         head.append(f"(recording RECOVERED: {s.note})")
