@@ -6,13 +6,14 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint bench venv clean clean-cache
+.PHONY: demo test lint bench venv clean clean-cache lock
 
 venv: $(STAMP)
 
-$(STAMP): requirements.txt requirements-dev.txt setup.py
+$(STAMP): requirements.txt requirements-dev.txt constraints.txt setup.py
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt -r requirements-dev.txt
+	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt \
+		-r requirements-dev.txt -c constraints.txt
 	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
 	touch $(STAMP)
 
@@ -32,6 +33,11 @@ bench: $(STAMP)
 # other files: after editing biped_opt/model or biped_opt/hybrid, drop it (a fresh clone has none).
 clean-cache:
 	find biped_opt -name '*.nbi' -o -name '*.nbc' | xargs rm -f
+
+# Regenerate constraints.txt after changing a pin in requirements*.txt.
+lock: $(STAMP)
+	{ sed -n '1,2p' constraints.txt; $(PY) -m pip freeze --exclude-editable | grep -v '^biped'; } \
+		> constraints.txt.new && mv constraints.txt.new constraints.txt
 
 clean: clean-cache
 	rm -rf $(VENV) build *.egg-info
