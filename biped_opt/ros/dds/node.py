@@ -298,7 +298,10 @@ class Subscription(_Entity):
 class Service(_Entity):
     """``rclpy.service.Service``: ``callback(request, response) -> response``."""
 
-    reply_wait_s = 0.1  # rmw_cyclonedds waits this long for the client's reply reader
+    # rmw_cyclonedds waits 100 ms for a new client's reply reader before answering and drops the
+    # reply after that; on a loaded machine discovery can take longer, and a dropped reply leaves
+    # the client waiting forever, so wait up to 1 s (only a client not yet matched ever waits)
+    reply_wait_s = 1.0
 
     def __init__(self, node: Node, srv_type: ServiceType, name: str,
                  callback: Callable[[Any, Any], Any], qos: QoSProfile, group: Any) -> None:
@@ -345,7 +348,7 @@ class Service(_Entity):
         """``yes``/``gone``/``maybe`` (timed out) for the client that wrote a request.
 
         As rmw_cyclonedds: a request writer without ``clientid`` is assumed fine; otherwise
-        wait up to 100 ms until the reply writer has matched the reader with that id.
+        wait up to ``reply_wait_s`` until the reply writer has matched the reader with that id.
         """
         reader, deadline = self._reader, time.monotonic() + self.reply_wait_s
         if reader is None:
