@@ -160,6 +160,28 @@ def _dense_eval(F, y, x, out):
 
 
 @nb.njit(cache=True, error_model="numpy")
+def _dense_component(F, y, x, k):
+    """Component k of the interpolant at x (what a position or velocity guard needs)."""
+    acc = 0.0
+    for r in range(6, -1, -1):
+        acc += F[r, k]
+        acc *= x if (6 - r) % 2 == 0 else 1.0 - x
+    return y[k] + acc
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _guard_on_dense(p, mode, u, term_sign, F, y, x, i, tmp, fscratch):
+    """Guard i on the interpolant at x: one component for a foot height or the body's z', the
+    whole state (and the leg forces) only for a reaction force."""
+    if i == 2:
+        return term_sign * _dense_component(F, y, x, 8)
+    if not mode >> i & 1:
+        return _dense_component(F, y, x, 4 + 2 * i)
+    _dense_eval(F, y, x, tmp)
+    return _guard(p, mode, u, term_sign, tmp, i, fscratch)
+
+
+@nb.njit(cache=True, error_model="numpy")
 def _guard(p, mode, u, term_sign, y, i, fscratch):
     """Value of guard i at state y in mode ``mode`` (see the module docstring)."""
     if i == 2:
@@ -210,8 +232,7 @@ def _root_on_dense(p, mode, u, term_sign, F, y, i, xa, ga, xb, gb, tmp, fscratch
         x = (xa * gb - xb * ga) / (gb - ga)
         if not xa < x < xb:
             x = 0.5 * (xa + xb)
-        _dense_eval(F, y, x, tmp)
-        gx = _guard(p, mode, u, term_sign, tmp, i, fscratch)
+        gx = _guard_on_dense(p, mode, u, term_sign, F, y, x, i, tmp, fscratch)
         if gx > 0.0:
             xa, ga = x, gx
             if side == 1:
@@ -407,8 +428,7 @@ def simulate_kernel(p, y0, mode0, u, cfg, samples, events, y_out):
                     gb = 0.0
                     for m in range(1, 9):
                         xm = probe[i] * m / 8.0
-                        _dense_eval(F, y, xm, tmp)
-                        gm = _guard(p, mode, u, term_sign, tmp, i, fscratch)
+                        gm = _guard_on_dense(p, mode, u, term_sign, F, y, xm, i, tmp, fscratch)
                         if gm <= 0.0:
                             xb = xm
                             gb = gm
