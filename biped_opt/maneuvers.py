@@ -19,6 +19,7 @@ import enum
 import math
 from dataclasses import dataclass
 
+import numba as nb
 import numpy as np
 import numpy.typing as npt
 
@@ -55,6 +56,8 @@ class ManeuverSpec:
     theta0_limit: float
     #: one line for humans
     description: str
+    #: index of the maneuver in the compiled initial-state function
+    code: int
 
 
 _SPECS = {
@@ -66,6 +69,7 @@ _SPECS = {
         term_mode=None,
         theta0_limit=0.25,
         description="fall from rest at z = 1 to the body's nadir after touchdown",
+        code=0,
     ),
     Maneuver.LIFTOFF: ManeuverSpec(
         maneuver=Maneuver.LIFTOFF,
@@ -75,6 +79,7 @@ _SPECS = {
         term_mode=ContactMode.AIR,
         theta0_limit=0.3,
         description="push off from double stance at z = l0 - 0.15 to the body's apex in the air",
+        code=1,
     ),
 }
 
@@ -122,6 +127,36 @@ def check_theta0(maneuver: Maneuver | str | ManeuverSpec, theta0: float) -> floa
     return value
 
 
+@nb.njit(cache=True, error_model="numpy")
+def fill_initial_state(code: int, th: float, p: npt.NDArray[np.float64],
+                       y0: npt.NDArray[np.float64]) -> None:
+    """Initial state of maneuver ``code`` (ManeuverSpec.code) at pitch th into y0 (14,).
+
+    touchdown: at rest at z = 1, legs at rest length and perpendicular to the body,
+    foot_j = body + R(th) (s_j w, -l0); liftoff: at rest at z = l0 - 0.15 with vertical,
+    compressed legs, feet on the ground directly below the hips. p: packed parameters.
+    """
+    l0, w = p[4], p[5]
+    wc = w * math.cos(th)
+    ws = w * math.sin(th)
+    for i in range(y0.shape[0]):
+        y0[i] = 0.0
+    y0[2] = th
+    if code == 0:
+        z = TOUCHDOWN_HEIGHT
+        lx = l0 * math.sin(th)
+        lz = l0 * math.cos(th)
+        y0[1] = z
+        y0[3] = -wc + lx
+        y0[4] = z - ws - lz
+        y0[5] = wc + lx
+        y0[6] = z + ws - lz
+    else:
+        y0[1] = l0 - LIFTOFF_COMPRESSION
+        y0[3] = -wc
+        y0[5] = wc
+
+
 def initial_state(
     maneuver: Maneuver | str | ManeuverSpec, theta0: float, params: BipedParams | None = None
 ) -> tuple[npt.NDArray[np.float64], ContactMode]:
@@ -129,13 +164,6 @@ def initial_state(
     s = spec(maneuver)
     th = check_theta0(s, theta0)
     p = params if params is not None else _DEFAULT_PARAMS
-    wc, ws = p.w * math.cos(th), p.w * math.sin(th)
-    if s.maneuver is Maneuver.TOUCHDOWN:
-        # legs at rest length, perpendicular to the body: foot_j = body + R(th) (s_j w, -l0)
-        z = TOUCHDOWN_HEIGHT
-        lx, lz = p.l0 * math.sin(th), p.l0 * math.cos(th)
-        q = [0.0, z, th, -wc + lx, z - ws - lz, wc + lx, z + ws - lz]
-    else:
-        # vertical legs, feet on the ground directly below the hips, both compressed
-        q = [0.0, p.l0 - LIFTOFF_COMPRESSION, th, -wc, 0.0, wc, 0.0]
-    return np.array(q + [0.0] * (NSTATE - len(q))), s.initial_mode
+    y0 = np.empty(NSTATE)
+    fill_initial_state(s.code, th, p.as_array(), y0)
+    return y0, s.initial_mode

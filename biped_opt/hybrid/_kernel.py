@@ -31,6 +31,7 @@ import numba as nb
 import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as _dop853
 
+from biped_opt.maneuvers import fill_initial_state
 from biped_opt.model.biped import NSTATE, apply_impact, dynamics, dynamics_at, generalised_forces
 
 # --- Status codes (mirrored by biped_opt.hybrid.trajectory.Status) ---------------------------
@@ -558,17 +559,20 @@ def simulate_kernel(p, y0, mode0, u, cfg, samples, events, y_out):
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
-def simulate_batch_kernel(p, y0s, modes0, us, cfg, events, y_out, info):
-    """:func:`simulate_kernel` over many initial states and inputs, in parallel threads.
+def simulate_batch_kernel(p, code, thetas, mode0, us, cfg, events, y_out, info):
+    """:func:`simulate_kernel` over many initial pitches and inputs, in parallel threads.
 
-    y0s : (N, 14); modes0 : (N,) int; us : (N, 3); cfg : as for simulate_kernel (no samples);
+    code : maneuver code (ManeuverSpec.code) for the initial states; thetas : (N,); mode0 : the
+    initial mode; us : (N, 3); cfg : as for simulate_kernel (no samples);
     events : (N, max_events + 1, EVENT_WIDTH); y_out : (N, 14); info : (N, 8) receives the
     kernel's returned tuple per trajectory.
     """
     no_samples = np.empty((0, SAMPLE_WIDTH))
-    for k in nb.prange(y0s.shape[0]):
+    for k in nb.prange(thetas.shape[0]):
+        y0 = np.empty(NSTATE)
+        fill_initial_state(code, thetas[k], p, y0)
         status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej = simulate_kernel(
-            p, y0s[k], modes0[k], us[k], cfg, no_samples, events[k], y_out[k]
+            p, y0, mode0, us[k], cfg, no_samples, events[k], y_out[k]
         )
         info[k, 0] = status
         info[k, 1] = t_f

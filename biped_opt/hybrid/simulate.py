@@ -18,7 +18,7 @@ import numpy.typing as npt
 from biped_opt.errors import InvalidInputError, InvalidParameterError, SimulationError
 from biped_opt.hybrid import _kernel as K
 from biped_opt.hybrid.trajectory import Status, Trajectory
-from biped_opt.maneuvers import ManeuverSpec, initial_state, parse_maneuver, spec
+from biped_opt.maneuvers import ManeuverSpec, check_theta0, initial_state, parse_maneuver, spec
 from biped_opt.model.biped import NSTATE
 from biped_opt.model.modes import ContactMode
 from biped_opt.model.params import BipedParams
@@ -217,15 +217,15 @@ def simulate_batch(
         raise InvalidInputError(
             f"inputs must have shape (<=3,) or ({n}, <=3) for {n} angles, got {raw.shape}"
         )
-    y0s = np.empty((n, NSTATE))
-    for k in range(n):
-        y0s[k] = initial_state(s, th[k], params)[0]  # validates each angle
-    modes0 = np.full(n, int(s.initial_mode), dtype=np.int64)
+    bad = np.flatnonzero(~(np.abs(th) <= s.theta0_limit))  # NaN fails the comparison too
+    if bad.size:
+        check_theta0(s, th[bad[0]])  # raises, naming theta0 and the valid range
     events = np.zeros((n, options.max_events + 1, K.EVENT_WIDTH))
     y_out = np.empty((n, NSTATE))
     info = np.empty((n, 8))
     K.simulate_batch_kernel(
-        params.as_array(), y0s, modes0, u_arr, kernel_config(s, options), events, y_out, info
+        params.as_array(), s.code, th, int(s.initial_mode), u_arr, kernel_config(s, options),
+        events, y_out, info,
     )
     return BatchResult(
         maneuver=s.maneuver.value,
