@@ -128,15 +128,20 @@ class RecorderNode(ros.Node):
 
     # -- service calls from a worker thread ------------------------------------------------
     def _call(self, client: Any, request: Any) -> Any:
+        """Call and wait; a request left unanswered for ``service_timeout`` is sent once more
+        (both services are idempotent), then the sweep fails with a clear error."""
         timeout = float(self.get_parameter("service_timeout").value)
         if not client.wait_for_service(timeout_sec=timeout):
             raise SimulationError(f"service {client.srv_name} is not available")
-        done = threading.Event()
-        future = client.call_async(request)
-        future.add_done_callback(lambda _f: done.set())
-        if not done.wait(timeout):
-            raise SimulationError(f"no reply from {client.srv_name} within {timeout} s")
-        return future.result()
+        for attempt in range(2):
+            done = threading.Event()
+            future = client.call_async(request)
+            future.add_done_callback(lambda _f, done=done: done.set())
+            if done.wait(timeout):
+                return future.result()
+            self.get_logger().warning(
+                f"no reply from {client.srv_name} within {timeout} s (attempt {attempt + 1})")
+        raise SimulationError(f"no reply from {client.srv_name} to two requests")
 
     # -- the sweep --------------------------------------------------------------------------
     def record(self, req: SweepRequest) -> SweepSummary:
