@@ -21,6 +21,7 @@ from pathlib import Path
 from types import ModuleType
 
 import biped_opt
+from biped_opt.cli.args import int_at_least
 from biped_opt.errors import BipedOptError
 
 __all__ = ["BenchUnavailableError", "load_bench", "register", "run", "format_table"]
@@ -68,22 +69,11 @@ def load_bench() -> ModuleType:
         raise BenchUnavailableError(f"cannot import the benchmark: {exc}") from None
 
 
-def positive_int(text: str) -> int:
-    """argparse type for --cases: an integer >= 2 (one case per maneuver at least)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--cases must be an integer, got {text!r}") from None
-    if value < 2:
-        raise argparse.ArgumentTypeError(f"--cases must be at least 2, got {value}")
-    return value
-
-
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "bench", help="time biped_opt against solve_ivp and a relaxation simulator"
     )
-    p.add_argument("--cases", type=positive_int, default=200,
+    p.add_argument("--cases", type=int_at_least("--cases", 2), default=200,
                    help="number of (maneuver, theta0, inputs) cases, half each (default 200)")
     p.add_argument("--seed", type=int, default=None, help="seed of the random cases")
     p.add_argument("--quick", action="store_true",

@@ -12,7 +12,8 @@ import dataclasses
 import json
 import math
 
-from biped_opt.cli.simulate_cmd import add_maneuver_argument, finite_float, parse_maneuver_arg
+from biped_opt.cli.args import finite_float
+from biped_opt.cli.simulate_cmd import add_maneuver_argument, parse_maneuver_arg
 from biped_opt.errors import InvalidInputError, InvalidParameterError
 from biped_opt.hybrid.simulate import INPUT_NAMES
 from biped_opt.maneuvers import Maneuver, check_theta0

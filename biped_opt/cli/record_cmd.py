@@ -6,7 +6,7 @@ import argparse
 import signal
 from pathlib import Path
 
-from biped_opt.cli.simulate_cmd import finite_float
+from biped_opt.cli.args import finite_float
 
 
 def register(sub: argparse._SubParsersAction) -> None:

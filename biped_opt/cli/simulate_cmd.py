@@ -4,28 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 
+from biped_opt.cli.args import finite_float
 from biped_opt.errors import InvalidInputError
 from biped_opt.hybrid import simulate
 from biped_opt.hybrid.trajectory import Trajectory
 from biped_opt.maneuvers import Maneuver, check_theta0, parse_maneuver
-
-
-def finite_float(name: str):
-    """argparse type: a finite float; the error names the argument."""
-
-    def convert(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
-        if not math.isfinite(value):
-            raise argparse.ArgumentTypeError(f"{name} must be finite, got {text!r}")
-        return value
-
-    convert.__name__ = name
-    return convert
 
 
 def add_maneuver_argument(parser: argparse.ArgumentParser) -> None:

@@ -5,26 +5,13 @@ from __future__ import annotations
 import argparse
 import sys
 
+from biped_opt.cli.args import finite_float, int_at_least
 from biped_opt.cli.optimise_cmd import add_problem_arguments, problem_from_args
-from biped_opt.cli.simulate_cmd import finite_float, parse_maneuver_arg
+from biped_opt.cli.simulate_cmd import parse_maneuver_arg
 from biped_opt.errors import InvalidInputError
 from biped_opt.fixed_sweep import FIXED_INPUTS
 from biped_opt.maneuvers import check_theta0
 from biped_opt.optimal.sweep import sweep_fixed, sweep_grid, sweep_optimal
-
-
-def positive_int(name: str):
-    def convert(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be an integer, got {text!r}") from None
-        if value < 2:
-            raise argparse.ArgumentTypeError(f"{name} must be at least 2, got {value}")
-        return value
-
-    convert.__name__ = name
-    return convert
 
 
 def add_range_arguments(p: argparse.ArgumentParser, num_help: str) -> None:
@@ -32,7 +19,7 @@ def add_range_arguments(p: argparse.ArgumentParser, num_help: str) -> None:
                    help="smallest th0 [rad] (default: -limit of the maneuver)")
     p.add_argument("--theta0-max", type=finite_float("--theta0-max"), default=None,
                    help="largest th0 [rad] (default: +limit of the maneuver)")
-    p.add_argument("--num", type=positive_int("--num"), default=None, help=num_help)
+    p.add_argument("--num", type=int_at_least("--num", 2), default=None, help=num_help)
     p.add_argument("--progress", dest="progress", action="store_true", default=None,
                    help="draw a progress bar on stderr (default: when stderr is a terminal)")
     p.add_argument("--no-progress", dest="progress", action="store_false")

@@ -68,6 +68,19 @@ _ERROR_EXPONENT = -1.0 / 8.0
 _MAX_STEPS = 100_000
 
 
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _stage_state(y, K, h, s, out):
+    """out = y + h sum_r A[s, r] K_r, the state at which stage s is evaluated (zeros skipped)."""
+    n = y.shape[0]
+    for i in range(n):
+        out[i] = y[i]
+    for r in range(s):
+        a = h * _A[s, r]
+        if a != 0.0:
+            for i in range(n):
+                out[i] += a * K[r * n + i]
+
+
 @nb.njit(cache=True, error_model="numpy")
 def _step(p, mode, u, term_sign, y, f, h, K, y_new, f_new, lam_new, tmp, rtol, atol, probe):
     """One DOP853 step of size h from (y, f = dy/dt at y) in mode ``mode``.
@@ -84,13 +97,7 @@ def _step(p, mode, u, term_sign, y, f, h, K, y_new, f_new, lam_new, tmp, rtol, a
     for i in range(n):
         K[i] = f[i]
     for s in range(1, _NSTAGES):
-        for i in range(n):
-            tmp[i] = y[i]
-        for r in range(s):
-            a = h * _A[s, r]
-            if a != 0.0:
-                for i in range(n):
-                    tmp[i] += a * K[r * n + i]
+        _stage_state(y, K, h, s, tmp)
         dynamics_at(p, mode, tmp, u, K, s * n, lam_new)
         c = _C[s]
         for j in range(2):
@@ -129,13 +136,7 @@ def _dense_coefficients(p, mode, u, y, f, h, K, y_new, f_new, F, tmp, lam):
     """Coefficients F (7, 14) of the 7th-order interpolant on the step just taken (3 stages)."""
     n = y.shape[0]
     for s in range(_NSTAGES + 1, 16):
-        for i in range(n):
-            tmp[i] = y[i]
-        for r in range(s):
-            a = h * _A[s, r]
-            if a != 0.0:
-                for i in range(n):
-                    tmp[i] += a * K[r * n + i]
+        _stage_state(y, K, h, s, tmp)
         dynamics_at(p, mode, tmp, u, K, s * n, lam)
     for i in range(n):
         dy = y_new[i] - y[i]

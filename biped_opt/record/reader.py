@@ -1,8 +1,9 @@
 """Reading biped_opt MCAP recordings back, including files a killed recorder left unfinished.
 
-:func:`read_recording` first tries the indexed reader (a finished file); if the file has no valid
-summary - its writer was killed before ``finish()`` - it falls back to a stream reader that decodes
+:func:`read_raw` first tries the indexed reader (a finished file); if the file has no valid
+summary - its writer was killed before ``finish()`` - it falls back to a stream reader that keeps
 every complete chunk and reports how much it recovered (MCAP.md: crash safety).
+:func:`read_recording` decodes what :func:`read_raw` returns.
 """
 
 from __future__ import annotations
@@ -66,59 +67,14 @@ class Recording:
 
 def read_recording(path: str | Path) -> Recording:
     """Decode a recording; recover what can be recovered from an unfinished file."""
-    path = Path(path)
-    if not path.is_file():
-        raise RecordError(f"no such recording: {path}")
+    raw = read_raw(path)
     typestore = load_interfaces().typestore
-    try:
-        return _read_indexed(path, typestore)
-    except (McapError, ValueError, EOFError, AssertionError, KeyError):
-        return _read_stream(path, typestore)
-
-
-def _decode(typestore: Any, schema_name: str, data: bytes) -> Any:
-    return typestore.deserialize_cdr(data, schema_name)
-
-
-def _read_indexed(path: Path, typestore: Any) -> Recording:
-    with open(path, "rb") as stream:
-        reader = make_reader(stream)
-        summary = reader.get_summary()
-        if summary is None:
-            raise McapError("no summary")
-        out = []
-        for schema, channel, message in reader.iter_messages(log_time_order=True):
-            out.append(RecordedMessage(channel.topic, message.log_time,
-                                       _decode(typestore, schema.name, message.data)))
-        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-    return _recording(path, out, metadata, complete=True, note="indexed")
-
-
-def _read_stream(path: Path, typestore: Any) -> Recording:
-    schemas: dict[int, Schema] = {}
-    channels: dict[int, Channel] = {}
-    out: list[RecordedMessage] = []
-    metadata: dict[str, dict[str, str]] = {}
-    with open(path, "rb") as stream:
-        reader = StreamReader(stream, skip_magic=False, emit_chunks=False)
-        try:
-            for record in reader.records:
-                if isinstance(record, Schema):
-                    schemas[record.id] = record
-                elif isinstance(record, Channel):
-                    channels[record.id] = record
-                elif isinstance(record, Message):
-                    channel = channels[record.channel_id]
-                    schema = schemas[channel.schema_id]
-                    out.append(RecordedMessage(channel.topic, record.log_time,
-                                               _decode(typestore, schema.name, record.data)))
-                elif isinstance(record, Metadata):
-                    metadata[record.name] = dict(record.metadata)
-        except (McapError, EOFError, ValueError, KeyError, AssertionError):
-            pass  # the truncated tail: everything before it is complete
-    out.sort(key=lambda m: m.log_time_ns)
-    note = f"recovered {len(out)} messages from an unfinished file (its writer was killed)"
-    return _recording(path, out, metadata, complete=False, note=note)
+    messages = [
+        RecordedMessage(m.topic, m.log_time_ns,
+                        typestore.deserialize_cdr(m.data, raw.channels[m.topic].type))
+        for m in raw.messages
+    ]
+    return _recording(raw.path, messages, raw.metadata, complete=raw.complete, note=raw.note)
 
 
 def _recording(path: Path, messages: list[RecordedMessage], metadata: dict[str, dict[str, str]],

@@ -295,6 +295,21 @@ class Subscription(_Entity):
         self._reader = None
 
 
+def _service_endpoints(node: Any, srv_type: ServiceType, name: str, qos: QoSProfile, key: str
+                       ) -> tuple[Any, str, tuple[Any, Any], tuple[Any, Any]]:
+    """What a service or a client needs for its two endpoints, as rmw_cyclonedds names them:
+    (participant, endpoint id, (request topic, qos), (reply topic, qos)); both endpoints carry
+    USER_DATA ``key=<id>;`` (``serviceid`` or ``clientid``)."""
+    participant = node.context.participant
+    ident = _endpoint_id(participant)
+    user = f"{key}={ident};".encode()
+    request = (node._topic(f"rq{name}Request", srv_type.RequestWire),
+               to_dds_qos(qos, user + _type_hash_user_data(srv_type.name + "_Request")))
+    reply = (node._topic(f"rr{name}Reply", srv_type.ResponseWire),
+             to_dds_qos(qos, user + _type_hash_user_data(srv_type.name + "_Response")))
+    return participant, ident, request, reply
+
+
 class Service(_Entity):
     """``rclpy.service.Service``: ``callback(request, response) -> response``."""
 
@@ -307,15 +322,10 @@ class Service(_Entity):
                  callback: Callable[[Any, Any], Any], qos: QoSProfile, group: Any) -> None:
         self.node, self.srv_type, self.srv_name = node, srv_type, name
         self.callback, self.callback_group, self.qos_profile = callback, group, qos
-        participant = node.context.participant
-        req_topic = node._topic(f"rq{name}Request", srv_type.RequestWire)
-        rep_topic = node._topic(f"rr{name}Reply", srv_type.ResponseWire)
-        self.service_id = _endpoint_id(participant)
-        user = f"serviceid={self.service_id};".encode()
-        self._reader: DataReader | None = DataReader(participant, req_topic, qos=to_dds_qos(
-            qos, user + _type_hash_user_data(srv_type.name + "_Request")))
-        self._writer: DataWriter | None = DataWriter(participant, rep_topic, qos=to_dds_qos(
-            qos, user + _type_hash_user_data(srv_type.name + "_Response")))
+        participant, self.service_id, request, reply = _service_endpoints(
+            node, srv_type, name, qos, "serviceid")
+        self._reader: DataReader | None = DataReader(participant, *request)
+        self._writer: DataWriter | None = DataWriter(participant, *reply)
         self.condition = ReadCondition(self._reader, _ANY)
         self._client_ids: dict[int, str | None] = {}
         self._ready_clients: set[str] = set()
@@ -389,15 +399,10 @@ class Client(_Entity):
                  group: Any) -> None:
         self.node, self.srv_type, self.srv_name = node, srv_type, name
         self.callback_group, self.qos_profile = group, qos
-        participant = node.context.participant
-        req_topic = node._topic(f"rq{name}Request", srv_type.RequestWire)
-        rep_topic = node._topic(f"rr{name}Reply", srv_type.ResponseWire)
-        self.client_id = _endpoint_id(participant)
-        user = f"clientid={self.client_id};".encode()
-        self._writer: DataWriter | None = DataWriter(participant, req_topic, qos=to_dds_qos(
-            qos, user + _type_hash_user_data(srv_type.name + "_Request")))
-        self._reader: DataReader | None = DataReader(participant, rep_topic, qos=to_dds_qos(
-            qos, user + _type_hash_user_data(srv_type.name + "_Response")))
+        participant, self.client_id, request, reply = _service_endpoints(
+            node, srv_type, name, qos, "clientid")
+        self._writer: DataWriter | None = DataWriter(participant, *request)
+        self._reader: DataReader | None = DataReader(participant, *reply)
         self.condition = ReadCondition(self._reader, _ANY)
         self.guid = self._writer.get_instance_handle() & _MASK64
         self._seq = itertools.count(1)
