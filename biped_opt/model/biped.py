@@ -115,7 +115,7 @@ def generalised_forces(
     f[off + 6] = -f2 * n2z - mg_foot
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def dynamics_at(
     p: Array, mode: int, y: Array, u: Array, out: Array, off: int, lam: Array
 ) -> None:
