@@ -310,7 +310,23 @@ def _service_endpoints(node: Any, srv_type: ServiceType, name: str, qos: QoSProf
     return participant, ident, request, reply
 
 
-class Service(_Entity):
+class _RequestReply(_Entity):
+    """A service's or a client's reader and writer pair (see :func:`_service_endpoints`)."""
+
+    _reader: DataReader | None
+    _writer: DataWriter | None
+
+    def _guids(self) -> tuple[list[bytes], list[bytes]]:
+        if self._reader is None or self._writer is None:
+            return [], []
+        return [self._reader.get_guid().bytes], [self._writer.get_guid().bytes]
+
+    def _destroy(self) -> None:
+        self.condition = None
+        self._reader = self._writer = None
+
+
+class Service(_RequestReply):
     """``rclpy.service.Service``: ``callback(request, response) -> response``."""
 
     # rmw_cyclonedds waits 100 ms for a new client's reply reader before answering and drops the
@@ -382,17 +398,8 @@ class Service(_Entity):
             time.sleep(0.002)
         return "gone"
 
-    def _guids(self) -> tuple[list[bytes], list[bytes]]:
-        if self._reader is None:
-            return [], []
-        return [self._reader.get_guid().bytes], [self._writer.get_guid().bytes]
 
-    def _destroy(self) -> None:
-        self.condition = None
-        self._reader = self._writer = None
-
-
-class Client(_Entity):
+class Client(_RequestReply):
     """``rclpy.client.Client``: ``wait_for_service``, ``call_async -> Future``, ``call``."""
 
     def __init__(self, node: Node, srv_type: ServiceType, name: str, qos: QoSProfile,
@@ -471,14 +478,8 @@ class Client(_Entity):
                 tasks.append(lambda f=future, b=wire.body: f.set_result(b))
         return tasks
 
-    def _guids(self) -> tuple[list[bytes], list[bytes]]:
-        if self._reader is None:
-            return [], []
-        return [self._reader.get_guid().bytes], [self._writer.get_guid().bytes]
-
     def _destroy(self) -> None:
-        self.condition = None
-        self._reader = self._writer = None
+        super()._destroy()
         with self._lock:
             pending, self._pending = self._pending, {}
         for future in pending.values():
