@@ -11,7 +11,6 @@ nonsmooth table (every point located to 1e-10 with the core) are reproduced.
 from __future__ import annotations
 
 import argparse
-import signal
 import time
 from pathlib import Path
 
@@ -32,12 +31,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from biped_opt import ros
     from biped_opt.maneuvers import spec
+    from biped_opt.nodes.convert import stop_on_sigterm
     from biped_opt.nodes.graph import Graph
     from biped_opt.nodes.recorder import SweepRequest
     from biped_opt.plots.reproduce import reproduce
     from biped_opt.record.report import report
 
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    stop_on_sigterm()
     start = time.perf_counter()
     print(f"bringing up simulator, optimiser, recorder (ROS backend: {ros.BACKEND})", flush=True)
     recorded = []

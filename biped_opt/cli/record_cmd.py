@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import signal
 from pathlib import Path
 
 from biped_opt.cli.args import finite_float
@@ -22,6 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from biped_opt.nodes.convert import stop_on_sigterm
     from biped_opt.nodes.graph import Graph
     from biped_opt.nodes.recorder import SweepRequest
 
@@ -29,7 +29,7 @@ def run(args: argparse.Namespace) -> int:
                            theta0_max=args.theta0_max, num=args.num, optimal=args.optimal,
                            output=args.out).validated()
     # SIGTERM stops like Ctrl-C: the recorder finishes the file before the process exits
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    stop_on_sigterm()
     with Graph(params_file=args.params_file,
                overrides={"simulator": {"autostart": False}}) as graph:
         summary = graph.recorder.record(request)

@@ -120,6 +120,7 @@ class OptimiserNode(ros.Node):
 
 
 def main(args: list[str] | None = None) -> None:
+    convert.stop_on_sigterm()
     ros.init(args=args)
     node = OptimiserNode()
     executor = ros.MultiThreadedExecutor(num_threads=4)

@@ -23,7 +23,6 @@ Parameters: ``maneuver``, ``theta0_min``, ``theta0_max``, ``num``, ``optimal``, 
 from __future__ import annotations
 
 import json
-import signal
 import threading
 from dataclasses import dataclass
 from pathlib import Path
@@ -254,8 +253,7 @@ def _header_fields(ns: int) -> dict[str, Any]:
 
 
 def main(args: list[str] | None = None) -> None:
-    # SIGTERM ends the node like SIGINT: spin returns, the file is finished, exit status 0
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    convert.stop_on_sigterm()
     ros.init(args=args)
     node = RecorderNode()
     executor = ros.MultiThreadedExecutor(num_threads=2)

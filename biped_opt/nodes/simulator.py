@@ -157,6 +157,7 @@ class SimulatorNode(ros.Node):
 
 
 def main(args: list[str] | None = None) -> None:
+    convert.stop_on_sigterm()
     ros.init(args=args)
     node = SimulatorNode()
     try:

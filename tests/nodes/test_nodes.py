@@ -223,3 +223,36 @@ def test_node_in_a_subprocess_exits_cleanly_on_sigint(domain_id):
         proc.kill()
     assert proc.returncode == 0, err
     assert "Traceback" not in err
+
+
+def test_simulator_in_a_subprocess_exits_cleanly_on_sigterm(domain_id):
+    """ros2 launch follows SIGINT with SIGTERM: a node must end cleanly on either."""
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "biped_opt.nodes.simulator", "--ros-args", "-p", "loop:=true"],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        ctx = ros.Context()
+        ros.init(args=[], context=ctx, domain_id=domain_id)
+        node = ros.Node("probe", context=ctx)
+        modes = []
+        node.create_subscription(
+            ros.msgs.ContactMode, "/biped/contact_mode", modes.append,
+            ros.QoSProfile(depth=10, reliability=ros.ReliabilityPolicy.RELIABLE,
+                           durability=ros.DurabilityPolicy.TRANSIENT_LOCAL))
+        executor = ros.SingleThreadedExecutor(context=ctx)
+        executor.add_node(node)
+        deadline = time.monotonic() + 30.0
+        while not modes and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.1)
+        assert modes, "the simulator never published its contact mode"
+        executor.shutdown()
+        node.destroy_node()
+        ros.try_shutdown(context=ctx)
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err
