@@ -31,9 +31,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from biped_opt import ros
     from biped_opt.maneuvers import spec
-    from biped_opt.nodes.convert import stop_on_sigterm
     from biped_opt.nodes.graph import Graph
     from biped_opt.nodes.recorder import SweepRequest
+    from biped_opt.nodes.run import stop_on_sigterm
     from biped_opt.plots.reproduce import reproduce
     from biped_opt.record.report import report
 

@@ -21,9 +21,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from biped_opt.nodes.convert import stop_on_sigterm
     from biped_opt.nodes.graph import Graph
     from biped_opt.nodes.recorder import SweepRequest
+    from biped_opt.nodes.run import stop_on_sigterm
 
     request = SweepRequest(maneuver=args.maneuver, theta0_min=args.theta0_min,
                            theta0_max=args.theta0_max, num=args.num, optimal=args.optimal,

@@ -7,7 +7,6 @@ lists) and written as plain float lists, which every backend accepts.
 from __future__ import annotations
 
 import math
-import signal
 from typing import Any
 
 import numpy as np
@@ -26,7 +25,6 @@ __all__ = [
     "request_theta0",
     "state_messages",
     "contact_mode_messages",
-    "stop_on_sigterm",
 ]
 
 NS = 1_000_000_000
@@ -111,12 +109,6 @@ def contact_mode_messages(tr: Trajectory, start_ns: int) -> list[tuple[float, An
         msg.mode = int(mode)
         out.append((t, msg))
     return out
-
-
-def stop_on_sigterm() -> None:
-    """Let SIGTERM (what ``ros2 launch`` sends after SIGINT) end a node like Ctrl-C: spin raises
-    KeyboardInterrupt, the node is destroyed, open files are finished, the exit status is 0."""
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
 
 
 def finite(value: float) -> bool:

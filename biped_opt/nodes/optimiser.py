@@ -25,6 +25,7 @@ from biped_opt import ros
 from biped_opt.errors import BipedOptError
 from biped_opt.maneuvers import Maneuver
 from biped_opt.nodes import convert
+from biped_opt.nodes.run import run_node
 from biped_opt.optimal import OptimalControlProblem, OptimalResult, get_problem, optimal_policy
 from biped_opt.optimal.derivatives import outcome_sensitivity
 
@@ -120,19 +121,7 @@ class OptimiserNode(ros.Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    convert.stop_on_sigterm()
-    ros.init(args=args)
-    node = OptimiserNode()
-    executor = ros.MultiThreadedExecutor(num_threads=4)
-    executor.add_node(node)
-    try:
-        executor.spin()
-    except KeyboardInterrupt:
-        pass
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        ros.try_shutdown()
+    run_node(OptimiserNode, args, threads=4)
 
 
 if __name__ == "__main__":

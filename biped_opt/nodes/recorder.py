@@ -31,11 +31,12 @@ from typing import Any
 import numpy as np
 
 from biped_opt import ros
-from biped_opt.errors import BipedOptError, InvalidInputError, SimulationError
+from biped_opt.errors import InvalidInputError, SimulationError
 from biped_opt.fixed_sweep import FIXED_INPUTS, theta_grid
 from biped_opt.maneuvers import spec
 from biped_opt.nodes import convert
-from biped_opt.optimal import get_problem
+from biped_opt.nodes.run import run_node
+from biped_opt.optimal import OptimalControlProblem, get_problem
 from biped_opt.record import SweepWriter
 
 __all__ = ["RecorderNode", "SweepRequest", "SweepSummary", "main"]
@@ -186,11 +187,8 @@ class RecorderNode(ros.Node):
         return summary
 
     def _record_point(self, writer: SweepWriter, maneuver: str, th: float, optimal: bool,
-                      fixed: tuple[float, ...], problem: Any, offset: int) -> tuple[bool, float]:
-        policy: list[float] = []
-        value = float("nan")
-        inputs = np.zeros(3)
-        inputs[: len(fixed)] = fixed
+                      fixed: tuple[float, ...], problem: OptimalControlProblem, offset: int
+                      ) -> tuple[bool, float]:
         if optimal:
             q = ros.srvs.OptimalPolicy.Request()
             q.maneuver, q.theta0 = maneuver, th
@@ -201,6 +199,8 @@ class RecorderNode(ros.Node):
             value = float(reply.value)
             inputs = np.asarray(reply.inputs, dtype=float)
         else:
+            inputs = np.zeros(3)
+            inputs[: len(fixed)] = fixed
             policy = [float(v) for v in inputs]
         q = ros.srvs.Simulate.Request()
         q.maneuver, q.theta0, q.inputs, q.real_time_factor = maneuver, th, inputs.tolist(), 0.0
@@ -221,8 +221,9 @@ class RecorderNode(ros.Node):
             value = float(problem.cost(reply.outcome, inputs))
         point = {
             "header": _header_fields(offset), "maneuver": maneuver, "theta0": th,
-            "optimal": optimal, "policy": policy, "value": value, "outcome": reply.outcome,
-            "t_final": reply.t_final, "mode_sequence": modes, "event_times": times[1:],
+            "optimal": optimal, "policy": policy, "value": value,
+            "outcome": float(reply.outcome), "t_final": float(reply.t_final),
+            "mode_sequence": modes, "event_times": times[1:],
         }
         end = offset + int(round(reply.t_final * convert.NS))
         writer.write("/biped/sweep", point, end)
@@ -231,7 +232,6 @@ class RecorderNode(ros.Node):
         for name in ("maneuver", "theta0", "optimal", "policy", "value", "outcome", "t_final",
                      "mode_sequence", "event_times"):
             setattr(msg, name, point[name])
-        msg.outcome, msg.t_final = float(reply.outcome), float(reply.t_final)
         self._sweep_pub.publish(msg)
         return bool(reply.success), float(reply.t_final)
 
@@ -253,20 +253,7 @@ def _header_fields(ns: int) -> dict[str, Any]:
 
 
 def main(args: list[str] | None = None) -> None:
-    convert.stop_on_sigterm()
-    ros.init(args=args)
-    node = RecorderNode()
-    executor = ros.MultiThreadedExecutor(num_threads=2)
-    executor.add_node(node)
-    try:
-        executor.spin()
-    except KeyboardInterrupt:
-        pass
-    except BipedOptError as exc:
-        node.get_logger().error(str(exc))
-    finally:
-        node.destroy_node()
-        ros.try_shutdown()
+    run_node(RecorderNode, args, threads=2)
 
 
 if __name__ == "__main__":

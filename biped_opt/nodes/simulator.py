@@ -25,6 +25,7 @@ from biped_opt.errors import BipedOptError, InvalidInputError
 from biped_opt.hybrid import simulate
 from biped_opt.hybrid.trajectory import Trajectory
 from biped_opt.nodes import convert
+from biped_opt.nodes.run import run_node
 
 __all__ = ["SimulatorNode", "main", "CONTACT_MODE_QOS"]
 
@@ -157,16 +158,7 @@ class SimulatorNode(ros.Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    convert.stop_on_sigterm()
-    ros.init(args=args)
-    node = SimulatorNode()
-    try:
-        ros.spin(node)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        node.destroy_node()
-        ros.try_shutdown()
+    run_node(SimulatorNode, args)
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@ thread per test (the Graph), clients in a separate test node of the same context
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import signal
@@ -191,68 +192,71 @@ def test_recorder_records_every_sample_through_the_graph(graph, tmp_path):
     assert rec.counts["/biped/contact_mode"] == sum(len(p.mode_sequence) for p in points)
 
 
-def test_node_in_a_subprocess_exits_cleanly_on_sigint(domain_id):
+def _node_process(domain_id, module, *ros_args):
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "biped_opt.nodes.optimiser", "--ros-args", "-p",
-         "touchdown.theta_star:=-0.05"],
+    return subprocess.Popen(
+        [sys.executable, "-m", f"biped_opt.nodes.{module}", "--ros-args", *ros_args],
         env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
+
+
+@contextlib.contextmanager
+def _outside_probe(domain_id):
+    """A node in a context of its own (as another process would have), spun on demand."""
+    ctx = ros.Context()
+    ros.init(args=[], context=ctx, domain_id=domain_id)
+    node = ros.Node("probe", context=ctx)
+    executor = ros.SingleThreadedExecutor(context=ctx)
+    executor.add_node(node)
     try:
-        ctx = ros.Context()
-        ros.init(args=[], context=ctx, domain_id=domain_id)
-        node = ros.Node("probe", context=ctx)
-        client = node.create_client(ros.srvs.OptimalPolicy, "/biped/optimal_policy")
-        executor = ros.SingleThreadedExecutor(context=ctx)
-        executor.add_node(node)
-        assert client.wait_for_service(timeout_sec=30.0)
-        request = ros.srvs.OptimalPolicy.Request()
-        request.maneuver, request.theta0 = "touchdown", 0.05
-        future = client.call_async(request)
-        executor.spin_until_future_complete(future, timeout_sec=60.0)
-        reply = future.result()
-        # the parameter given on the command line reached the node
-        expected = optimal_policy(get_problem("touchdown", theta_star=-0.05), 0.05)
-        assert reply.success and reply.value == expected.value
+        yield node, executor
+    finally:
         executor.shutdown()
         node.destroy_node()
         ros.try_shutdown(context=ctx)
-        proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=30)
-    finally:
-        proc.kill()
+
+
+def _stop(proc, sig):
+    """Send ``sig``; the node must exit 0 without a traceback."""
+    proc.send_signal(sig)
+    _out, err = proc.communicate(timeout=30)
     assert proc.returncode == 0, err
     assert "Traceback" not in err
+
+
+def test_node_in_a_subprocess_exits_cleanly_on_sigint(domain_id):
+    proc = _node_process(domain_id, "optimiser", "-p", "touchdown.theta_star:=-0.05")
+    try:
+        with _outside_probe(domain_id) as (node, executor):
+            client = node.create_client(ros.srvs.OptimalPolicy, "/biped/optimal_policy")
+            assert client.wait_for_service(timeout_sec=30.0)
+            request = ros.srvs.OptimalPolicy.Request()
+            request.maneuver, request.theta0 = "touchdown", 0.05
+            future = client.call_async(request)
+            executor.spin_until_future_complete(future, timeout_sec=60.0)
+            reply = future.result()
+        # the parameter given on the command line reached the node
+        expected = optimal_policy(get_problem("touchdown", theta_star=-0.05), 0.05)
+        assert reply.success and reply.value == expected.value
+        _stop(proc, signal.SIGINT)
+    finally:
+        proc.kill()
 
 
 def test_simulator_in_a_subprocess_exits_cleanly_on_sigterm(domain_id):
     """ros2 launch follows SIGINT with SIGTERM: a node must end cleanly on either."""
-    env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "biped_opt.nodes.simulator", "--ros-args", "-p", "loop:=true"],
-        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )
+    proc = _node_process(domain_id, "simulator", "-p", "loop:=true")
     try:
-        ctx = ros.Context()
-        ros.init(args=[], context=ctx, domain_id=domain_id)
-        node = ros.Node("probe", context=ctx)
-        modes = []
-        node.create_subscription(
-            ros.msgs.ContactMode, "/biped/contact_mode", modes.append,
-            ros.QoSProfile(depth=10, reliability=ros.ReliabilityPolicy.RELIABLE,
-                           durability=ros.DurabilityPolicy.TRANSIENT_LOCAL))
-        executor = ros.SingleThreadedExecutor(context=ctx)
-        executor.add_node(node)
-        deadline = time.monotonic() + 30.0
-        while not modes and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.1)
-        assert modes, "the simulator never published its contact mode"
-        executor.shutdown()
-        node.destroy_node()
-        ros.try_shutdown(context=ctx)
-        proc.send_signal(signal.SIGTERM)
-        out, err = proc.communicate(timeout=30)
+        with _outside_probe(domain_id) as (node, executor):
+            modes = []
+            node.create_subscription(
+                ros.msgs.ContactMode, "/biped/contact_mode", modes.append,
+                ros.QoSProfile(depth=10, reliability=ros.ReliabilityPolicy.RELIABLE,
+                               durability=ros.DurabilityPolicy.TRANSIENT_LOCAL))
+            deadline = time.monotonic() + 30.0
+            while not modes and time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.1)
+            assert modes, "the simulator never published its contact mode"
+        _stop(proc, signal.SIGTERM)
     finally:
         proc.kill()
-    assert proc.returncode == 0, err
-    assert "Traceback" not in err
