@@ -59,6 +59,11 @@ class ManeuverSpec:
     #: index of the maneuver in the compiled initial-state function
     code: int
 
+    @property
+    def mode_code(self) -> int:
+        """The initial mode as a plain int (what the compiled kernels take)."""
+        return _MODE_CODES[self.code]
+
 
 _SPECS = {
     Maneuver.TOUCHDOWN: ManeuverSpec(
@@ -84,6 +89,7 @@ _SPECS = {
 }
 
 _SPECS_BY_NAME = {m.value: s for m, s in _SPECS.items()}
+_MODE_CODES = {s.code: int(s.initial_mode) for s in _SPECS.values()}
 
 #: initial body height of the touchdown maneuver [length]
 TOUCHDOWN_HEIGHT = 1.0

@@ -18,7 +18,7 @@ import numpy.typing as npt
 from biped_opt.errors import InvalidInputError, InvalidParameterError, SimulationError
 from biped_opt.hybrid import _kernel as K
 from biped_opt.hybrid.trajectory import Status, Trajectory
-from biped_opt.maneuvers import ManeuverSpec, check_theta0, initial_state, parse_maneuver, spec
+from biped_opt.maneuvers import ManeuverSpec, check_theta0, parse_maneuver, spec
 from biped_opt.model.biped import NSTATE
 from biped_opt.model.modes import ContactMode
 from biped_opt.model.params import BipedParams
@@ -62,6 +62,13 @@ def check_inputs(inputs: npt.ArrayLike | None) -> Array:
     """Inputs as (u1, u2, u12), zero-padded; the error names the offending input."""
     if inputs is None:
         return np.zeros(3)
+    if type(inputs) is tuple and len(inputs) == 3:  # the common case, on every trajectory
+        try:
+            u1, u2, u12 = float(inputs[0]), float(inputs[1]), float(inputs[2])
+        except (TypeError, ValueError):
+            raise InvalidInputError(f"inputs must be numbers, got {inputs!r}") from None
+        if math.isfinite(u1 + u2 + u12):  # a sum of finite numbers is finite (or overflows)
+            return np.array((u1, u2, u12))
     if isinstance(inputs, (tuple, list)) and len(inputs) <= 3:
         try:
             values = [float(v) for v in inputs]
@@ -105,6 +112,12 @@ def kernel_config(
     return cfg
 
 
+#: the default ``cfg`` vector of each maneuver (by ManeuverSpec.code), and its initial mode
+_DEFAULT_CFG: dict[int, Array] = {}
+_NO_SAMPLES = np.empty((0, K.SAMPLE_WIDTH))  # nothing is ever written to a zero-row buffer
+_DEFAULT_P = DEFAULT_PARAMS.as_array()
+
+
 def simulate(
     maneuver: str,
     theta0: float,
@@ -118,33 +131,41 @@ def simulate(
 
     ``sample_dt`` requests dense samples on the grid t = k sample_dt (plus the events and t_f).
     The trajectory's ``status`` says how it ended; this function raises only for invalid
-    arguments.
+    arguments. (An optimiser calls this hundreds of times per policy, so the Python around the
+    compiled kernel is kept to the checks and one call.)
     """
     s = spec(maneuver)
-    params = params if params is not None else DEFAULT_PARAMS
-    y0, mode0 = initial_state(s, theta0, params)
+    if type(theta0) is float and abs(theta0) <= s.theta0_limit:  # NaN fails the comparison
+        th = theta0
+    else:
+        th = check_theta0(s, theta0)
     u = check_inputs(inputs)
-    if sample_dt is not None:
+    p = _DEFAULT_P if params is None else params.as_array()
+    if sample_dt is None:
+        samples = _NO_SAMPLES
+        if options is DEFAULT_OPTIONS:
+            cfg = _DEFAULT_CFG.get(s.code)
+            if cfg is None:
+                cfg = _DEFAULT_CFG[s.code] = kernel_config(s, options, 0.0)
+        else:
+            cfg = kernel_config(s, options, 0.0)
+    else:
         if not (math.isfinite(sample_dt) and sample_dt > 0):
             raise InvalidInputError(f"sample_dt must be a positive number, got {sample_dt!r}")
         capacity = int(options.t_end / sample_dt) + 2 * options.max_events + 8
         samples = np.empty((capacity, K.SAMPLE_WIDTH))
-        dt = float(sample_dt)
-    else:
-        samples = np.empty((0, K.SAMPLE_WIDTH))
-        dt = 0.0
+        cfg = kernel_config(s, options, float(sample_dt))
     events = np.empty((options.max_events + 1, K.EVENT_WIDTH))
     y_out = np.empty(NSTATE)
-    status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej = K.simulate_kernel(
-        params.as_array(), y0, int(mode0), u, kernel_config(s, options, dt), samples, events,
-        y_out,
+    status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej = K.simulate_maneuver(
+        p, s.code, th, s.mode_code, u, cfg, samples, events, y_out
     )
     if n_s > samples.shape[0]:  # cannot happen while capacity covers t_end / sample_dt
         raise SimulationError(f"sample buffer overflow: {n_s} > {samples.shape[0]}")
-    n_rows = n_ev + (1 if status in (K.OK, K.APEX_IN_CONTACT) else 0)
     return Trajectory.from_kernel(
-        s.maneuver.value, float(theta0), u, status, t_f, y_out, mode_f, events[:n_rows],
-        samples[:n_s] if sample_dt is not None else None, nfev, nsteps, nrej,
+        s.maneuver.value, th, u, status, t_f, y_out, mode_f,
+        events[: n_ev + 1 if status == K.OK or status == K.APEX_IN_CONTACT else n_ev],
+        None if sample_dt is None else samples[:n_s], nfev, nsteps, nrej,
     )
 
 
@@ -224,7 +245,7 @@ def simulate_batch(
     y_out = np.empty((n, NSTATE))
     info = np.empty((n, 8))
     K.simulate_batch_kernel(
-        params.as_array(), s.code, th, int(s.initial_mode), u_arr, kernel_config(s, options),
+        params.as_array(), s.code, th, s.mode_code, u_arr, kernel_config(s, options),
         events, y_out, info,
     )
     return BatchResult(

@@ -37,7 +37,7 @@ __all__ = [
     "generalised_forces",
     "leg_forces",
     "dynamics",
-    "dynamics_at",
+    "vector_field",
     "apply_impact",
     "energy",
 ]
@@ -55,17 +55,18 @@ BODY_DZ = 8  #: index in y of the body's vertical velocity z'
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _leg(p: Array, y: Array, j: int, side: float, wct: float, wst: float, ubar: float
+def _leg(p: Array, y: Array, yo: int, j: int, side: float, wct: float, wst: float, ubar: float
          ) -> tuple[float, float, float]:
-    """(F_j, n_jx, n_jz) of leg j (hip at ``side`` * w along the body), MODEL.md Sec. 2.
+    """(F_j, n_jx, n_jz) of leg j (hip at ``side`` * w along the body) for the state at
+    y[yo:yo + 14], MODEL.md Sec. 2.
 
     F_j = k (l0 - L_j) - c L_j' + ubar pushes the hip away from the foot along the unit leg
     vector n_j = e_j / L_j, e_j = hip_j - foot_j.
     """
-    ex = y[0] + side * wct - y[3 + 2 * j]
-    ez = y[1] + side * wst - y[4 + 2 * j]
-    vx = y[7] - side * wst * y[9] - y[10 + 2 * j]
-    vz = y[8] + side * wct * y[9] - y[11 + 2 * j]
+    ex = y[yo + 0] + side * wct - y[yo + 3 + 2 * j]
+    ez = y[yo + 1] + side * wst - y[yo + 4 + 2 * j]
+    vx = y[yo + 7] - side * wst * y[yo + 9] - y[yo + 10 + 2 * j]
+    vz = y[yo + 8] + side * wct * y[yo + 9] - y[yo + 11 + 2 * j]
     length = math.sqrt(ex * ex + ez * ez)
     inv = 1.0 / length
     nx = ex * inv
@@ -74,20 +75,20 @@ def _leg(p: Array, y: Array, j: int, side: float, wct: float, wst: float, ubar: 
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def leg_forces(p: Array, mode: int, y: Array, u: Array
+def leg_forces(p: Array, mode: int, y: Array, yo: int, u: Array
                ) -> tuple[float, float, float, float, float, float, float]:
-    """Both legs' forces and unit vectors and the body torque:
+    """Both legs' forces and unit vectors and the body torque for the state at y[yo:yo + 14]:
     (F1, n1x, n1z, F2, n2x, n2z, torque).
 
     Force coupling (paper Sec. II-B): u1 acts only in J = {1}, u2 only in J = {2}, the body
     torque u12 only in J = {1, 2}. Straight-line code (no loop over the legs) keeps everything
     in registers, which halves the cost: the simulator evaluates this ~200 times per maneuver.
     """
-    th = y[2]
+    th = y[yo + 2]
     wct = p[5] * math.cos(th)
     wst = p[5] * math.sin(th)
-    f1, n1x, n1z = _leg(p, y, 0, -1.0, wct, wst, u[0] if mode == 1 else 0.0)
-    f2, n2x, n2z = _leg(p, y, 1, 1.0, wct, wst, u[1] if mode == 2 else 0.0)
+    f1, n1x, n1z = _leg(p, y, yo, 0, -1.0, wct, wst, u[0] if mode == 1 else 0.0)
+    f2, n2x, n2z = _leg(p, y, yo, 1, 1.0, wct, wst, u[1] if mode == 2 else 0.0)
     # w (cos th n_z - sin th n_x) is each leg's lever arm about the body's centre
     torque = -(wct * n1z - wst * n1x) * f1 + (wct * n2z - wst * n2x) * f2
     if mode == 3:
@@ -104,7 +105,7 @@ def generalised_forces(
     p: packed parameters (:meth:`~biped_opt.model.params.BipedParams.as_array`); mode: contact
     mode bit mask; y: state, shape (14,); u: inputs (u1, u2, u12), shape (3,).
     """
-    f1, n1x, n1z, f2, n2x, n2z, torque = leg_forces(p, mode, y, u)
+    f1, n1x, n1z, f2, n2x, n2z, torque = leg_forces(p, mode, y, 0, u)
     mg_foot = p[2] * p[3]
     f[off + 0] = f1 * n1x + f2 * n2x
     f[off + 1] = f1 * n1z + f2 * n2z - p[0] * p[3]
@@ -116,20 +117,23 @@ def generalised_forces(
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def dynamics_at(
-    p: Array, mode: int, y: Array, u: Array, out: Array, off: int, lam: Array
+def vector_field(
+    p: Array, mode: int, y: Array, yo: int, u: Array, out: Array, off: int, lam: Array, lo: int
 ) -> None:
-    """Vector field of mode J written to ``out[off:off + 14]`` = (q', q''), reactions to lam.
+    """Vector field of mode J at the state y[yo:yo + 14]: (q', q'') to ``out[off:off + 14]``,
+    the reactions (lambda_1, lambda_2) to ``lam[lo:lo + 2]``.
 
     Eq. (1a): M is diagonal and Da_j = e_{z_j}, so lambda_j = -f_J[z_j] = mf g + F_j n_jz and
-    z_j'' = 0 for every active constraint j; inactive entries of lam are 0. (The offset form lets
-    the integrator write stages into one flat buffer without creating array views.)
+    z_j'' = 0 for every active constraint j; inactive reactions are 0. The offsets let the
+    integrator keep states, stage derivatives and reactions in one flat workspace: the compiler
+    then knows that the stores of one stage do not overwrite the inputs of the next, and keeps
+    the step's arithmetic in registers.
     """
-    f1, n1x, n1z, f2, n2x, n2z, torque = leg_forces(p, mode, y, u)
+    f1, n1x, n1z, f2, n2x, n2z, torque = leg_forces(p, mode, y, yo, u)
     mg_foot = p[2] * p[3]
     inv_mb, inv_ib, inv_mf = p[9], p[10], p[11]
     for i in range(NDOF):
-        out[off + i] = y[NDOF + i]
+        out[off + i] = y[yo + NDOF + i]
     out[off + 7] = (f1 * n1x + f2 * n2x) * inv_mb
     out[off + 8] = (f1 * n1z + f2 * n2z - p[0] * p[3]) * inv_mb
     out[off + 9] = torque * inv_ib
@@ -138,23 +142,23 @@ def dynamics_at(
     fz1 = -f1 * n1z - mg_foot
     fz2 = -f2 * n2z - mg_foot
     if mode & 1:
-        lam[0] = -fz1
+        lam[lo] = -fz1
         out[off + 11] = 0.0
     else:
-        lam[0] = 0.0
+        lam[lo] = 0.0
         out[off + 11] = fz1 * inv_mf
     if mode & 2:
-        lam[1] = -fz2
+        lam[lo + 1] = -fz2
         out[off + 13] = 0.0
     else:
-        lam[1] = 0.0
+        lam[lo + 1] = 0.0
         out[off + 13] = fz2 * inv_mf
 
 
 @nb.njit(cache=True, error_model="numpy")
 def dynamics(p: Array, mode: int, y: Array, u: Array, dy: Array, lam: Array) -> None:
     """Vector field of mode J: dy = (q', q''), and reaction forces lam (shape (2,)), Eq. (1a)."""
-    dynamics_at(p, mode, y, u, dy, 0, lam)
+    vector_field(p, mode, y, 0, u, dy, 0, lam, 0)
 
 
 @nb.njit(cache=True, error_model="numpy")
