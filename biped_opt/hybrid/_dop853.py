@@ -220,8 +220,9 @@ def step(p, mode, u, term_sign, y, f, h, W, y_new, f_new, lam, rtol, atol, probe
             + 0.20136540080403034 * W[160 + i]
             + 0.02265179219836082 * W[176 + i]
         )
-        e5 /= scale
-        e3 /= scale
+        inv = 1.0 / scale
+        e5 *= inv
+        e3 *= inv
         err5 += e5 * e5
         err3 += e3 * e3
     if err5 == 0.0 and err3 == 0.0:

@@ -29,7 +29,7 @@ from biped_opt.hybrid._dop853 import WORKSPACE, dense_coefficients
 from biped_opt.hybrid._dop853 import step as dop853_step
 from biped_opt.hybrid._guards import NGUARDS, guard_values
 from biped_opt.maneuvers import fill_initial_state
-from biped_opt.model.biped import NSTATE, apply_impact, dynamics, generalised_forces
+from biped_opt.model.biped import NSTATE, apply_impact, dynamics, leg_forces
 
 # --- Status codes (mirrored by biped_opt.hybrid.trajectory.Status) ---------------------------
 OK = 0
@@ -89,7 +89,7 @@ def _dense_component(F, y, x, k):
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _guard_on_dense(p, mode, u, term_sign, F, y, x, i, tmp, fscratch):
+def _guard_on_dense(p, mode, u, term_sign, F, y, x, i, tmp):
     """Guard i on the interpolant at x: one component for a foot height or the body's z', the
     whole state (and the leg forces) only for a reaction force."""
     if i == 2:
@@ -97,22 +97,23 @@ def _guard_on_dense(p, mode, u, term_sign, F, y, x, i, tmp, fscratch):
     if not mode >> i & 1:
         return _dense_component(F, y, x, 4 + 2 * i)
     _dense_eval(F, y, x, tmp)
-    return _guard(p, mode, u, term_sign, tmp, i, fscratch)
+    return _guard(p, mode, u, term_sign, tmp, i)
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _guard(p, mode, u, term_sign, y, i, fscratch):
+def _guard(p, mode, u, term_sign, y, i):
     """Value of guard i at state y in mode ``mode`` (see the module docstring)."""
     if i == 2:
         return term_sign * y[8]
     if mode >> i & 1:
-        generalised_forces(p, mode, y, u, fscratch, 0)
-        return -fscratch[4 + 2 * i]  # lambda_i = -f_J[z_i] (M diagonal, Da_i = e_zi)
+        # lambda_i = mf g + F_i n_iz (MODEL.md Sec. 2), the legs' forces only
+        f1, _, n1z, f2, _, n2z, _ = leg_forces(p, mode, y, 0, u)
+        return p[2] * p[3] + (f1 * n1z if i == 0 else f2 * n2z)
     return y[4 + 2 * i]
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _guard_rate(p, mode, u, term_sign, y, dy, i, tmp, fscratch):
+def _guard_rate(p, mode, u, term_sign, y, dy, i, tmp):
     """d/dt of guard i along the flow of mode ``mode`` at y (dy = vector field at y)."""
     if i == 2:
         return term_sign * dy[8]
@@ -122,15 +123,15 @@ def _guard_rate(p, mode, u, term_sign, y, dy, i, tmp, fscratch):
     eps = 1e-6
     for k in range(y.shape[0]):
         tmp[k] = y[k] + eps * dy[k]
-    g_plus = _guard(p, mode, u, term_sign, tmp, i, fscratch)
+    g_plus = _guard(p, mode, u, term_sign, tmp, i)
     for k in range(y.shape[0]):
         tmp[k] = y[k] - eps * dy[k]
-    g_minus = _guard(p, mode, u, term_sign, tmp, i, fscratch)
+    g_minus = _guard(p, mode, u, term_sign, tmp, i)
     return (g_plus - g_minus) / (2.0 * eps)
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _root_on_dense(p, mode, u, term_sign, F, y, i, xa, ga, xb, gb, tmp, fscratch):
+def _root_on_dense(p, mode, u, term_sign, F, y, i, xa, ga, xb, gb, tmp):
     """Root in (xa, xb] of guard i on the dense output, by the Illinois method.
 
     Requires ga > 0 >= gb. Returns x with the bracket shrunk below _ROOT_XTOL of the step.
@@ -143,7 +144,7 @@ def _root_on_dense(p, mode, u, term_sign, F, y, i, xa, ga, xb, gb, tmp, fscratch
         x = (xa * gb - xb * ga) / (gb - ga)
         if not xa < x < xb:
             x = 0.5 * (xa + xb)
-        gx = _guard_on_dense(p, mode, u, term_sign, F, y, x, i, tmp, fscratch)
+        gx = _guard_on_dense(p, mode, u, term_sign, F, y, x, i, tmp)
         if gx > 0.0:
             xa, ga = x, gx
             if side == 1:
@@ -239,7 +240,7 @@ def simulate_kernel(p, y0, mode0, u, cfg, samples, events, y_out):
 
     n = NSTATE
     # one allocation carved into views: a dozen separate small arrays cost more than a step
-    buf = np.zeros(WORKSPACE + 13 * n + 22)
+    buf = np.zeros(WORKSPACE + 13 * n + 15)
     W = buf[:WORKSPACE]
     o = WORKSPACE
     F = buf[o : o + 7 * n].reshape((7, n))
@@ -251,13 +252,12 @@ def simulate_kernel(p, y0, mode0, u, cfg, samples, events, y_out):
     tmp = buf[o + 4 * n : o + 5 * n]
     tmp2 = buf[o + 5 * n : o + 6 * n]
     o += 6 * n
-    fscratch = buf[o : o + 7]
-    lam = buf[o + 7 : o + 9]
-    lam_new = buf[o + 9 : o + 11]
-    lam_tmp = buf[o + 11 : o + 13]
-    gv = buf[o + 13 : o + 16]
-    gv_new = buf[o + 16 : o + 19]
-    probe = buf[o + 19 : o + 22]
+    lam = buf[o : o + 2]
+    lam_new = buf[o + 2 : o + 4]
+    lam_tmp = buf[o + 4 : o + 6]
+    gv = buf[o + 6 : o + 9]
+    gv_new = buf[o + 9 : o + 12]
+    probe = buf[o + 12 : o + 15]
     flags = np.zeros(2 * NGUARDS, dtype=np.bool_)
     armed = flags[:NGUARDS]
     flips = flags[NGUARDS:]
@@ -350,7 +350,7 @@ def simulate_kernel(p, y0, mode0, u, cfg, samples, events, y_out):
                     gb = 0.0
                     for m in range(1, 9):
                         xm = probe[i] * m / 8.0
-                        gm = _guard_on_dense(p, mode, u, term_sign, F, y, xm, i, tmp, fscratch)
+                        gm = _guard_on_dense(p, mode, u, term_sign, F, y, xm, i, tmp)
                         if gm <= 0.0:
                             xb = xm
                             gb = gm
@@ -360,7 +360,7 @@ def simulate_kernel(p, y0, mode0, u, cfg, samples, events, y_out):
                 else:
                     continue
                 x = _root_on_dense(
-                    p, mode, u, term_sign, F, y, i, 0.0, gv[i], xb, gb, tmp, fscratch
+                    p, mode, u, term_sign, F, y, i, 0.0, gv[i], xb, gb, tmp
                 )
                 if x < x_first:
                     x_first = x
@@ -407,10 +407,10 @@ def simulate_kernel(p, y0, mode0, u, cfg, samples, events, y_out):
         for i in range(NGUARDS):
             flips[i] = i == first
             if i != first and armed[i]:
-                gi = _guard(p, mode, u, term_sign, y, i, fscratch)
+                gi = _guard(p, mode, u, term_sign, y, i)
                 if abs(gi) <= SIMULTANEOUS_TOL:
                     flips[i] = (
-                        _guard_rate(p, mode, u, term_sign, y, f, i, tmp, fscratch) < 0.0
+                        _guard_rate(p, mode, u, term_sign, y, f, i, tmp) < 0.0
                     )
         touchdown = 0
         liftoff = 0

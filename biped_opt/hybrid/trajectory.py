@@ -115,12 +115,12 @@ class Trajectory:
         """Build from the kernel's outputs without the frozen-dataclass ``__init__`` (which sets
         each field through ``object.__setattr__``): this is on the per-trajectory hot path."""
         self = object.__new__(cls)
-        self.__dict__.update(
-            maneuver=maneuver, theta0=theta0, inputs=inputs, status=_STATUSES[status],
-            t_final=t_final, state_final=state_final, mode_final=_MODES[mode_final],
-            event_rows=event_rows, samples=samples, nfev=nfev, nsteps=nsteps,
-            nrejected=nrejected,
-        )
+        object.__setattr__(self, "__dict__", {
+            "maneuver": maneuver, "theta0": theta0, "inputs": inputs,
+            "status": _STATUSES[status], "t_final": t_final, "state_final": state_final,
+            "mode_final": _MODES[mode_final], "event_rows": event_rows, "samples": samples,
+            "nfev": nfev, "nsteps": nsteps, "nrejected": nrejected,
+        })
         return self
 
     @property
