@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import enum
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numba as nb
 import numpy as np
@@ -59,10 +59,11 @@ class ManeuverSpec:
     #: index of the maneuver in the compiled initial-state function
     code: int
 
-    @property
-    def mode_code(self) -> int:
-        """The initial mode as a plain int (what the compiled kernels take)."""
-        return _MODE_CODES[self.code]
+    #: the initial mode as a plain int (what the compiled kernels take)
+    mode_code: int = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "mode_code", int(self.initial_mode))
 
 
 _SPECS = {
@@ -89,7 +90,6 @@ _SPECS = {
 }
 
 _SPECS_BY_NAME = {m.value: s for m, s in _SPECS.items()}
-_MODE_CODES = {s.code: int(s.initial_mode) for s in _SPECS.values()}
 
 #: initial body height of the touchdown maneuver [length]
 TOUCHDOWN_HEIGHT = 1.0

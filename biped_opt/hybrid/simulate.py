@@ -63,12 +63,10 @@ def check_inputs(inputs: npt.ArrayLike | None) -> Array:
     if inputs is None:
         return np.zeros(3)
     if type(inputs) is tuple and len(inputs) == 3:  # the common case, on every trajectory
-        try:
-            u1, u2, u12 = float(inputs[0]), float(inputs[1]), float(inputs[2])
-        except (TypeError, ValueError):
-            raise InvalidInputError(f"inputs must be numbers, got {inputs!r}") from None
-        if math.isfinite(u1 + u2 + u12):  # a sum of finite numbers is finite (or overflows)
-            return np.array((u1, u2, u12))
+        u1, u2, u12 = inputs
+        if type(u1) is float and type(u2) is float and type(u12) is float:
+            if math.isfinite(u1 + u2 + u12):  # a sum of finite numbers is finite (or overflows)
+                return np.array(inputs)
     if isinstance(inputs, (tuple, list)) and len(inputs) <= 3:
         try:
             values = [float(v) for v in inputs]
