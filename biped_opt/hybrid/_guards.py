@@ -27,11 +27,11 @@ def contact_guard(mode, j, y, yo, lam, lo):
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def guard_values(mode, term_sign, y, yo, lam, lo, out):
-    """All guards at the state y[yo:yo + 14], whose reactions lam[lo:lo + 2] are known."""
-    out[0] = contact_guard(mode, 0, y, yo, lam, lo)
-    out[1] = contact_guard(mode, 1, y, yo, lam, lo)
-    out[2] = term_sign * y[yo + 8]
+def guard_values(mode, term_sign, y, lam, out):
+    """All guards at the state y, whose reactions lam are known."""
+    out[0] = contact_guard(mode, 0, y, 0, lam, 0)
+    out[1] = contact_guard(mode, 1, y, 0, lam, 0)
+    out[2] = term_sign * y[8]
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")

@@ -29,7 +29,7 @@ from biped_opt.hybrid._dop853 import WORKSPACE, dense_coefficients
 from biped_opt.hybrid._dop853 import step as dop853_step
 from biped_opt.hybrid._guards import NGUARDS, guard_values
 from biped_opt.maneuvers import fill_initial_state
-from biped_opt.model.biped import NSTATE, apply_impact, dynamics, leg_forces
+from biped_opt.model.biped import NSTATE, apply_impact, dynamics, foot_support, leg_forces
 
 # --- Status codes (mirrored by biped_opt.hybrid.trajectory.Status) ---------------------------
 OK = 0
@@ -112,9 +112,8 @@ def _guard(p, mode, u, term_sign, y, i):
     if i == 2:
         return term_sign * y[8]
     if mode >> i & 1:
-        # lambda_i = mf g + F_i n_iz (MODEL.md Sec. 2), the legs' forces only
-        f1, _, n1z, f2, _, n2z, _ = leg_forces(p, mode, y, 0, u)
-        return p[2] * p[3] + (f1 * n1z if i == 0 else f2 * n2z)
+        f1, _, n1z, f2, _, n2z, _ = leg_forces(p, mode, y, 0, u)  # the legs' forces only
+        return foot_support(p, f1, n1z) if i == 0 else foot_support(p, f2, n2z)
     return y[4 + 2 * i]
 
 
@@ -245,8 +244,9 @@ def simulate_kernel(p, y0, mode0, u, cfg, samples, events, y_out):
     sample_dt = cfg[CFG_SAMPLE_DT]
 
     n = NSTATE
-    # one allocation carved into views: a dozen separate small arrays cost more than a step
-    buf = np.zeros(WORKSPACE + 13 * n + 15)
+    # one allocation carved into views (a dozen separate small arrays cost more than a step):
+    # workspace, interpolant (7 n), six states, three reaction pairs, three guard triples
+    buf = np.zeros(WORKSPACE + 7 * n + 6 * n + 3 * 2 + 3 * NGUARDS)
     W = buf[:WORKSPACE]
     o = WORKSPACE
     F = buf[o : o + 7 * n].reshape((7, n))
@@ -284,7 +284,7 @@ def simulate_kernel(p, y0, mode0, u, cfg, samples, events, y_out):
 
     dynamics(p, mode, y, u, f, lam)
     nfev += 1
-    guard_values(mode, term_sign, y, 0, lam, 0, gv)
+    guard_values(mode, term_sign, y, lam, gv)
     for i in range(NGUARDS):
         armed[i] = gv[i] > REARM_TOL
     if not term_enabled:
@@ -329,7 +329,7 @@ def simulate_kernel(p, y0, mode0, u, cfg, samples, events, y_out):
         h = h_step * factor
 
         # --- event detection: a sign change at the step's end, or at a stage inside it -----
-        guard_values(mode, term_sign, y_new, 0, lam_new, 0, gv_new)
+        guard_values(mode, term_sign, y_new, lam_new, gv_new)
         any_candidate = False
         for i in range(NGUARDS):
             if armed[i] and gv[i] > 0.0 and (gv_new[i] <= 0.0 or probe[i] <= 1.0):
@@ -454,7 +454,7 @@ def simulate_kernel(p, y0, mode0, u, cfg, samples, events, y_out):
                 if touchdown >> j & 1 and lam[j] < 0.0:
                     status = INCONSISTENT  # the new contact would pull the foot into the ground
                     finished = True
-            guard_values(mode, term_sign, y, 0, lam, 0, gv)
+            guard_values(mode, term_sign, y, lam, gv)
             for i in range(NGUARDS):
                 if flips[i]:
                     armed[i] = False

@@ -39,6 +39,7 @@ __all__ = [
     "dynamics",
     "vector_field",
     "sincos",
+    "foot_support",
     "apply_impact",
     "energy",
 ]
@@ -129,6 +130,14 @@ def leg_forces(p: Array, mode: int, y: Array, yo: int, u: Array
     return f1, n1x, n1z, f2, n2x, n2z, torque
 
 
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def foot_support(p: Array, force: float, nz: float) -> float:
+    """mf g + F_j n_jz: the upward force that holds foot j vertically at rest. It is the reaction
+    lambda_j while the foot is on the ground (MODEL.md Sec. 2); in the air its negative is the
+    foot's net vertical force."""
+    return p[2] * p[3] + force * nz
+
+
 @nb.njit(cache=True, error_model="numpy")
 def generalised_forces(
     p: Array, mode: int, y: Array, u: Array, f: Array, off: int
@@ -139,14 +148,13 @@ def generalised_forces(
     mode bit mask; y: state, shape (14,); u: inputs (u1, u2, u12), shape (3,).
     """
     f1, n1x, n1z, f2, n2x, n2z, torque = leg_forces(p, mode, y, 0, u)
-    mg_foot = p[2] * p[3]
     f[off + 0] = f1 * n1x + f2 * n2x
     f[off + 1] = f1 * n1z + f2 * n2z - p[0] * p[3]
     f[off + 2] = torque
     f[off + 3] = -f1 * n1x
-    f[off + 4] = -f1 * n1z - mg_foot
+    f[off + 4] = -foot_support(p, f1, n1z)
     f[off + 5] = -f2 * n2x
-    f[off + 6] = -f2 * n2z - mg_foot
+    f[off + 6] = -foot_support(p, f2, n2z)
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -163,7 +171,6 @@ def vector_field(
     the step's arithmetic in registers.
     """
     f1, n1x, n1z, f2, n2x, n2z, torque = leg_forces(p, mode, y, yo, u)
-    mg_foot = p[2] * p[3]
     inv_mb, inv_ib, inv_mf = p[9], p[10], p[11]
     for i in range(NDOF):
         out[off + i] = y[yo + NDOF + i]
@@ -172,20 +179,20 @@ def vector_field(
     out[off + 9] = torque * inv_ib
     out[off + 10] = -f1 * n1x * inv_mf
     out[off + 12] = -f2 * n2x * inv_mf
-    fz1 = -f1 * n1z - mg_foot
-    fz2 = -f2 * n2z - mg_foot
+    support1 = foot_support(p, f1, n1z)
+    support2 = foot_support(p, f2, n2z)
     if mode & 1:
-        lam[lo] = -fz1
+        lam[lo] = support1
         out[off + 11] = 0.0
     else:
         lam[lo] = 0.0
-        out[off + 11] = fz1 * inv_mf
+        out[off + 11] = -support1 * inv_mf
     if mode & 2:
-        lam[lo + 1] = -fz2
+        lam[lo + 1] = support2
         out[off + 13] = 0.0
     else:
         lam[lo + 1] = 0.0
-        out[off + 13] = fz2 * inv_mf
+        out[off + 13] = -support2 * inv_mf
 
 
 @nb.njit(cache=True, error_model="numpy")

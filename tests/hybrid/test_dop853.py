@@ -11,6 +11,9 @@ import pytest
 
 from biped_opt.hybrid import _dop853, _dop853_gen
 from biped_opt.hybrid._kernel import _dense_eval
+from biped_opt.maneuvers import initial_state
+from biped_opt.model.biped import dynamics
+from biped_opt.model.params import BipedParams
 
 _OSCILLATOR = '''
 import numba as nb
@@ -93,6 +96,29 @@ def test_error_estimate_shrinks_with_the_step(oscillator_step):
 
 
 def test_biped_workspace_layout():
-    """Slots of 14 derivatives + 2 reactions, 16 stage slots, then the stage and initial states."""
+    """Slots of 14 derivatives + 2 reactions, 16 stage slots, then the stage and initial states;
+    after a biped step slot 12 holds the vector field and reactions at the new point, equal to a
+    separate evaluation there (bit for bit: the same compiled function on the same numbers)."""
     assert _dop853.STRIDE == 16
     assert _dop853.WORKSPACE == 18 * 16
+    params = BipedParams()
+    p = params.as_array()
+    y, mode = initial_state("liftoff", 0.1, params)
+    u = np.array([1.5, 3.0, 0.2])
+    f, lam0 = np.empty(14), np.empty(2)
+    dynamics(p, int(mode), y, u, f, lam0)
+    W = np.full(_dop853.WORKSPACE, np.nan)
+    y_new, f_new, lam, probe = np.empty(14), np.empty(14), np.empty(2), np.empty(3)
+    err = _dop853.step(p, int(mode), u, 1.0, y, f, 0.01, W, y_new, f_new, lam, 1e-11, 1e-12, probe)
+    assert 0.0 < err < 1.0
+    k12 = 12 * _dop853.STRIDE
+    dy_check, lam_check = np.empty(14), np.empty(2)
+    dynamics(p, int(mode), y_new, u, dy_check, lam_check)
+    np.testing.assert_array_equal(W[k12 : k12 + 14], dy_check)
+    np.testing.assert_array_equal(W[k12 + 14 : k12 + 16], lam_check)
+    np.testing.assert_array_equal(f_new, dy_check)
+    np.testing.assert_array_equal(lam, lam_check)
+    assert lam_check.min() > 0.0  # both feet still pressed on the ground: the check means something
+    y_slot = _dop853.SLOT_Y * _dop853.STRIDE
+    np.testing.assert_array_equal(W[y_slot : y_slot + 14], y)
+    np.testing.assert_array_equal(W[_dop853.SLOT_STAGE * _dop853.STRIDE :][:14], y_new)
