@@ -23,6 +23,7 @@ import numba as nb
 import numpy as np
 import numpy.typing as npt
 
+from biped_opt._jit import HOT_PATH
 from biped_opt.errors import InvalidInputError
 from biped_opt.model.biped import NSTATE
 from biped_opt.model.modes import ContactMode
@@ -133,7 +134,7 @@ def check_theta0(maneuver: Maneuver | str | ManeuverSpec, theta0: float) -> floa
     return value
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(**HOT_PATH)
 def fill_initial_state(code: int, th: float, p: npt.NDArray[np.float64],
                        y0: npt.NDArray[np.float64]) -> None:
     """Initial state of maneuver ``code`` (ManeuverSpec.code) at pitch th into y0 (14,).

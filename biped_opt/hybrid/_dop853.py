@@ -14,6 +14,7 @@ import math
 
 import numba as nb
 
+from biped_opt._jit import HOT_PATH
 from biped_opt.hybrid._guards import probe_stage
 from biped_opt.model.biped import vector_field
 
@@ -23,7 +24,7 @@ SLOT_Y = 17
 WORKSPACE = 18 * STRIDE
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(**HOT_PATH)
 def step(p, mode, u, term_sign, y, f, h, W, y_new, f_new, lam, rtol, atol, probe):
     """One DOP853 step of size h from (y, f = dy/dt at y) in mode ``mode``.
 
@@ -230,7 +231,7 @@ def step(p, mode, u, term_sign, y, f, h, W, y_new, f_new, lam, rtol, atol, probe
     return abs(h) * err5 / math.sqrt((err5 + 0.01 * err3) * 14)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(**HOT_PATH)
 def dense_coefficients(p, mode, u, y, f, h, W, y_new, f_new, F):
     """Coefficients F (7, n) of the 7th-order interpolant on the step just taken from y
     (W holds its stages; three more are evaluated), in the form SciPy's Dop853DenseOutput

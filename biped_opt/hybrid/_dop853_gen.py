@@ -80,6 +80,7 @@ def _assign(lhs: str, head: str, coefs: np.ndarray, stride: int, indent: str) ->
 def render(
     n: int = 14,
     imports: str = (
+        "from biped_opt._jit import HOT_PATH\n"
         "from biped_opt.hybrid._guards import probe_stage\n"
         "from biped_opt.model.biped import vector_field"
     ),
@@ -91,8 +92,9 @@ def render(
     ``rhs(p, mode, y, yo, u, out, off, lam, lo)`` writes the vector field at the state
     y[yo:yo + n] to out[off:off + n] and the two reactions to lam[lo:lo + 2];
     ``probe(mode, term_sign, y, yo, lam, lo, c, c0, c1, c2)`` returns (c0, c1, c2) updated
-    with the guard signs at a stage state (abscissa c). The defaults are the biped's; the tests
-    render other ones.
+    with the guard signs at a stage state (abscissa c); ``imports`` brings both, and
+    ``HOT_PATH`` (the compilation flags, :mod:`biped_opt._jit`). The defaults are the biped's;
+    the tests render other ones.
     """
     A, B, C = _tableau.A, _tableau.B, _tableau.C
     E3, E5, D = _tableau.E3, _tableau.E5, _tableau.D
@@ -105,7 +107,7 @@ def render(
     out = [_HEADER.format(n=n, stride=st, imports=imports)]
     w = out.append
     w("")
-    w('@nb.njit(cache=True, error_model="numpy")')
+    w("@nb.njit(**HOT_PATH)")
     w("def step(p, mode, u, term_sign, y, f, h, W, y_new, f_new, lam, rtol, atol, probe):")
     w('    """One DOP853 step of size h from (y, f = dy/dt at y) in mode ``mode``.')
     w("")
@@ -157,7 +159,7 @@ def render(
     w(f"    return abs(h) * err5 / math.sqrt((err5 + 0.01 * err3) * {n})")
     w("")
     w("")
-    w('@nb.njit(cache=True, error_model="numpy")')
+    w("@nb.njit(**HOT_PATH)")
     w("def dense_coefficients(p, mode, u, y, f, h, W, y_new, f_new, F):")
     w('    """Coefficients F (7, n) of the 7th-order interpolant on the step just taken from y')
     w("    (W holds its stages; three more are evaluated), in the form SciPy's Dop853DenseOutput")

@@ -16,17 +16,19 @@ from __future__ import annotations
 
 import numba as nb
 
+from biped_opt._jit import HOT_PATH
+
 NGUARDS = 3
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@nb.njit(**HOT_PATH, inline="always")
 def contact_guard(mode, j, y, yo, lam, lo):
     """Guard of foot j: its reaction lambda_j = lam[lo + j] in contact, its height z_j in the air
     (state at y[yo:yo + 14])."""
     return lam[lo + j] if mode >> j & 1 else y[yo + 4 + 2 * j]
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@nb.njit(**HOT_PATH, inline="always")
 def guard_values(mode, term_sign, y, lam, out):
     """All guards at the state y, whose reactions lam are known."""
     out[0] = contact_guard(mode, 0, y, 0, lam, 0)
@@ -34,7 +36,7 @@ def guard_values(mode, term_sign, y, lam, out):
     out[2] = term_sign * y[8]
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@nb.njit(**HOT_PATH, inline="always")
 def probe_stage(mode, term_sign, y, yo, lam, lo, c, c0, c1, c2):
     """(c0, c1, c2) updated with the stage at abscissa c: ci = min(ci, c) for each guard i that is
     <= 0 at the stage state y[yo:yo + 14] (reactions lam[lo:lo + 2]). The stages sample the step's

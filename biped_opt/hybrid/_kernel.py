@@ -25,6 +25,7 @@ import math
 import numba as nb
 import numpy as np
 
+from biped_opt._jit import HOT_PATH
 from biped_opt.hybrid._dop853 import WORKSPACE, dense_coefficients
 from biped_opt.hybrid._dop853 import step as dop853_step
 from biped_opt.hybrid._guards import NGUARDS, guard_values
@@ -66,14 +67,14 @@ _EVENT_STEP_FRACTION = 0.7
 _ROOT_XTOL = 1e-13
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@nb.njit(**HOT_PATH, inline="always")
 def _inverse_eighth_root(err):
     """err ** (-1/8), the step-size law of an 8th-order method, by three square roots (a general
     power is a slower libm call, taken once per step)."""
     return 1.0 / math.sqrt(math.sqrt(math.sqrt(err)))
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(**HOT_PATH)
 def _dense_eval(F, y, x, out):
     """Interpolant at fraction x in [0, 1] of the step that started at y."""
     for i in range(y.shape[0]):
@@ -84,7 +85,7 @@ def _dense_eval(F, y, x, out):
         out[i] = y[i] + acc
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(**HOT_PATH)
 def _dense_component(F, y, x, k):
     """Component k of the interpolant at x (what a position or velocity guard needs)."""
     acc = 0.0
@@ -94,7 +95,7 @@ def _dense_component(F, y, x, k):
     return y[k] + acc
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(**HOT_PATH)
 def _guard_on_dense(p, mode, u, term_sign, F, y, x, i, tmp):
     """Guard i on the interpolant at x: one component for a foot height or the body's z', the
     whole state (and the leg forces) only for a reaction force."""
@@ -106,7 +107,7 @@ def _guard_on_dense(p, mode, u, term_sign, F, y, x, i, tmp):
     return _guard(p, mode, u, term_sign, tmp, i)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(**HOT_PATH)
 def _guard(p, mode, u, term_sign, y, i):
     """Value of guard i at state y in mode ``mode`` (see the module docstring)."""
     if i == 2:
@@ -117,7 +118,7 @@ def _guard(p, mode, u, term_sign, y, i):
     return y[4 + 2 * i]
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(**HOT_PATH)
 def _guard_rate(p, mode, u, term_sign, y, dy, i, tmp):
     """d/dt of guard i along the flow of mode ``mode`` at y (dy = vector field at y)."""
     if i == 2:
@@ -135,7 +136,7 @@ def _guard_rate(p, mode, u, term_sign, y, dy, i, tmp):
     return (g_plus - g_minus) / (2.0 * eps)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(**HOT_PATH)
 def _root_on_dense(p, mode, u, term_sign, F, y, i, xa, ga, xb, gb, tmp):
     """Root in (xa, xb] of guard i on the dense output, by the Illinois method.
 
@@ -165,7 +166,7 @@ def _root_on_dense(p, mode, u, term_sign, F, y, i, xa, ga, xb, gb, tmp):
     return xb
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(**HOT_PATH)
 def _record_sample(samples, ns, t, y, mode, lam):
     if ns < samples.shape[0]:
         samples[ns, 0] = t
@@ -177,7 +178,7 @@ def _record_sample(samples, ns, t, y, mode, lam):
     return ns + 1
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(**HOT_PATH)
 def _initial_step(p, mode, u, y, f, rtol, atol, h_max, tmp, ftmp, lam):
     """Starting step size (Hairer, Norsett and Wanner, Sec. II.4), one extra evaluation."""
     n = y.shape[0]
@@ -218,7 +219,7 @@ CFG_SAMPLE_DT = 8  # spacing of dense samples (<= 0: none)
 CFG_SIZE = 9
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(**HOT_PATH)
 def simulate_kernel(p, y0, mode0, u, cfg, samples, events, y_out):
     """Integrate one maneuver from (t = 0, y0, mode0) to its terminal event.
 
@@ -487,7 +488,7 @@ def simulate_kernel(p, y0, mode0, u, cfg, samples, events, y_out):
     return status, t, mode, n_events, ns, nfev, nsteps, nrejected
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(**HOT_PATH)
 def simulate_maneuver(p, code, theta0, mode0, u, cfg, samples, events, y_out):
     """:func:`simulate_kernel` from the initial state of maneuver ``code`` (ManeuverSpec.code)
     at pitch theta0, built here rather than by the caller (one compiled call per trajectory)."""
@@ -496,7 +497,7 @@ def simulate_maneuver(p, code, theta0, mode0, u, cfg, samples, events, y_out):
     return simulate_kernel(p, y0, mode0, u, cfg, samples, events, y_out)
 
 
-@nb.njit(cache=True, parallel=True, error_model="numpy")
+@nb.njit(**HOT_PATH, parallel=True)
 def simulate_batch_kernel(p, code, thetas, mode0, us, cfg, events, y_out, info):
     """:func:`simulate_maneuver` over many initial pitches and inputs, in parallel threads.
 
