@@ -74,25 +74,28 @@ def _inverse_eighth_root(err):
     return 1.0 / math.sqrt(math.sqrt(math.sqrt(err)))
 
 
+@nb.njit(**HOT_PATH, inline="always")
+def _interpolant(y0, f0, f1, f2, f3, f4, f5, f6, x):
+    """One component of the 7th-order interpolant at fraction x in [0, 1] of a step, from its
+    value y0 at the step's start and its coefficients f0..f6 (SciPy's Dop853DenseOutput form,
+    in which x and 1 - x alternate as the factors)."""
+    xm = 1.0 - x
+    return y0 + x * (f0 + xm * (f1 + x * (f2 + xm * (f3 + x * (f4 + xm * (f5 + x * f6))))))
+
+
 @nb.njit(**HOT_PATH)
 def _dense_eval(F, y, x, out):
     """Interpolant at fraction x in [0, 1] of the step that started at y."""
     for i in range(y.shape[0]):
-        acc = 0.0
-        for r in range(6, -1, -1):
-            acc += F[r, i]
-            acc *= x if (6 - r) % 2 == 0 else 1.0 - x
-        out[i] = y[i] + acc
+        out[i] = _interpolant(
+            y[i], F[0, i], F[1, i], F[2, i], F[3, i], F[4, i], F[5, i], F[6, i], x
+        )
 
 
 @nb.njit(**HOT_PATH)
 def _dense_component(F, y, x, k):
     """Component k of the interpolant at x (what a position or velocity guard needs)."""
-    acc = 0.0
-    for r in range(6, -1, -1):
-        acc += F[r, k]
-        acc *= x if (6 - r) % 2 == 0 else 1.0 - x
-    return y[k] + acc
+    return _interpolant(y[k], F[0, k], F[1, k], F[2, k], F[3, k], F[4, k], F[5, k], F[6, k], x)
 
 
 @nb.njit(**HOT_PATH)
@@ -107,14 +110,22 @@ def _guard_on_dense(p, mode, u, term_sign, F, y, x, i, tmp):
     return _guard(p, mode, u, term_sign, tmp, i)
 
 
+@nb.njit(**HOT_PATH, inline="always")
+def _reaction(p, mode, u, y, j):
+    """lambda_j at the state y, foot j on the ground: from the legs' forces only (no branch on
+    j, so that inlined into the root search it adds no reference counting)."""
+    f1, _, n1z, f2, _, n2z, _ = leg_forces(p, mode, y, 0, u)
+    w = float(j)
+    return (1.0 - w) * foot_support(p, f1, n1z) + w * foot_support(p, f2, n2z)
+
+
 @nb.njit(**HOT_PATH)
 def _guard(p, mode, u, term_sign, y, i):
     """Value of guard i at state y in mode ``mode`` (see the module docstring)."""
     if i == 2:
         return term_sign * y[8]
     if mode >> i & 1:
-        f1, _, n1z, f2, _, n2z, _ = leg_forces(p, mode, y, 0, u)  # the legs' forces only
-        return foot_support(p, f1, n1z) if i == 0 else foot_support(p, f2, n2z)
+        return _reaction(p, mode, u, y, i)
     return y[4 + 2 * i]
 
 
@@ -141,7 +152,15 @@ def _root_on_dense(p, mode, u, term_sign, F, y, i, xa, ga, xb, gb, tmp):
     """Root in (xa, xb] of guard i on the dense output, by the Illinois method.
 
     Requires ga > 0 >= gb. Returns x with the bracket shrunk below _ROOT_XTOL of the step.
+    A foot height or the body's z' is one component of the interpolant: its eight coefficients
+    are read once and the iteration is arithmetic on them. Only a reaction force needs the
+    whole interpolated state and the legs' forces at every iterate.
     """
+    k = 8 if i == 2 else 4 + 2 * i
+    one_component = i == 2 or not mode >> i & 1
+    sign = term_sign if i == 2 else 1.0
+    y0, f0, f1, f2 = y[k], F[0, k], F[1, k], F[2, k]
+    f3, f4, f5, f6 = F[3, k], F[4, k], F[5, k], F[6, k]
     side = 0
     x = xb
     for _ in range(200):
@@ -150,7 +169,11 @@ def _root_on_dense(p, mode, u, term_sign, F, y, i, xa, ga, xb, gb, tmp):
         x = (xa * gb - xb * ga) / (gb - ga)
         if not xa < x < xb:
             x = 0.5 * (xa + xb)
-        gx = _guard_on_dense(p, mode, u, term_sign, F, y, x, i, tmp)
+        if one_component:
+            gx = sign * _interpolant(y0, f0, f1, f2, f3, f4, f5, f6, x)
+        else:
+            _dense_eval(F, y, x, tmp)
+            gx = _reaction(p, mode, u, tmp, i)
         if gx > 0.0:
             xa, ga = x, gx
             if side == 1:
