@@ -188,7 +188,7 @@ def run_benchmark(
     from biped_opt.optimal.sweep import sweep_fixed
 
     cases = make_cases(n_cases, seed)
-    rounds = 1 if quick else 3
+    rounds = 1 if quick else 5
     relax_every = 4 if quick else 1  # relaxation is pure Python: a subset in quick mode
     sweep_points = 41 if quick else SWEEP_POINTS
     sweep_repeats = 1 if quick else 5
