@@ -98,16 +98,16 @@ def _dense_component(F, y, x, k):
     return _interpolant(y[k], F[0, k], F[1, k], F[2, k], F[3, k], F[4, k], F[5, k], F[6, k], x)
 
 
-@nb.njit(**HOT_PATH)
-def _guard_on_dense(p, mode, u, term_sign, F, y, x, i, tmp):
-    """Guard i on the interpolant at x: one component for a foot height or the body's z', the
-    whole state (and the leg forces) only for a reaction force."""
+@nb.njit(**HOT_PATH, inline="always")
+def _guard_component(mode, term_sign, i):
+    """(k, sign) such that guard i is sign * y[k] (k = 8, the body's z', for the termination;
+    k = 4 + 2 i, the foot's height, for a foot in the air), or (-1, 1.0) when it is the reaction
+    force of a foot on the ground."""
     if i == 2:
-        return term_sign * _dense_component(F, y, x, 8)
+        return 8, term_sign
     if not mode >> i & 1:
-        return _dense_component(F, y, x, 4 + 2 * i)
-    _dense_eval(F, y, x, tmp)
-    return _guard(p, mode, u, term_sign, tmp, i)
+        return 4 + 2 * i, 1.0
+    return -1, 1.0
 
 
 @nb.njit(**HOT_PATH, inline="always")
@@ -122,28 +122,37 @@ def _reaction(p, mode, u, y, j):
 @nb.njit(**HOT_PATH)
 def _guard(p, mode, u, term_sign, y, i):
     """Value of guard i at state y in mode ``mode`` (see the module docstring)."""
-    if i == 2:
-        return term_sign * y[8]
-    if mode >> i & 1:
-        return _reaction(p, mode, u, y, i)
-    return y[4 + 2 * i]
+    k, sign = _guard_component(mode, term_sign, i)
+    if k >= 0:
+        return sign * y[k]
+    return _reaction(p, mode, u, y, i)
+
+
+@nb.njit(**HOT_PATH)
+def _guard_on_dense(p, mode, u, term_sign, F, y, x, i, tmp):
+    """Guard i on the interpolant at x: one component for a foot height or the body's z', the
+    whole state (and the leg forces) only for a reaction force."""
+    k, sign = _guard_component(mode, term_sign, i)
+    if k >= 0:
+        return sign * _dense_component(F, y, x, k)
+    _dense_eval(F, y, x, tmp)
+    return _reaction(p, mode, u, tmp, i)
 
 
 @nb.njit(**HOT_PATH)
 def _guard_rate(p, mode, u, term_sign, y, dy, i, tmp):
     """d/dt of guard i along the flow of mode ``mode`` at y (dy = vector field at y)."""
-    if i == 2:
-        return term_sign * dy[8]
-    if not mode >> i & 1:
-        return dy[4 + 2 * i]
+    k, sign = _guard_component(mode, term_sign, i)
+    if k >= 0:
+        return sign * dy[k]
     # lambda_i depends on (q, q'); differentiate along the flow by a central difference.
     eps = 1e-6
-    for k in range(y.shape[0]):
-        tmp[k] = y[k] + eps * dy[k]
-    g_plus = _guard(p, mode, u, term_sign, tmp, i)
-    for k in range(y.shape[0]):
-        tmp[k] = y[k] - eps * dy[k]
-    g_minus = _guard(p, mode, u, term_sign, tmp, i)
+    for m in range(y.shape[0]):
+        tmp[m] = y[m] + eps * dy[m]
+    g_plus = _reaction(p, mode, u, tmp, i)
+    for m in range(y.shape[0]):
+        tmp[m] = y[m] - eps * dy[m]
+    g_minus = _reaction(p, mode, u, tmp, i)
     return (g_plus - g_minus) / (2.0 * eps)
 
 
@@ -156,11 +165,11 @@ def _root_on_dense(p, mode, u, term_sign, F, y, i, xa, ga, xb, gb, tmp):
     are read once and the iteration is arithmetic on them. Only a reaction force needs the
     whole interpolated state and the legs' forces at every iterate.
     """
-    k = 8 if i == 2 else 4 + 2 * i
-    one_component = i == 2 or not mode >> i & 1
-    sign = term_sign if i == 2 else 1.0
-    y0, f0, f1, f2 = y[k], F[0, k], F[1, k], F[2, k]
-    f3, f4, f5, f6 = F[3, k], F[4, k], F[5, k], F[6, k]
+    k, sign = _guard_component(mode, term_sign, i)
+    one_component = k >= 0
+    c = max(k, 0)  # (the coefficients are read but unused for a reaction force)
+    y0, f0, f1, f2 = y[c], F[0, c], F[1, c], F[2, c]
+    f3, f4, f5, f6 = F[3, c], F[4, c], F[5, c], F[6, c]
     side = 0
     x = xb
     for _ in range(200):
