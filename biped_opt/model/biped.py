@@ -176,7 +176,7 @@ def vector_field(
     into every stage of the step, and each inlined array argument gets a reference count
     (an atomic increment and decrement, ~20 cycles each and a barrier to reordering). Numba
     removes such a pair only when nothing branches between them. With branches here, ~18 pairs
-    per stage survived; without them a whole simulation is ~12% faster, with bit-identical
+    per stage survived; without them a whole simulation is ~11% faster, with bit-identical
     results (``tests/hybrid/test_dop853.py`` checks that the step has no reference counting).
     """
     f1, n1x, n1z, f2, n2x, n2z, torque = leg_forces(p, mode, y, yo, u)

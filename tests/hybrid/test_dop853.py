@@ -133,7 +133,7 @@ def test_step_has_no_reference_counting():
     Numba increments and decrements an array's reference count (atomic operations, a barrier to
     reordering) around every inlined function that takes it, and removes the pair only when no
     branch separates them. With mode-dependent branches in the vector field ~18 pairs per stage
-    survived (a whole simulation ~12% slower); the branch-free form has none. Such a branch in
+    survived (a whole simulation ~11% slower); the branch-free form has none. Such a branch in
     the vector field makes this fail. (The cached step cannot be inspected, so a fresh,
     uncached copy of it is compiled here.)
     """
