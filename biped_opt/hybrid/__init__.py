@@ -9,6 +9,7 @@ from biped_opt.hybrid.simulate import (
     SimulatorOptions,
     simulate,
     simulate_batch,
+    warm_up,
 )
 from biped_opt.hybrid.trajectory import Event, Segment, Status, Trajectory
 
@@ -21,4 +22,5 @@ __all__ = [
     "Trajectory",
     "simulate",
     "simulate_batch",
+    "warm_up",
 ]

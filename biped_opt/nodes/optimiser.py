@@ -25,7 +25,7 @@ from biped_opt import ros
 from biped_opt.errors import BipedOptError
 from biped_opt.maneuvers import Maneuver
 from biped_opt.nodes import convert
-from biped_opt.nodes.run import run_node
+from biped_opt.nodes.run import run_node, warm_up_kernels
 from biped_opt.optimal import OptimalControlProblem, OptimalResult, get_problem, optimal_policy
 from biped_opt.optimal.derivatives import outcome_sensitivity
 
@@ -53,6 +53,7 @@ class OptimiserNode(ros.Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("optimiser", **kwargs)
+        warm_up_kernels(self)
         self._problems: dict[Maneuver, OptimalControlProblem] = {}
         for maneuver in Maneuver:
             default = get_problem(maneuver.value)

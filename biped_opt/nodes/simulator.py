@@ -25,7 +25,7 @@ from biped_opt.errors import BipedOptError, InvalidInputError
 from biped_opt.hybrid import simulate
 from biped_opt.hybrid.trajectory import Trajectory
 from biped_opt.nodes import convert
-from biped_opt.nodes.run import run_node
+from biped_opt.nodes.run import run_node, warm_up_kernels
 
 __all__ = ["SimulatorNode", "main", "CONTACT_MODE_QOS"]
 
@@ -53,6 +53,7 @@ class SimulatorNode(ros.Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("simulator", **kwargs)
+        warm_up_kernels(self)
         self.declare_parameter("maneuver", "touchdown")
         self.declare_parameter("theta0", 0.1)
         self.declare_parameter("inputs", [2.0, 0.5, 0.0])

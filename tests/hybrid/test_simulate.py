@@ -232,3 +232,14 @@ def test_bad_options():
         SimulatorOptions(rtol=0.0)
     with pytest.raises(InvalidParameterError, match="max_events"):
         SimulatorOptions(max_events=0)
+
+
+def test_warm_up_compiles_both_kernels():
+    """warm_up leaves the single-call and the batch kernels compiled (or loaded from the cache),
+    so a node that calls it before serving never compiles inside a request."""
+    from biped_opt.hybrid import _kernel, warm_up
+
+    seconds = warm_up()
+    assert 0.0 < seconds < 600.0
+    assert _kernel.simulate_maneuver.signatures
+    assert _kernel.simulate_batch_kernel.signatures
