@@ -53,7 +53,9 @@ class OptimiserNode(ros.Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("optimiser", **kwargs)
-        warm_up_kernels(self)
+        self.declare_parameter("warm_up", True)
+        if self.get_parameter("warm_up").value:
+            warm_up_kernels(self)
         self._problems: dict[Maneuver, OptimalControlProblem] = {}
         for maneuver in Maneuver:
             default = get_problem(maneuver.value)

@@ -53,7 +53,9 @@ class SimulatorNode(ros.Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("simulator", **kwargs)
-        warm_up_kernels(self)
+        self.declare_parameter("warm_up", True)
+        if self.get_parameter("warm_up").value:
+            warm_up_kernels(self)
         self.declare_parameter("maneuver", "touchdown")
         self.declare_parameter("theta0", 0.1)
         self.declare_parameter("inputs", [2.0, 0.5, 0.0])
