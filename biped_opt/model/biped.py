@@ -140,6 +140,24 @@ def foot_support(p: Array, force: float, nz: float) -> float:
     return p[2] * p[3] + force * nz
 
 
+@nb.njit(**HOT_PATH, inline="always")
+def _force_components(p: Array, mode: int, y: Array, yo: int, u: Array
+                      ) -> tuple[float, float, float, float, float, float, float]:
+    """f_J(q, q', u) for the state at y[yo:yo + 14], as values (MODEL.md Sec. 2): body x, z and
+    pitch, then foot 1 x, z and foot 2 x, z. Each foot's z force is -(mf g + F_j n_jz), minus
+    the reaction that holds it while it is on the ground."""
+    f1, n1x, n1z, f2, n2x, n2z, torque = leg_forces(p, mode, y, yo, u)
+    return (
+        f1 * n1x + f2 * n2x,
+        f1 * n1z + f2 * n2z - p[0] * p[3],
+        torque,
+        -f1 * n1x,
+        -foot_support(p, f1, n1z),
+        -f2 * n2x,
+        -foot_support(p, f2, n2z),
+    )
+
+
 @nb.njit(**HOT_PATH)
 def generalised_forces(
     p: Array, mode: int, y: Array, u: Array, f: Array, off: int
@@ -149,14 +167,14 @@ def generalised_forces(
     p: packed parameters (:meth:`~biped_opt.model.params.BipedParams.as_array`); mode: contact
     mode bit mask; y: state, shape (14,); u: inputs (u1, u2, u12), shape (3,).
     """
-    f1, n1x, n1z, f2, n2x, n2z, torque = leg_forces(p, mode, y, 0, u)
-    f[off + 0] = f1 * n1x + f2 * n2x
-    f[off + 1] = f1 * n1z + f2 * n2z - p[0] * p[3]
-    f[off + 2] = torque
-    f[off + 3] = -f1 * n1x
-    f[off + 4] = -foot_support(p, f1, n1z)
-    f[off + 5] = -f2 * n2x
-    f[off + 6] = -foot_support(p, f2, n2z)
+    fx, fz, fth, f1x, f1z, f2x, f2z = _force_components(p, mode, y, 0, u)
+    f[off + 0] = fx
+    f[off + 1] = fz
+    f[off + 2] = fth
+    f[off + 3] = f1x
+    f[off + 4] = f1z
+    f[off + 5] = f2x
+    f[off + 6] = f2z
 
 
 @nb.njit(**HOT_PATH, inline="always")
@@ -179,24 +197,22 @@ def vector_field(
     per stage survived; without them a whole simulation is ~11% faster, with bit-identical
     results (``tests/hybrid/test_dop853.py`` checks that the step has no reference counting).
     """
-    f1, n1x, n1z, f2, n2x, n2z, torque = leg_forces(p, mode, y, yo, u)
+    fx, fz, fth, f1x, f1z, f2x, f2z = _force_components(p, mode, y, yo, u)
     inv_mb, inv_ib, inv_mf = p[9], p[10], p[11]
     for i in range(NDOF):
         out[off + i] = y[yo + NDOF + i]
-    out[off + 7] = (f1 * n1x + f2 * n2x) * inv_mb
-    out[off + 8] = (f1 * n1z + f2 * n2z - p[0] * p[3]) * inv_mb
-    out[off + 9] = torque * inv_ib
-    out[off + 10] = -f1 * n1x * inv_mf
-    out[off + 12] = -f2 * n2x * inv_mf
-    support1 = foot_support(p, f1, n1z)
-    support2 = foot_support(p, f2, n2z)
+    out[off + 7] = fx * inv_mb
+    out[off + 8] = fz * inv_mb
+    out[off + 9] = fth * inv_ib
+    out[off + 10] = f1x * inv_mf
+    out[off + 12] = f2x * inv_mf
     on1 = float(mode & 1)  # 1.0 while foot 1 is on the ground: lambda_1 holds it, z_1'' = 0
     on2 = float(mode >> 1 & 1)
     # "+ 0.0" turns the -0.0 of a foot in the air into +0.0 (the reactions are reported)
-    lam[lo] = support1 * on1 + 0.0
-    lam[lo + 1] = support2 * on2 + 0.0
-    out[off + 11] = -support1 * inv_mf * (1.0 - on1)
-    out[off + 13] = -support2 * inv_mf * (1.0 - on2)
+    lam[lo] = -f1z * on1 + 0.0
+    lam[lo + 1] = -f2z * on2 + 0.0
+    out[off + 11] = f1z * inv_mf * (1.0 - on1)
+    out[off + 13] = f2z * inv_mf * (1.0 - on2)
 
 
 @nb.njit(**HOT_PATH)
