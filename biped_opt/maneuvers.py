@@ -120,6 +120,8 @@ def spec(maneuver: Maneuver | str | ManeuverSpec) -> ManeuverSpec:
 def check_theta0(maneuver: Maneuver | str | ManeuverSpec, theta0: float) -> float:
     """theta0 as a float, validated against the maneuver's range; the error names ``theta0``."""
     s = spec(maneuver)
+    if type(theta0) is float and abs(theta0) <= s.theta0_limit:  # the common case (NaN fails)
+        return theta0
     try:
         value = float(theta0)
     except (TypeError, ValueError):

@@ -113,7 +113,8 @@ def kernel_config(
     return cfg
 
 
-#: the default ``cfg`` vector of each maneuver (by ManeuverSpec.code), and its initial mode
+#: the default-options ``cfg`` vector of each maneuver, by ManeuverSpec.code (looked up
+#: without hashing the spec and options, as kernel_config's cache must)
 _DEFAULT_CFG: dict[int, Array] = {}
 _NO_SAMPLES = np.empty((0, K.SAMPLE_WIDTH))  # nothing is ever written to a zero-row buffer
 _DEFAULT_P = DEFAULT_PARAMS.as_array()
@@ -136,10 +137,7 @@ def simulate(
     compiled kernel is kept to the checks and one call.)
     """
     s = spec(maneuver)
-    if type(theta0) is float and abs(theta0) <= s.theta0_limit:  # NaN fails the comparison
-        th = theta0
-    else:
-        th = check_theta0(s, theta0)
+    th = check_theta0(s, theta0)
     u = check_inputs(inputs)
     p = _DEFAULT_P if params is None else params.as_array()
     if sample_dt is None:
