@@ -44,7 +44,7 @@ def value_derivative(problem: OptimalControlProblem, result: OptimalResult) -> t
             problem.maneuver.value, result.theta0, result.inputs,
             direction=(side, 0.0, 0.0, 0.0), params=problem.params,
         )
-        out.append(2.0 * (s.outcome - problem.theta_star) * s.gradient[0])
+        out.append(problem.outcome_slope(s.outcome) * s.gradient[0])
     return out[0], out[1]
 
 

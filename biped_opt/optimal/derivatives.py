@@ -716,11 +716,11 @@ def _cost_derivatives(
 ) -> tuple[float, Array, Array, Array]:
     """c_theta, c_u, c_uu, c_u,theta of c = (th_f - th*)^2 + sum alpha u^2 (Eqs. (14), (15))."""
     alpha = np.asarray(problem.alphas, dtype=np.float64)
-    err = d.outcome - problem.theta_star
-    c_t = 2.0 * err * d.g_theta
-    c_u = 2.0 * err * d.g_u + 2.0 * alpha * x
-    c_uu = 2.0 * np.outer(d.g_u, d.g_u) + 2.0 * err * d.g_uu + 2.0 * np.diag(alpha)
-    c_ut = 2.0 * d.g_theta * d.g_u + 2.0 * err * d.g_utheta
+    slope = problem.outcome_slope(d.outcome)  # 2 (th_f - th*)
+    c_t = slope * d.g_theta
+    c_u = slope * d.g_u + 2.0 * alpha * x
+    c_uu = 2.0 * np.outer(d.g_u, d.g_u) + slope * d.g_uu + 2.0 * np.diag(alpha)
+    c_ut = 2.0 * d.g_theta * d.g_u + slope * d.g_utheta
     return c_t, c_u, c_uu, c_ut
 
 

@@ -210,6 +210,11 @@ class OptimalControlProblem:
             c = c + a * u[..., INPUT_NAMES.index(d)] ** 2
         return float(c) if np.ndim(c) == 0 else c
 
+    def outcome_slope(self, outcome: float) -> float:
+        """dc/dth_f = 2 (th_f - th*): how the cost moves with the outcome (the chain rule's first
+        factor wherever an outcome derivative becomes a cost or value derivative)."""
+        return 2.0 * (outcome - self.theta_star)
+
     def describe(self) -> dict:
         """Plain-data description (for JSON output and captions)."""
         return {

@@ -96,7 +96,7 @@ def _cost_mark(mark: NonsmoothMark, problem: OptimalControlProblem, inputs: np.n
     if "jump" in mark.kind:
         left, right = cost(mark.left), cost(mark.right)
     else:
-        gain = 2.0 * (mark.value - problem.theta_star)
+        gain = problem.outcome_slope(mark.value)
         left, right = gain * mark.left, gain * mark.right
     return NonsmoothMark(theta0=mark.theta0, kind=mark.kind, left=left, right=right,
                          value=cost(mark.value), label=mark.label)
