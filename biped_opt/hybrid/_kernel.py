@@ -121,15 +121,6 @@ def _reaction(p, mode, u, y, j):
 
 
 @nb.njit(**HOT_PATH)
-def _guard(p, mode, u, term_sign, y, i):
-    """Value of guard i at state y in mode ``mode`` (see the module docstring)."""
-    k, sign = _guard_component(mode, term_sign, i)
-    if k >= 0:
-        return sign * y[k]
-    return _reaction(p, mode, u, y, i)
-
-
-@nb.njit(**HOT_PATH)
 def _guard_on_dense(p, mode, u, term_sign, F, y, x, i, tmp):
     """Guard i on the interpolant at x: one component for a foot height or the body's z', the
     whole state (and the leg forces) only for a reaction force."""
@@ -454,11 +445,11 @@ def simulate_kernel(p, y0, mode0, u, cfg, samples, events, y_out):
             y[k] = tmp[k]
         dynamics(p, mode, y, u, f, lam)
         nfev += 1
+        guard_values(mode, term_sign, y, lam, gv_new)  # every guard at the event
         for i in range(NGUARDS):
             flips[i] = i == first
             if i != first and armed[i]:
-                gi = _guard(p, mode, u, term_sign, y, i)
-                if abs(gi) <= SIMULTANEOUS_TOL:
+                if abs(gv_new[i]) <= SIMULTANEOUS_TOL:
                     flips[i] = (
                         _guard_rate(p, mode, u, term_sign, y, f, i, tmp) < 0.0
                     )
