@@ -51,6 +51,13 @@ def one_sided(
         raise ValueError("side must be -1 or +1")
     offsets = side * h0 / ratio ** np.arange(levels)
     values = np.array([f(x0 + s) for s in offsets])
+    if np.all(values == values[0]):
+        # a constant side (a saturated input, a flat outcome): the fit would return the constant
+        # only up to the least-squares rounding of the machine's BLAS, ~1e-15 off and CPU-dependent
+        value = float(values[0])
+        second = 0.0 if levels > 2 else float("nan")
+        return OneSided(side=side, limit=value, derivative=0.0, derivative_error=0.0,
+                        second_derivative=second)
     coeffs = np.polynomial.polynomial.polyfit(offsets, values, levels - 1)
     coarse = np.polynomial.polynomial.polyfit(offsets[1:], values[1:], levels - 2)
     return OneSided(

@@ -4,6 +4,7 @@ measured with the extrapolated one-sided limits and slopes of biped_opt.nonsmoot
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from biped_opt.fixed_sweep import theta_grid
 from biped_opt.hybrid import simulate
@@ -49,3 +50,12 @@ def test_liftoff_without_inputs_is_continuous():
     f = _outcome("liftoff", (0.0, 0.0, 0.0))
     left, right = one_sided(f, 0.0, -1), one_sided(f, 0.0, +1)
     assert abs(left.limit - right.limit) < 1e-9
+
+
+def test_one_sided_of_a_constant_side_is_exact():
+    """A saturated input is constant on one side: its limit must be the bound itself, bit for bit
+    (a least-squares fit returns it only to ~1e-15, differently on different CPUs)."""
+    side = one_sided(lambda x: 1.5 if x > 0 else 0.1 * x, 0.0, +1)
+    assert side.limit == 1.5 and side.derivative == 0.0 and side.second_derivative == 0.0
+    other = one_sided(lambda x: 1.5 if x > 0 else 0.1 * x, 0.0, -1)
+    assert other.derivative == pytest.approx(0.1, abs=1e-12)  # a line: exact up to rounding
