@@ -13,3 +13,11 @@ def context(domain_id):
     dds.init(context=ctx, domain_id=domain_id)
     yield ctx
     ctx.try_shutdown()
+
+
+@pytest.fixture(autouse=True)
+def _fresh_log_throttle():
+    """Each test starts with no log line held back by an earlier test's throttling."""
+    from biped_opt.ros.dds import log
+
+    log._SITES.clear()

@@ -17,6 +17,7 @@ from .context import (
     shutdown,
     try_shutdown,
 )
+from .entities import Publisher, Subscription, Timer
 from .executors import (
     Executor,
     MultiThreadedExecutor,
@@ -27,18 +28,13 @@ from .executors import (
 )
 from .futures import Future
 from .node import (
-    Client,
     Clock,
     MutuallyExclusiveCallbackGroup,
     Node,
     Parameter,
     ParameterNotDeclaredException,
-    Publisher,
     ReentrantCallbackGroup,
-    Service,
-    Subscription,
     Time,
-    Timer,
     parse_ros_args,
 )
 from .qos import (
@@ -51,13 +47,14 @@ from .qos import (
     qos_profile_services_default,
     qos_profile_system_default,
 )
+from .services import Client, MalformedMessageError, Service
 
 __all__ = [
     "Context", "NotInitializedError", "get_default_context", "init", "localhost_only",
     "loopback_config", "ok", "shutdown", "try_shutdown", "Executor", "MultiThreadedExecutor",
     "SingleThreadedExecutor", "spin", "spin_once", "spin_until_future_complete", "Future",
-    "Client", "Clock", "MutuallyExclusiveCallbackGroup", "Node", "Parameter",
-    "ParameterNotDeclaredException", "Publisher", "ReentrantCallbackGroup", "Service",
+    "Client", "Clock", "MalformedMessageError", "MutuallyExclusiveCallbackGroup", "Node",
+    "Parameter", "ParameterNotDeclaredException", "Publisher", "ReentrantCallbackGroup", "Service",
     "Subscription", "Time", "Timer", "parse_ros_args", "DurabilityPolicy", "HistoryPolicy",
     "QoSProfile", "ReliabilityPolicy", "qos_profile_parameters", "qos_profile_sensor_data",
     "qos_profile_services_default", "qos_profile_system_default",

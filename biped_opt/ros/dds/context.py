@@ -5,16 +5,24 @@ participant on ``domain_id`` (else ``$ROS_DOMAIN_ID``, else 0), with participant
 ``enclave=/;`` and the ``ros_discovery_info`` writer. ``ROS_LOCALHOST_ONLY=1`` (Humble) and
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (Jazzy) select a loopback-only Cyclone configuration
 unless ``CYCLONEDDS_URI`` gives one.
+
+Shutting a context down deletes its DDS entities explicitly, children before parents: the
+nodes' readers, writers and topics, the graph writer, then the participant. At interpreter exit
+every context still open is shut down and the loopback domains are deleted, before the
+interpreter starts tearing down (an entity left to the garbage collector then can call into a
+DDS library that is itself shutting down).
 """
 
 from __future__ import annotations
 
+import atexit
 import os
 import sys
 import threading
+import weakref
 from typing import Any
 
-from cyclonedds.core import GuardCondition, Policy, Qos
+from cyclonedds.core import DDSException, GuardCondition, Policy, Qos
 from cyclonedds.domain import Domain, DomainParticipant
 from cyclonedds.pub import DataWriter
 from cyclonedds.topic import Topic
@@ -23,6 +31,7 @@ from cyclonedds.util import duration
 from biped_opt.errors import BipedOptError
 
 from . import graph
+from .entities import delete_dds
 
 __all__ = [
     "Context", "NotInitializedError", "get_default_context", "init", "shutdown", "try_shutdown",
@@ -60,6 +69,8 @@ def loopback_config() -> str:
 
 _DOMAINS: dict[int, Domain] = {}
 _DOMAIN_LOCK = threading.Lock()
+#: every context that was initialised and not yet shut down
+_OPEN: weakref.WeakSet[Context] = weakref.WeakSet()
 
 
 def _domain_id(domain_id: int | None) -> int:
@@ -92,6 +103,7 @@ class Context:
         self._guards: list[GuardCondition] = []
         self._on_shutdown: list[Any] = []
         self._graph_writer: DataWriter | None = None
+        self._graph_topic: Topic | None = None
         self.domain_id: int | None = None
         self.args: list[str] = []
 
@@ -111,12 +123,14 @@ class Context:
             self._graph_types = (gid_t, node_t, info_t)
             topic = Topic(self._participant, graph.GRAPH_TOPIC, info_t, qos=Qos(
                 Policy.DataRepresentation(use_cdrv0_representation=True)))
+            self._graph_topic = topic
             self._graph_writer = DataWriter(self._participant, topic, qos=Qos(
                 Policy.DataRepresentation(use_cdrv0_representation=True),
                 Policy.Reliability.Reliable(max_blocking_time=duration(seconds=1)),
                 Policy.Durability.TransientLocal,
                 Policy.History.KeepLast(depth=1),
             ))
+            _OPEN.add(self)
             self.publish_graph()
 
     def ok(self) -> bool:
@@ -137,15 +151,18 @@ class Context:
         for node in list(self._nodes):
             node.destroy_node()
         participant, self._participant = self._participant, None
+        _OPEN.discard(self)
         for guard in list(self._guards):
-            guard.set(True)
+            guard.set(True)  # executors waiting on this context wake up and stop
         for callback in list(self._on_shutdown):
             callback()
-        self._graph_writer = None
-        self._guards.clear()
+        writer, topic = self._graph_writer, self._graph_topic
+        self._graph_writer = self._graph_topic = None
+        guards, self._guards = list(self._guards), []
         self._global_executor = None
-        # Delete the DDS participant and, with it, every reader, writer and WaitSet below it.
-        participant.__del__()
+        # What is left below the participant (WaitSets and GuardConditions of executors that
+        # were never shut down) goes with it.
+        delete_dds(writer, topic, *guards, participant)
 
     def on_shutdown(self, callback: Any) -> None:
         self._on_shutdown.append(callback)
@@ -159,13 +176,23 @@ class Context:
 
     def new_guard(self) -> GuardCondition:
         guard = GuardCondition(self.participant)
-        self._guards.append(guard)
+        with self._lock:
+            self._guards.append(guard)
         return guard
+
+    def release_guard(self, guard: GuardCondition) -> None:
+        """Forget a guard its owner is about to delete."""
+        with self._lock:
+            if guard in self._guards:
+                self._guards.remove(guard)
 
     def wake(self) -> None:
         """Trigger every executor waiting on this context (node added, timer created...)."""
         for guard in list(self._guards):
-            guard.set(True)
+            try:
+                guard.set(True)
+            except DDSException:
+                pass  # deleted by its executor meanwhile
 
     def add_node(self, node: Any) -> None:
         with self._lock:
@@ -199,6 +226,16 @@ class Context:
 
 
 _default_context = Context()
+
+
+@atexit.register
+def _shutdown_at_exit() -> None:
+    for context in list(_OPEN):
+        context.try_shutdown()
+    with _DOMAIN_LOCK:
+        domains = list(_DOMAINS.values())
+        _DOMAINS.clear()
+    delete_dds(*domains)
 
 
 def get_default_context() -> Context:

@@ -3,21 +3,28 @@
 Each subscription, service and client contributes a ReadCondition to the executor's WaitSet; a
 GuardCondition wakes the wait when nodes, timers or futures change; timers bound the wait time.
 As in rclpy, ``spin_once`` runs at most one callback: ready work is queued and drained first.
+
+``shutdown()`` stops a spin running in another thread and waits for it to return before it
+releases anything (the thread pool, the WaitSet and its GuardCondition, deleted explicitly), so
+no callback is scheduled on a pool that is gone and no DDS entity is left to the garbage
+collector.
 """
 
 from __future__ import annotations
 
 import collections
+import contextlib
 import os
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 from cyclonedds.core import DDSException, WaitSet
 
 from . import context as _ctx
+from .entities import delete_dds
 from .futures import Future
 
 __all__ = ["Executor", "SingleThreadedExecutor", "MultiThreadedExecutor",
@@ -37,6 +44,9 @@ class Executor:
         self._guard: Any = None
         self._attached: dict[int, Any] = {}
         self._shutdown = False
+        self._local = threading.local()
+        self._spinners = 0  # threads inside spin() / spin_until_future_complete()
+        self._idle = threading.Condition(self._lock)
 
     # node set
     def add_node(self, node: Any) -> bool:
@@ -57,9 +67,31 @@ class Executor:
         return list(self._nodes)
 
     def shutdown(self, timeout_sec: float | None = None) -> bool:
+        """Stop spinning: wake a spin in another thread and wait up to ``timeout_sec`` (None:
+        for as long as it takes) until it has returned, then release the WaitSet. True when
+        nothing spins any more (rclpy's contract)."""
         self._shutdown = True
         self._wake()
-        return True
+        with self._idle:
+            stopped = self._idle.wait_for(
+                lambda: self._spinners == 0 or self._in_callback(), timeout_sec)
+        if stopped:
+            self._release_waitset()
+        return stopped
+
+    def _in_callback(self) -> bool:
+        """True when called from a thread that is spinning this executor (it cannot wait for
+        itself to return)."""
+        return getattr(self._local, "depth", 0) > 0
+
+    def _release_waitset(self) -> None:
+        with self._lock:
+            waitset, guard = self._waitset, self._guard
+            self._waitset = self._guard = self._waitset_owner = None
+            self._attached.clear()
+        if guard is not None:
+            self.context.release_guard(guard)
+        delete_dds(waitset, guard)
 
     def _wake(self) -> None:
         guard = self._guard
@@ -136,26 +168,42 @@ class Executor:
 
     # spinning
     def spin_once(self, timeout_sec: float | None = None) -> None:
-        task = self._next_task(timeout_sec)
-        if task is not None:
-            self._run(*task)
+        with self._spinning():
+            task = self._next_task(timeout_sec)
+            if task is not None:
+                self._run(*task)
 
     def _run(self, group: Any, task: Callable[[], Any]) -> None:
         task()
 
+    @contextlib.contextmanager
+    def _spinning(self) -> Iterator[None]:
+        with self._lock:
+            self._spinners += 1
+        self._local.depth = getattr(self._local, "depth", 0) + 1
+        try:
+            yield
+        finally:
+            self._local.depth -= 1
+            with self._idle:
+                self._spinners -= 1
+                self._idle.notify_all()
+
     def spin(self) -> None:
-        while self.context.ok() and not self._shutdown:
-            self.spin_once()
+        with self._spinning():
+            while self.context.ok() and not self._shutdown:
+                self.spin_once()
 
     def spin_until_future_complete(self, future: Future, timeout_sec: float | None = None
                                    ) -> None:
         future.add_done_callback(lambda _f: self._wake())
         deadline = None if timeout_sec is None else time.monotonic() + timeout_sec
-        while self.context.ok() and not future.done() and not self._shutdown:
-            remaining = None if deadline is None else deadline - time.monotonic()
-            if remaining is not None and remaining <= 0:
-                return
-            self.spin_once(remaining)
+        with self._spinning():
+            while self.context.ok() and not future.done() and not self._shutdown:
+                remaining = None if deadline is None else deadline - time.monotonic()
+                if remaining is not None and remaining <= 0:
+                    return
+                self.spin_once(remaining)
 
 
 #: longest uninterrupted wait of a main-thread executor [ns]
@@ -174,9 +222,12 @@ class MultiThreadedExecutor(Executor):
         self._pool = ThreadPoolExecutor(max_workers=num_threads or os.cpu_count() or 2)
 
     def _run(self, group: Any, task: Callable[[], Any]) -> None:
+        if self._shutdown:
+            return  # shutting down: work that was ready but not started is dropped
         lock = getattr(group, "lock", None)
 
         def call() -> None:
+            self._local.worker = True
             try:
                 if lock is None:
                     task()
@@ -189,15 +240,20 @@ class MultiThreadedExecutor(Executor):
 
     def spin_once(self, timeout_sec: float | None = None) -> None:
         # Dispatch everything that is ready, not just one callback, to keep workers busy.
-        task = self._next_task(timeout_sec)
-        while task is not None:
-            self._run(*task)
-            task = self._ready.popleft() if self._ready else None
+        with self._spinning():
+            task = self._next_task(timeout_sec)
+            while task is not None:
+                self._run(*task)
+                task = self._ready.popleft() if self._ready else None
 
     def shutdown(self, timeout_sec: float | None = None) -> bool:
-        super().shutdown(timeout_sec)
-        self._pool.shutdown(wait=True)
-        return True
+        """Stop spinning (see :meth:`Executor.shutdown`), drop queued callbacks and wait for
+        the running ones."""
+        stopped = super().shutdown(timeout_sec)
+        # a callback that shuts its own executor down cannot wait for itself to finish
+        waits = not (self._in_callback() or getattr(self._local, "worker", False))
+        self._pool.shutdown(wait=waits, cancel_futures=True)
+        return stopped
 
 
 def _executor_for(node: Any, executor: Executor | None) -> Executor:

@@ -1,0 +1,269 @@
+"""What a node owns on Cyclone DDS: publishers, subscriptions, timers, and their common base.
+
+Every entity knows the DDS entities it created and deletes them itself, children first, when it
+is destroyed (:meth:`Entity.destroy`), instead of leaving them to the garbage collector: an
+entity collected during interpreter shutdown calls into a DDS library that may be tearing down.
+Taking and destroying are serialised by a lock, so an executor never takes from a reader that is
+being deleted. Samples that do not decode are dropped with one log line (rate-limited), never
+raised out of the executor (:mod:`.wire`).
+"""
+
+from __future__ import annotations
+
+import itertools
+import threading
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+from cyclonedds.core import (
+    DDSException,
+    InstanceState,
+    Policy,
+    ReadCondition,
+    SampleState,
+    ViewState,
+)
+from cyclonedds.pub import DataWriter
+from cyclonedds.sub import DataReader
+
+from ..interfaces import load_interfaces
+from . import graph, wire
+from .qos import QoSProfile, to_dds_qos
+
+if TYPE_CHECKING:
+    from .node import Node
+
+__all__ = ["Entity", "Publisher", "Subscription", "Timer", "delete_dds", "endpoint_id",
+           "ignore_deleted", "type_hash_user_data", "user_data_id", "NOT_READ",
+           "LOG_THROTTLE_S"]
+
+#: read-condition mask of every reader: samples not yet taken, in any view or instance state
+NOT_READ = SampleState.NotRead | ViewState.Any | InstanceState.Any
+#: at most one log line per call site and this many seconds for dropped or rejected samples
+LOG_THROTTLE_S = 1.0
+
+_ID_COUNTER = itertools.count(1)
+
+
+def endpoint_id(participant: Any) -> str:
+    """Unique id for ``clientid=``/``serviceid=``, formatted as rmw_cyclonedds does.
+
+    The id is a GID (24 bytes on Humble, 16 on Jazzy): the participant's 12-byte GUID prefix, a
+    big-endian counter, zero padding; printed in hex, the first byte two digits wide and the
+    others unpadded, separated by dots.
+    """
+    size = len(graph.gid_bytes(bytes(16)))
+    data = participant.get_guid().bytes[:12] + next(_ID_COUNTER).to_bytes(4, "big")
+    data += bytes(size - len(data))
+    return f"{data[0]:02x}" + "".join(f".{b:x}" for b in data[1:])
+
+
+def type_hash_user_data(ros_type: str) -> bytes:
+    """``typehash=RIHS01_...;`` that Jazzy's rmw_cyclonedds adds to endpoint USER_DATA."""
+    if graph.graph_layout() != "jazzy":
+        return b""
+    try:
+        digest = load_interfaces().typestore.hash_rihs01(ros_type)
+    except Exception:  # a type rosbags cannot hash: omit it, as rmw does on failure
+        return b""
+    return f"typehash={digest};".encode()
+
+
+def user_data_id(qos: Any, key: str) -> str | None:
+    """The value of ``key=value;`` in an endpoint's USER_DATA, if any."""
+    try:
+        data = qos[Policy.Userdata].data
+    except (KeyError, TypeError, AttributeError):
+        return None
+    text = bytes(data).decode("ascii", "replace")
+    for item in text.split(";"):
+        k, _, v = item.partition("=")
+        if k.strip() == key:
+            return v.strip()
+    return None
+
+
+def _ros_type(msg_type: type) -> str:
+    return str(getattr(msg_type, "_ros_type", ""))
+
+
+def delete_dds(*entities: Any) -> None:
+    """Delete Cyclone DDS entities now, in the order given (children before parents).
+
+    ``Entity.__del__`` deletes the C entity once and forgets it, so a later garbage collection
+    of the Python object does nothing.
+    """
+    for entity in entities:
+        if entity is not None:
+            entity.__del__()
+
+
+class Entity:
+    """Base of everything a node owns: a read condition for the executor's WaitSet (or None),
+    ``_take`` returning the callbacks that are ready, ``_guids`` for the graph, ``destroy``."""
+
+    node: Node
+    callback_group: Any = None
+    condition: ReadCondition | None = None
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()  # serialises _take against destroy
+        self._destroyed = False
+
+    def _dds(self) -> tuple[Any, ...]:
+        """The DDS entities this one created, in deletion order."""
+        return ()
+
+    def _guids(self) -> tuple[list[bytes], list[bytes]]:
+        return [], []
+
+    def _take(self) -> list[Callable[[], None]]:
+        return []
+
+    def _take_from(self, reader_attr: str = "_reader") -> tuple[list[Any], list[wire.Malformed]]:
+        """(decoded samples, malformed ones) taken from the reader; nothing once destroyed."""
+        with self._lock:
+            reader = getattr(self, reader_attr, None)
+            if reader is None:
+                return [], []
+            return wire.take(reader)
+
+    def _log_malformed(self, sample: wire.Malformed) -> None:
+        self.node.get_logger().warning(
+            f"dropped a sample of {sample.size} bytes on {self._where()} that does not "
+            f"decode: {sample.reason}", throttle_duration_sec=LOG_THROTTLE_S)
+
+    def _where(self) -> str:
+        return type(self).__name__
+
+    @property
+    def destroyed(self) -> bool:
+        return self._destroyed
+
+    def destroy(self) -> None:
+        """Release the DDS entities (idempotent)."""
+        with self._lock:
+            if self._destroyed:
+                return
+            self._destroyed = True
+            owned = (self.condition, *self._dds())
+            self.condition = None
+            self._forget()
+        delete_dds(*owned)
+
+    def _forget(self) -> None:
+        """Drop the references to the DDS entities (under the lock)."""
+
+
+class Publisher(Entity):
+    """``rclpy.publisher.Publisher``: ``publish(msg)``, ``topic_name``."""
+
+    def __init__(self, node: Node, msg_type: type, topic: str, qos: QoSProfile) -> None:
+        super().__init__()
+        self.node, self.msg_type, self.topic_name, self.qos_profile = node, msg_type, topic, qos
+        self._writer: DataWriter | None = DataWriter(
+            node.context.participant, node._topic("rt" + topic, msg_type),
+            qos=to_dds_qos(qos, type_hash_user_data(_ros_type(msg_type)) or None))
+
+    def publish(self, msg: Any) -> None:
+        if not isinstance(msg, self.msg_type):
+            raise TypeError(f"{self.topic_name}: expected {self.msg_type.__name__}, "
+                            f"got {type(msg).__name__}")
+        writer = self._writer
+        if writer is None:
+            raise RuntimeError(f"publisher on {self.topic_name} was destroyed")
+        writer.write(msg)
+
+    def get_subscription_count(self) -> int:
+        writer = self._writer
+        return len(writer.get_matched_subscriptions()) if writer else 0
+
+    def _guids(self) -> tuple[list[bytes], list[bytes]]:
+        return [], ([self._writer.get_guid().bytes] if self._writer else [])
+
+    def _dds(self) -> tuple[Any, ...]:
+        return (self._writer,)
+
+    def _forget(self) -> None:
+        self._writer = None
+
+
+class Subscription(Entity):
+    """``rclpy.subscription.Subscription``: calls ``callback(msg)`` from an executor."""
+
+    def __init__(self, node: Node, msg_type: type, topic: str, callback: Callable[[Any], None],
+                 qos: QoSProfile, group: Any) -> None:
+        super().__init__()
+        self.node, self.msg_type, self.topic_name = node, msg_type, topic
+        self.callback, self.callback_group, self.qos_profile = callback, group, qos
+        self._reader: DataReader | None = DataReader(
+            node.context.participant, node._topic("rt" + topic, msg_type),
+            qos=to_dds_qos(qos, type_hash_user_data(_ros_type(msg_type)) or None))
+        self.condition = ReadCondition(self._reader, NOT_READ)
+
+    def _take(self) -> list[Callable[[], None]]:
+        samples, malformed = self._take_from()
+        for sample in malformed:
+            self._log_malformed(sample)
+        return [lambda s=s: self.callback(s) for s in samples]
+
+    def _where(self) -> str:
+        return f"{self.topic_name} ({self.msg_type.__name__})"
+
+    def _guids(self) -> tuple[list[bytes], list[bytes]]:
+        return ([self._reader.get_guid().bytes] if self._reader else []), []
+
+    def _dds(self) -> tuple[Any, ...]:
+        return (self._reader,)
+
+    def _forget(self) -> None:
+        self._reader = None
+
+
+class Timer(Entity):
+    """``rclpy.timer.Timer``: periodic ``callback()`` run by an executor."""
+
+    def __init__(self, node: Node, period_sec: float, callback: Callable[[], None],
+                 group: Any) -> None:
+        super().__init__()
+        if not period_sec > 0:
+            raise ValueError(f"timer_period_sec must be > 0, got {period_sec}")
+        self.node, self.callback, self.callback_group = node, callback, group
+        self.timer_period_ns = int(round(period_sec * 1e9))
+        self._next = time.monotonic_ns() + self.timer_period_ns
+        self._canceled = False
+
+    @property
+    def is_canceled(self) -> bool:
+        return self._canceled
+
+    def cancel(self) -> None:
+        self._canceled = True
+
+    def reset(self) -> None:
+        self._canceled = False
+        self._next = time.monotonic_ns() + self.timer_period_ns
+        self.node.context.wake()
+
+    def time_until_next_call(self) -> int | None:
+        return None if self._canceled or self._destroyed else self._next - time.monotonic_ns()
+
+    def _take(self) -> list[Callable[[], None]]:
+        now = time.monotonic_ns()
+        if self._canceled or self._destroyed or now < self._next:
+            return []
+        # Skip missed periods instead of bursting, like rcl timers.
+        missed = (now - self._next) // self.timer_period_ns
+        self._next += (missed + 1) * self.timer_period_ns
+        return [self.callback]
+
+
+def ignore_deleted(call: Callable[[], Any], entity: Entity) -> Any:
+    """Run ``call``; a DDS error because ``entity`` was destroyed meanwhile returns None."""
+    try:
+        return call()
+    except DDSException:
+        if entity.destroyed:
+            return None
+        raise
