@@ -12,6 +12,7 @@ __all__ = [
     "InvalidParameterError",
     "InvalidInputError",
     "SimulationError",
+    "quoted",
 ]
 
 
@@ -32,3 +33,13 @@ class InvalidInputError(BipedOptError, ValueError):
 
 class SimulationError(BipedOptError, RuntimeError):
     """A simulation could not produce the requested result (see its ``status``)."""
+
+
+def quoted(value: object, limit: int = 40) -> str:
+    """``repr(value)`` for an error message, cut to about ``limit`` characters: a message must
+    name what was wrong without echoing a megabyte that someone sent."""
+    text = repr(value)
+    if len(text) <= limit:
+        return text
+    size = f" ({len(value)} characters)" if isinstance(value, str) else ""
+    return f"{text[:limit]}...{size}"

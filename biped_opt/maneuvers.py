@@ -24,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from biped_opt._jit import HOT_PATH
-from biped_opt.errors import InvalidInputError
+from biped_opt.errors import InvalidInputError, quoted
 from biped_opt.model.biped import NSTATE
 from biped_opt.model.modes import ContactMode
 from biped_opt.model.params import BipedParams
@@ -106,7 +106,8 @@ def parse_maneuver(value: Maneuver | str) -> Maneuver:
         return Maneuver(str(value).strip().lower())
     except ValueError:
         names = ", ".join(m.value for m in Maneuver)
-        raise InvalidInputError(f"maneuver must be one of {names}; got {value!r}") from None
+        raise InvalidInputError(
+            f"maneuver must be one of {names}; got {quoted(value)}") from None
 
 
 def spec(maneuver: Maneuver | str | ManeuverSpec) -> ManeuverSpec:

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import signal
-import threading
 from pathlib import Path
 
 NODES = ("simulator", "optimiser", "recorder")
@@ -34,16 +32,20 @@ def run_node(args: argparse.Namespace) -> int:
 
 
 def run_launch(args: argparse.Namespace) -> int:
+    from biped_opt.cli.signals import stop_requested
     from biped_opt.nodes.graph import Graph
 
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    with Graph(params_file=args.params_file) as graph:
-        names = ", ".join(n.get_name() for n in (graph.simulator, graph.optimiser, graph.recorder))
-        print(f"running {names}; Ctrl-C to stop", flush=True)
+    # a signal while the graph starts abandons the start; once it runs, a signal (even one that
+    # arrives while the "running" line is printed) only ends the wait below
+    with stop_requested(interrupt=True) as stop:
         try:
-            while not stop.wait(0.2):
-                pass
+            graph = Graph(params_file=args.params_file)
         except KeyboardInterrupt:
-            pass
+            return 0
+        with graph:
+            stop.defer()
+            names = ", ".join(n.get_name() for n in (graph.simulator, graph.optimiser,
+                                                     graph.recorder))
+            print(f"running {names}; Ctrl-C to stop", flush=True)
+            stop.wait()
     return 0

@@ -21,21 +21,29 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from biped_opt.cli.signals import stop_requested
     from biped_opt.nodes.graph import Graph
     from biped_opt.nodes.recorder import SweepRequest
-    from biped_opt.nodes.run import stop_on_sigterm
 
     request = SweepRequest(maneuver=args.maneuver, theta0_min=args.theta0_min,
                            theta0_max=args.theta0_max, num=args.num, optimal=args.optimal,
                            output=args.out).validated()
-    # SIGTERM stops like Ctrl-C: the recorder finishes the file before the process exits
-    stop_on_sigterm()
-    with Graph(params_file=args.params_file,
-               overrides={"simulator": {"autostart": False}}) as graph:
-        summary = graph.recorder.record(request)
+    # Ctrl-C or SIGTERM while the graph starts abandons the start; once it records, either one
+    # stops the sweep after the current point, the file is finished and the summary printed
+    with stop_requested(interrupt=True) as stop:
+        try:
+            graph = Graph(params_file=args.params_file,
+                          overrides={"simulator": {"autostart": False}})
+        except KeyboardInterrupt:
+            return 0
+        with graph:
+            stop.defer(graph.recorder.stop)
+            summary = graph.recorder.record(request)
     print(summary.path)
     for topic, count in summary.counts.items():
         print(f"  {topic:22s} {count:8d} messages")
+    if summary.stopped:
+        print(f"  stopped by a signal after {summary.recorded} of {summary.points} angles")
     if summary.failed:
-        print(f"  {summary.failed} of {summary.points} sweep points did not reach their end")
+        print(f"  {summary.failed} of {summary.recorded} sweep points did not reach their end")
     return 0 if not summary.failed else 1

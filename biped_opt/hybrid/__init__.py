@@ -7,6 +7,7 @@ reset guards disarmed, inconsistent contacts and exhausted budgets reported by s
 from biped_opt.hybrid.simulate import (
     BatchResult,
     SimulatorOptions,
+    kernels_cached,
     simulate,
     simulate_batch,
     warm_up,
@@ -20,6 +21,7 @@ __all__ = [
     "SimulatorOptions",
     "Status",
     "Trajectory",
+    "kernels_cached",
     "simulate",
     "simulate_batch",
     "warm_up",

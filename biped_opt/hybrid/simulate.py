@@ -26,6 +26,7 @@ from biped_opt.model.params import BipedParams
 
 __all__ = [
     "SimulatorOptions", "BatchResult", "simulate", "simulate_batch", "check_inputs", "warm_up",
+    "kernels_cached",
 ]
 
 Array = npt.NDArray[np.float64]
@@ -259,6 +260,22 @@ def simulate_batch(
         event_rows=events,
         nfev=info[:, 5].astype(np.int64),
     )
+
+
+def kernels_cached() -> bool:
+    """True when Numba's on-disk cache holds the simulator's kernels for the current sources
+    (a start then loads them in about a second instead of compiling for 30-60 s)."""
+    from biped_opt.hybrid import _kernel
+
+    for kernel in (_kernel.simulate_maneuver, _kernel.simulate_batch_kernel):
+        if kernel.signatures:
+            continue  # compiled (or loaded) in this process already
+        try:
+            if not kernel._cache._cache_file._load_index():
+                return False
+        except (AttributeError, OSError):  # another Numba layout: assume the worst
+            return False
+    return True
 
 
 def warm_up() -> float:

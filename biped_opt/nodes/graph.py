@@ -21,6 +21,9 @@ from biped_opt.ros.params_file import default_parameters_file, load_parameters
 
 __all__ = ["Graph"]
 
+#: longest wait for the executor thread to return (a callback still running) [s]
+_STOP_TIMEOUT_S = 30.0
+
 
 def _overrides(values: Mapping[str, Any]) -> list[Any]:
     return [ros.Parameter(name, value=value) for name, value in values.items()]
@@ -67,17 +70,18 @@ class Graph:
     def _spin(self) -> None:
         try:
             self.executor.spin()
-        except Exception as exc:  # a shutdown race ends the thread; report anything else
-            if ros.ok(context=self.context):
-                self.simulator.get_logger().error(f"executor stopped: {exc}")
+        except Exception as exc:  # a callback's error ends the spin: say so
+            self.simulator.get_logger().error(f"executor stopped: {exc!r}")
 
     def close(self) -> None:
+        """Finish any recording, stop the executor (its thread returns before anything is
+        destroyed), destroy the nodes, shut the context down."""
         self.recorder.close()
-        self.executor.shutdown()
+        self.executor.shutdown(timeout_sec=_STOP_TIMEOUT_S)
+        self._thread.join(_STOP_TIMEOUT_S)
         for node in (self.recorder, self.optimiser, self.simulator):
             node.destroy_node()
         ros.try_shutdown(context=self.context)
-        self._thread.join(timeout=10.0)
 
     def __enter__(self) -> Graph:
         return self

@@ -35,7 +35,7 @@ from biped_opt.errors import InvalidInputError, SimulationError
 from biped_opt.fixed_sweep import FIXED_INPUTS, theta_grid
 from biped_opt.maneuvers import spec
 from biped_opt.nodes import convert
-from biped_opt.nodes.run import run_node
+from biped_opt.nodes.run import announce_ready, run_node
 from biped_opt.optimal import OptimalControlProblem, get_problem
 from biped_opt.record import SweepWriter
 
@@ -69,9 +69,15 @@ class SweepRequest:
 @dataclass(frozen=True)
 class SweepSummary:
     path: Path
-    points: int
+    points: int  #: angles in the sweep's grid
     failed: int
     counts: dict[str, int]
+    #: angles recorded: ``points`` unless :meth:`RecorderNode.stop` ended the sweep early
+    recorded: int = 0
+
+    @property
+    def stopped(self) -> bool:
+        return self.recorded < self.points
 
 
 class RecorderNode(ros.Node):
@@ -100,6 +106,8 @@ class RecorderNode(ros.Node):
         self.finished = threading.Event()
         self.last_summary: SweepSummary | None = None
         self.error: BaseException | None = None
+        announce_ready(self, calls=("/biped/optimal_policy", "/biped/simulate"),
+                       publishes=("/biped/sweep",))
         if self.get_parameter("autostart").value:
             threading.Thread(target=self._record_from_parameters, daemon=True).start()
 
@@ -128,20 +136,21 @@ class RecorderNode(ros.Node):
 
     # -- service calls from a worker thread ------------------------------------------------
     def _call(self, client: Any, request: Any) -> Any:
-        """Call and wait; a request left unanswered for ``service_timeout`` is sent once more
-        (both services are idempotent), then the sweep fails with a clear error."""
+        """Call and wait up to ``service_timeout``; no answer fails the sweep with a clear error.
+
+        A request is sent once: requests and replies travel on reliable DDS and neither side's
+        reader drops one (:mod:`biped_opt.ros.dds.services`), so a missing reply means the
+        server is gone or stuck, which a second request would not mend."""
         timeout = float(self.get_parameter("service_timeout").value)
         if not client.wait_for_service(timeout_sec=timeout):
             raise SimulationError(f"service {client.srv_name} is not available")
-        for attempt in range(2):
-            done = threading.Event()
-            future = client.call_async(request)
-            future.add_done_callback(lambda _f, done=done: done.set())
-            if done.wait(timeout):
-                return future.result()
-            self.get_logger().warning(
-                f"no reply from {client.srv_name} within {timeout} s (attempt {attempt + 1})")
-        raise SimulationError(f"no reply from {client.srv_name} to two requests")
+        done = threading.Event()
+        future = client.call_async(request)
+        future.add_done_callback(lambda _f: done.set())
+        if not done.wait(timeout):
+            client.remove_pending_request(future)
+            raise SimulationError(f"no reply from {client.srv_name} within {timeout} s")
+        return future.result()
 
     # -- the sweep --------------------------------------------------------------------------
     def record(self, req: SweepRequest) -> SweepSummary:
@@ -165,6 +174,7 @@ class RecorderNode(ros.Node):
             self._writer = writer
         failed = 0
         offset = 0
+        recorded = 0
         try:
             for k, th in enumerate(grid):
                 if self._stop.is_set():
@@ -172,6 +182,7 @@ class RecorderNode(ros.Node):
                 ok, t_final = self._record_point(writer, maneuver, float(th), req.optimal,
                                                  fixed, problem, offset)
                 failed += not ok
+                recorded += 1
                 offset += int(round((t_final + GAP) * convert.NS))
                 self.get_logger().debug(f"{maneuver} {k + 1}/{grid.size} th0 = {th:+.4f}")
         finally:
@@ -179,9 +190,9 @@ class RecorderNode(ros.Node):
             with self._writer_lock:
                 self._writer = None
         summary = SweepSummary(path=req.output, points=grid.size, failed=failed,
-                               counts=dict(writer.counts))
+                               counts=dict(writer.counts), recorded=recorded)
         self.get_logger().info(
-            f"recorded {grid.size} {maneuver} points to {req.output}: "
+            f"recorded {recorded} of {grid.size} {maneuver} points to {req.output}: "
             + ", ".join(f"{topic} {n}" for topic, n in summary.counts.items()))
         self.last_summary = summary
         return summary
@@ -234,6 +245,11 @@ class RecorderNode(ros.Node):
             setattr(msg, name, point[name])
         self._sweep_pub.publish(msg)
         return bool(reply.success), float(reply.t_final)
+
+    def stop(self) -> None:
+        """Let a running :meth:`record` return after the point it is recording (safe to call
+        from a signal handler: it only sets a flag; the recording thread finishes the file)."""
+        self._stop.set()
 
     def close(self) -> None:
         """Stop after the current point and finish any open file."""

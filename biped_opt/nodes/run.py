@@ -1,16 +1,26 @@
-"""The ``main`` of every node: init, spin until Ctrl-C or SIGTERM, clean up (rclpy's form); and
-the kernels' warm-up the simulating nodes do before they serve."""
+"""The ``main`` of every node: init, spin until Ctrl-C or SIGTERM, clean up (rclpy's form); the
+kernels' warm-up the simulating nodes do before they serve, and the one "ready" line each node
+logs once it serves."""
 
 from __future__ import annotations
 
 import signal
+import sys
 from collections.abc import Callable
 from typing import Any
 
 from biped_opt import ros
-from biped_opt.hybrid import warm_up
+from biped_opt.errors import BipedOptError
+from biped_opt.hybrid import kernels_cached, warm_up
 
-__all__ = ["run_node", "stop_on_sigterm", "warm_up_kernels"]
+__all__ = ["LOG_THROTTLE_S", "announce_ready", "refuse", "run_node", "stop_on_sigterm",
+           "warm_up_kernels"]
+
+#: at most one log line per call site and this many seconds for rejected requests
+LOG_THROTTLE_S = 1.0
+
+#: what a first compile takes on a 2-core machine [s] (measured 27-63 s)
+FIRST_COMPILE_S = (30, 60)
 
 
 def stop_on_sigterm() -> None:
@@ -22,7 +32,13 @@ def stop_on_sigterm() -> None:
 def warm_up_kernels(node: Any) -> None:
     """Compile (or load) the simulator's kernels before ``node`` offers its services: in a fresh
     checkout that takes ~30 s, which a client's first request would otherwise wait out (and a
-    30 s service timeout would not). Logged when it took noticeably long."""
+    30 s service timeout would not). A first compile says so before it starts, and how long
+    it took once done."""
+    if not kernels_cached():
+        low, high = FIRST_COMPILE_S
+        node.get_logger().info(
+            f"compiling the simulator's kernels (first start in this checkout): about "
+            f"{low}-{high} s on 2 cores; later starts load them in about a second")
     seconds = warm_up()
     if seconds > 1.0:
         node.get_logger().info(
@@ -30,12 +46,49 @@ def warm_up_kernels(node: Any) -> None:
         )
 
 
+def announce_ready(node: Any, *, serves: tuple[str, ...] = (), calls: tuple[str, ...] = (),
+                   publishes: tuple[str, ...] = ()) -> None:
+    """The node's one "ready" line: what it serves, calls and publishes (what a launch file or
+    a test waits for)."""
+    parts = [f"{verb} {', '.join(names)}" for verb, names in (
+        ("serving", serves), ("calling", calls), ("publishing", publishes)) if names]
+    node.get_logger().info("ready: " + "; ".join(parts))
+
+
+def refuse(node: Any, service: str, response: Any, exc: Exception) -> Any:
+    """``response`` as a refusal: ``success = false`` and why. A :class:`BipedOptError` is a bad
+    request (its message names the field); anything else is a bug that must cost one request,
+    not the node (``internal error: ...``). Logged, one line a second at most."""
+    if isinstance(exc, BipedOptError):
+        node.get_logger().warning(f"rejected {service} request: {exc}",
+                                  throttle_duration_sec=LOG_THROTTLE_S)
+        message = str(exc)
+    else:
+        node.get_logger().error(f"{service} request failed: {type(exc).__name__}: {exc}",
+                                throttle_duration_sec=LOG_THROTTLE_S)
+        message = f"internal error: {type(exc).__name__}: {exc}"
+    response.success, response.message = False, message
+    return response
+
+
 def run_node(make_node: Callable[[], Any], args: list[str] | None, *, threads: int = 1) -> None:
     """Create the node after ``ros.init(args)`` and spin it (``threads`` > 1: a multi-threaded
-    executor, for nodes whose callbacks wait on each other or serve concurrent clients)."""
+    executor, for nodes whose callbacks wait on each other or serve concurrent clients).
+
+    Ctrl-C or SIGTERM, also during the warm-up, ends it with status 0; a bad parameter ends it
+    with one line on stderr and status 2, as a bad command-line argument would."""
     stop_on_sigterm()
     ros.init(args=args)
-    node = make_node()
+    try:
+        node = make_node()
+    except BipedOptError as exc:
+        ros.try_shutdown()
+        name = getattr(make_node, "__name__", "node").removesuffix("Node").lower()
+        print(f"{name}: error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
+    except KeyboardInterrupt:
+        ros.try_shutdown()
+        return
     executor = (ros.MultiThreadedExecutor(num_threads=threads) if threads > 1
                 else ros.SingleThreadedExecutor())
     executor.add_node(node)

@@ -25,7 +25,7 @@ from biped_opt.errors import BipedOptError, InvalidInputError
 from biped_opt.hybrid import simulate
 from biped_opt.hybrid.trajectory import Trajectory
 from biped_opt.nodes import convert
-from biped_opt.nodes.run import run_node, warm_up_kernels
+from biped_opt.nodes.run import announce_ready, refuse, run_node, warm_up_kernels
 
 __all__ = ["SimulatorNode", "main", "CONTACT_MODE_QOS"]
 
@@ -54,8 +54,6 @@ class SimulatorNode(ros.Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("simulator", **kwargs)
         self.declare_parameter("warm_up", True)
-        if self.get_parameter("warm_up").value:
-            warm_up_kernels(self)
         self.declare_parameter("maneuver", "touchdown")
         self.declare_parameter("theta0", 0.1)
         self.declare_parameter("inputs", [2.0, 0.5, 0.0])
@@ -63,6 +61,8 @@ class SimulatorNode(ros.Node):
         self.declare_parameter("real_time_factor", 1.0)
         self.declare_parameter("loop", False)
         self.declare_parameter("autostart", True)
+        if self.get_parameter("warm_up").value:
+            warm_up_kernels(self)
         self._state_pub = self.create_publisher(
             ros.msgs.BipedState, "/biped/state", ros.qos_profile_sensor_data
         )
@@ -75,6 +75,8 @@ class SimulatorNode(ros.Node):
         self._lock = threading.Lock()
         self._playback: _Playback | None = None
         self._timer = self.create_timer(0.005, self._on_tick)
+        announce_ready(self, serves=("/biped/simulate",),
+                       publishes=("/biped/state", "/biped/contact_mode"))
         if self.get_parameter("autostart").value:
             try:
                 self.start(
@@ -143,11 +145,8 @@ class SimulatorNode(ros.Node):
         try:
             tr = self.start(request.maneuver, request.theta0, request.inputs,
                             request.real_time_factor)
-        except BipedOptError as exc:
-            self.get_logger().warning(f"rejected /biped/simulate request: {exc}")
-            response.success = False
-            response.message = str(exc)
-            return response
+        except Exception as exc:  # bad request, or a bug: one refused request either way
+            return refuse(self, "/biped/simulate", response, exc)
         response.success = tr.success
         response.message = tr.message
         response.outcome = tr.outcome

@@ -7,6 +7,7 @@ import contextlib
 import math
 import os
 import signal
+import struct
 import subprocess
 import sys
 import threading
@@ -14,6 +15,7 @@ import time
 
 import numpy as np
 import pytest
+from cyclonedds._clayer import ddspy_write
 
 from biped_opt import ros
 from biped_opt.fixed_sweep import theta_grid
@@ -58,8 +60,11 @@ def call(node, srv, name, timeout=30.0, **fields):
 
 def test_state_stream_has_the_modes_and_exact_event_stamps(graph, probe):
     states, modes = [], []
+    # best effort as the publisher offers, but deep: the test is about stamps and order, and a
+    # 5-deep reader drops samples whenever the loaded executor takes a burst late
     probe.create_subscription(ros.msgs.BipedState, "/biped/state", states.append,
-                              ros.qos_profile_sensor_data)
+                              ros.QoSProfile(depth=1000,
+                                             reliability=ros.ReliabilityPolicy.BEST_EFFORT))
     probe.create_subscription(ros.msgs.ContactMode, "/biped/contact_mode", modes.append,
                               ros.QoSProfile(depth=10, reliability=ros.ReliabilityPolicy.RELIABLE,
                                              durability=ros.DurabilityPolicy.TRANSIENT_LOCAL))
@@ -86,7 +91,7 @@ def test_state_stream_has_the_modes_and_exact_event_stamps(graph, probe):
     seen = [s.contact_mode for s in states]
     assert [k for i, k in enumerate(seen) if i == 0 or seen[i - 1] != k] == [0, 1, 3]
     # loopback in one process at 2x real time: a best-effort stream still delivers (nearly) all
-    assert len(states) >= 0.95 * len(tr.samples)
+    assert len(states) >= 0.99 * len(tr.samples)
 
 
 def test_optimiser_replies_equal_the_core(graph, probe):
@@ -125,12 +130,52 @@ def test_bad_requests_are_refused_and_the_node_keeps_serving(graph, probe, maneu
     assert not bad_sim.success and bad_sim.message.startswith("inputs:")
 
 
-def test_eight_concurrent_clients_get_their_own_replies(graph, probe):
-    """8 clients x 100 calls in flight together; every reply must belong to its request.
+def _not_utf8_request(client, maneuver: bytes, theta0: float):
+    """A request whose maneuver is not UTF-8, written raw behind ``client``'s header (what a
+    broken or hostile peer can send); the reply comes to ``client``'s future."""
+    future = ros.Future()
+    with client._pending_lock:
+        seq = next(client._seq)
+        client._pending[seq] = future
+    text = struct.pack("<I", len(maneuver) + 1) + maneuver + b"\x00"
+    text += bytes(-len(text) % 8)
+    data = b"\x00\x01\x00\x00" + struct.pack("<Qq", client.guid, seq) + text
+    data += struct.pack("<d", theta0) + bytes(24)  # Simulate: empty inputs, real_time_factor 0
+    assert ddspy_write(client._writer._ref, data) >= 0
+    return future
 
-    A request whose reply has not come within 5 s is sent again (what a ROS client does with an
-    idempotent service); on a loaded machine this was seen once in several hundred calls, so
-    more than 2 re-sends out of 800 fail the test, and so does any reply to another request."""
+
+@pytest.mark.skipif(ros.BACKEND != "dds", reason="raw bytes are written through Cyclone")
+@pytest.mark.parametrize(("service", "srv"), [("/biped/optimal_policy", "OptimalPolicy"),
+                                               ("/biped/simulate", "Simulate")])
+def test_no_request_can_take_a_node_down(graph, probe, capfd, service, srv):
+    """Undecodable bytes, a megabyte-long maneuver name, absurd numbers: each is refused with a
+    short message naming the field, the node logs a line and answers the next request."""
+    srv_type = getattr(ros.srvs, srv)
+    client = probe.create_client(srv_type, service)
+    assert client.wait_for_service(timeout_sec=10.0)
+    future = _not_utf8_request(client, b"touch\xffdown", 0.1)
+    done = threading.Event()
+    future.add_done_callback(lambda _f: done.set())
+    assert done.wait(30.0)
+    assert not future.result().success
+    assert future.result().message.startswith("malformed request: UnicodeDecodeError")
+    huge = "x" * 1_000_000
+    reply = call(probe, srv_type, service, maneuver=huge, theta0=0.1)
+    assert not reply.success and reply.message.startswith("maneuver:")
+    assert len(reply.message) < 200 and "(1000000 characters)" in reply.message
+    for theta0 in (math.nan, -math.inf, 1e308, 5.0):
+        reply = call(probe, srv_type, service, maneuver="touchdown", theta0=theta0)
+        assert not reply.success and reply.message.startswith("theta0:")
+    reply = call(probe, srv_type, service, maneuver="touchdown", theta0=-1e-6)
+    assert reply.success
+    err = capfd.readouterr().err
+    assert "Traceback" not in err and "x" * 100 not in err
+
+
+def test_eight_concurrent_clients_get_their_own_replies(graph, probe):
+    """8 clients x 100 calls in flight together: every call is answered, once, with the answer
+    to its own request. No request is ever sent twice: a reply not there within 30 s is lost."""
     angles = np.linspace(-0.2, 0.2, 9)
     expected = {}
     for th in angles:  # fill the cache, and know each angle's answer
@@ -138,7 +183,6 @@ def test_eight_concurrent_clients_get_their_own_replies(graph, probe):
                  theta0=float(th))
         expected[float(th)] = (r.value, tuple(np.asarray(r.policy)))
     errors: list[str] = []
-    resent: list[str] = []
 
     def client_loop(k: int) -> None:
         client = probe.create_client(ros.srvs.OptimalPolicy, "/biped/optimal_policy")
@@ -147,27 +191,24 @@ def test_eight_concurrent_clients_get_their_own_replies(graph, probe):
             th = float(angles[(k + i) % len(angles)])
             request = ros.srvs.OptimalPolicy.Request()
             request.maneuver, request.theta0 = "touchdown", th
-            for _attempt in range(2):
-                done = threading.Event()
-                future = client.call_async(request)
-                future.add_done_callback(lambda _f, done=done: done.set())
-                if done.wait(5.0):
-                    break
-                resent.append(f"client {k} call {i}")
-            else:
-                errors.append(f"client {k} call {i}: no reply to two requests")
+            done = threading.Event()
+            future = client.call_async(request)
+            future.add_done_callback(lambda _f, done=done: done.set())
+            if not done.wait(30.0):
+                errors.append(f"client {k} call {i}: no reply within 30 s")
                 return
             r = future.result()
             if (r.value, tuple(np.asarray(r.policy))) != expected[th]:
                 errors.append(f"client {k} call {i}: reply for another request")
+        if client.duplicate_replies:
+            errors.append(f"client {k}: {client.duplicate_replies} duplicate replies")
 
     threads = [threading.Thread(target=client_loop, args=(k,)) for k in range(8)]
     for t in threads:
         t.start()
     for t in threads:
-        t.join(120.0)
+        t.join(300.0)
     assert errors == []
-    assert len(resent) <= 2, resent
 
 
 def test_recorder_records_every_sample_through_the_graph(graph, tmp_path):
@@ -216,12 +257,15 @@ def _outside_probe(domain_id):
         ros.try_shutdown(context=ctx)
 
 
-def _stop(proc, sig):
-    """Send ``sig``; the node must exit 0 without a traceback."""
+def _stop(proc, sig, ready):
+    """Send ``sig``; the node must exit 0 promptly, having logged one ``ready`` line and no
+    warning, error or traceback."""
     proc.send_signal(sig)
     _out, err = proc.communicate(timeout=30)
     assert proc.returncode == 0, err
-    assert "Traceback" not in err
+    assert "Traceback" not in err and "[ERROR]" not in err and "[WARN]" not in err, err
+    assert [line.split("]: ", 1)[1] for line in err.splitlines() if "]: ready" in line] \
+        == [ready], err
 
 
 def test_node_in_a_subprocess_exits_cleanly_on_sigint(domain_id):
@@ -238,7 +282,7 @@ def test_node_in_a_subprocess_exits_cleanly_on_sigint(domain_id):
         # the parameter given on the command line reached the node
         expected = optimal_policy(get_problem("touchdown", theta_star=-0.05), 0.05)
         assert reply.success and reply.value == expected.value
-        _stop(proc, signal.SIGINT)
+        _stop(proc, signal.SIGINT, "ready: serving /biped/optimal_policy")
     finally:
         proc.kill()
 
@@ -257,6 +301,7 @@ def test_simulator_in_a_subprocess_exits_cleanly_on_sigterm(domain_id):
             while not modes and time.monotonic() < deadline:
                 executor.spin_once(timeout_sec=0.1)
             assert modes, "the simulator never published its contact mode"
-        _stop(proc, signal.SIGTERM)
+        _stop(proc, signal.SIGTERM,
+              "ready: serving /biped/simulate; publishing /biped/state, /biped/contact_mode")
     finally:
         proc.kill()

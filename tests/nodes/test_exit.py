@@ -1,0 +1,101 @@
+"""Commands end promptly and quietly: ``biped-opt record`` run 30 times, ``biped-opt launch``
+stopped by SIGINT and SIGTERM.
+
+A run that takes more than 20 s (a recording of 2 angles takes ~2-3 s) counts as a hang; any
+warning, error or traceback on stderr fails the run: a clean exit says nothing about itself.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import pytest
+
+from tests.conftest import unique_domain_id
+
+RUNS = 30
+HANG_S = 20.0
+NOISE = ("Traceback", "[ERROR]", "[WARN]", "Exception", "error:")
+
+
+def _env(domain_id: int) -> dict[str, str]:
+    return {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "PYTHONUNBUFFERED": "1"}
+
+
+def _record(index: int, tmp_path) -> str | None:
+    """One ``record`` in a fresh process; None when clean, else what went wrong."""
+    out = tmp_path / f"r{index}.mcap"
+    cmd = [sys.executable, "-m", "biped_opt.cli.main", "record", "--maneuver", "touchdown",
+           "--theta0-min", "-0.05", "--theta0-max", "0.05", "--num", "2", "--out", str(out)]
+    start = time.monotonic()
+    try:
+        proc = subprocess.run(cmd, env=_env(unique_domain_id()), capture_output=True, text=True,
+                              timeout=HANG_S)
+    except subprocess.TimeoutExpired:
+        return f"run {index}: no exit within {HANG_S} s"
+    noisy = [line for line in proc.stderr.splitlines() if any(n in line for n in NOISE)]
+    if proc.returncode != 0 or noisy or str(out) not in proc.stdout:
+        return (f"run {index}: status {proc.returncode} after {time.monotonic() - start:.1f} s,"
+                f" stderr {noisy or proc.stderr[-300:]!r}")
+    return None
+
+
+def test_record_exits_cleanly_every_time(tmp_path):
+    # two at a time: the machine has two cores, and shutdown races show up under load
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        problems = [p for p in pool.map(lambda i: _record(i, tmp_path), range(RUNS)) if p]
+    assert problems == []
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_launch_stops_cleanly_on_a_signal(sig):
+    proc = subprocess.Popen([sys.executable, "-m", "biped_opt.cli.main", "launch"],
+                            env=_env(unique_domain_id()), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()  # printed once the three nodes serve
+        assert line.startswith("running simulator, optimiser, recorder"), line
+        proc.send_signal(sig)
+        _out, err = proc.communicate(timeout=HANG_S)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert not [line for line in err.splitlines() if any(n in line for n in NOISE)], err
+    assert sum("]: ready: " in line for line in err.splitlines()) == 3, err
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_record_stops_after_the_current_point_on_a_signal(sig, tmp_path):
+    """A signal in the middle of a sweep: the point being recorded completes, the file is
+    finished (read back by the indexed reader, not recovery), the summary says how far it got
+    and the status is 0."""
+    from biped_opt.record.reader import read_recording
+
+    out = tmp_path / "stopped.mcap"
+    cmd = [sys.executable, "-m", "biped_opt.cli.main", "record", "--maneuver", "touchdown",
+           "--theta0-min", "-0.2", "--theta0-max", "0.2", "--num", "4000", "--out", str(out)]
+    proc = subprocess.Popen(cmd, env=_env(unique_domain_id()), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stderr is not None
+        for line in proc.stderr:  # the recorder's ready line: the sweep starts right after it
+            if "[recorder]: ready: " in line:
+                break
+        time.sleep(1.0)  # a few dozen of the ~4000 angles
+        proc.send_signal(sig)
+        out_text, err = proc.communicate(timeout=HANG_S)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert not [line for line in err.splitlines() if any(n in line for n in NOISE)], err
+    assert "stopped by a signal after" in out_text, out_text
+    recording = read_recording(out)
+    assert recording.complete
+    points = len(recording.sweep_points())
+    assert 0 < points < 4000 and f"after {points} of " in out_text
