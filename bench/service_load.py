@@ -1,0 +1,219 @@
+"""Reliability of the optimiser service under concurrent load.
+
+Starts one optimiser node in its own process, then N client processes that each make M calls of
+``/biped/optimal_policy`` one after another, every call with an angle no other call uses (so no
+reply comes from the node's cache and every request costs a real optimisation). Prints
+
+- sent, answered, lost (no reply within ``--timeout``), late (answered after it), duplicated
+  (a second reply to one request) and misrouted (a reply whose numbers are not those of its
+  request: every answered call is checked afterwards against ``optimal_policy`` run in this
+  process, which is deterministic, so they must agree to the last bit);
+- p50/p99 latency of the answered calls;
+- the node's resident memory (VmRSS) after its start-up and after the load.
+
+    python bench/service_load.py [--clients 8] [--calls 200] [--runs 1] [--cache-size N] [--json]
+
+The node runs on whichever backend ``biped_opt.ros`` selects; discovery is loopback only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("ROS_LOCALHOST_ONLY", "1")
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+
+#: touchdown angles are drawn from this interval (inside the maneuver's |th0| <= 0.25)
+SPAN = 0.24
+
+
+def angles(client: int, clients: int, calls: int) -> list[float]:
+    """Angles of one client: a slice of one grid of clients * calls distinct values."""
+    grid = np.linspace(-SPAN, SPAN, clients * calls)
+    return [float(v) for v in grid[client::clients]]
+
+
+def rss_kib(pid: int) -> int:
+    """Resident set size of a process [KiB] (Linux /proc)."""
+    with open(f"/proc/{pid}/status", encoding="ascii") as fh:
+        for line in fh:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1])
+    raise RuntimeError(f"no VmRSS for process {pid}")
+
+
+# -- one client process --------------------------------------------------------------------------
+
+def optimiser_client(name: str) -> tuple[Any, Any, Any]:
+    """(node, client of /biped/optimal_policy, executor spinning in a thread) in the default
+    context, once the service is there; ``close_client`` ends them."""
+    from biped_opt import ros
+
+    ros.init(args=[])
+    node = ros.Node(name)
+    cli = node.create_client(ros.srvs.OptimalPolicy, "/biped/optimal_policy")
+    executor = ros.SingleThreadedExecutor()
+    executor.add_node(node)
+    threading.Thread(target=executor.spin, daemon=True).start()
+    if not cli.wait_for_service(timeout_sec=60.0):
+        raise SystemExit(f"{name}: /biped/optimal_policy did not appear")
+    return node, cli, executor
+
+
+def close_client(node: Any, executor: Any) -> None:
+    from biped_opt import ros
+
+    executor.shutdown()
+    node.destroy_node()
+    ros.try_shutdown()
+
+
+def client_main(index: int, clients: int, calls: int, timeout: float) -> None:
+    """Make the calls of client ``index``; print one JSON line with every outcome."""
+    from biped_opt import ros
+
+    node, cli, executor = optimiser_client(f"load_client_{index}")
+    results = []
+    late: list[float] = []
+    for th in angles(index, clients, calls):
+        done = threading.Event()
+        t0 = time.perf_counter()
+        future = cli.call_async(ros.srvs.OptimalPolicy.Request(maneuver="touchdown", theta0=th))
+        future.add_done_callback(lambda _f, done=done: done.set())
+        if not done.wait(timeout):
+            results.append({"theta0": th, "answered": False})
+            future.add_done_callback(lambda _f, th=th: late.append(th))
+            continue
+        reply = future.result()
+        results.append({
+            "theta0": th, "answered": True, "latency_ms": (time.perf_counter() - t0) * 1e3,
+            "success": bool(reply.success), "value": float(reply.value),
+            "policy": [float(v) for v in np.asarray(reply.policy)],
+        })
+    time.sleep(0.5)  # a reply still on its way counts as late, not lost
+    duplicates = int(getattr(cli, "duplicate_replies", 0))
+    print(json.dumps({"client": index, "results": results, "late": late,
+                      "duplicates": duplicates}), flush=True)
+    close_client(node, executor)
+
+
+# -- the node and the run ------------------------------------------------------------------------
+
+def start_node(domain_id: int, cache_size: int | None) -> subprocess.Popen:
+    """The optimiser in a process of its own, once it logged its ready line; what it logs
+    goes on being collected in ``proc.log_lines``."""
+    args = [sys.executable, "-m", "biped_opt.cli.main", "node", "optimiser", "--ros-args"]
+    if cache_size is not None:
+        args += ["-p", f"cache_size:={cache_size}"]
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(args, env=env, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300.0
+    assert proc.stderr is not None
+    while time.monotonic() < deadline:
+        line = proc.stderr.readline()
+        if not line:
+            raise RuntimeError(f"the optimiser exited with status {proc.wait()}")
+        if "ready" in line:
+            lines = [line]
+            proc.log_lines = lines  # type: ignore[attr-defined]
+            threading.Thread(target=lines.extend, args=(proc.stderr,), daemon=True).start()
+            return proc
+    proc.kill()
+    raise RuntimeError("the optimiser did not report ready within 300 s")
+
+
+def run_once(args: argparse.Namespace, domain_id: int) -> dict:
+    node = start_node(domain_id, args.cache_size)
+    try:
+        rss_before = rss_kib(node.pid)
+        env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "PYTHONPATH": str(ROOT)}
+        t0 = time.perf_counter()
+        procs = [subprocess.Popen(
+            [sys.executable, __file__, "--client", str(k), "--clients", str(args.clients),
+             "--calls", str(args.calls), "--timeout", str(args.timeout)],
+            env=env, stdout=subprocess.PIPE, text=True) for k in range(args.clients)]
+        outputs = [json.loads(p.communicate()[0].strip().splitlines()[-1]) for p in procs]
+        wall = time.perf_counter() - t0
+        rss_after = rss_kib(node.pid)
+    finally:
+        node.terminate()
+        node.wait(30)
+    return summarise(outputs, wall, rss_before, rss_after, args)
+
+
+def summarise(outputs: list[dict], wall: float, rss_before: int, rss_after: int,
+              args: argparse.Namespace) -> dict:
+    from biped_opt.optimal import get_problem, optimal_policy
+
+    problem = get_problem("touchdown")
+    rows = [r for out in outputs for r in out["results"]]
+    answered = [r for r in rows if r["answered"]]
+    misrouted = 0
+    if args.verify:
+        for r in answered:
+            expected = optimal_policy(problem, r["theta0"])
+            if (r["value"] != float(expected.value)
+                    or r["policy"] != [float(v) for v in expected.x]):
+                misrouted += 1
+    latency = np.array([r["latency_ms"] for r in answered]) if answered else np.zeros(1)
+    return {
+        "clients": args.clients, "calls_per_client": args.calls, "sent": len(rows),
+        "answered": len(answered), "lost": len(rows) - len(answered),
+        "late": sum(len(out["late"]) for out in outputs),
+        "duplicated": sum(out["duplicates"] for out in outputs),
+        "misrouted": misrouted if args.verify else None,
+        "failed_replies": sum(not r["success"] for r in answered),
+        "p50_ms": float(np.percentile(latency, 50)), "p99_ms": float(np.percentile(latency, 99)),
+        "wall_s": wall, "calls_per_s": len(answered) / wall,
+        "node_rss_kib_before": rss_before, "node_rss_kib_after": rss_after,
+    }
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--clients", type=int, default=8)
+    parser.add_argument("--calls", type=int, default=200, help="calls per client")
+    parser.add_argument("--timeout", type=float, default=30.0, help="per call [s]")
+    parser.add_argument("--runs", type=int, default=1)
+    parser.add_argument("--cache-size", type=int, default=None,
+                        help="the optimiser's cache_size parameter (default: the node's)")
+    parser.add_argument("--no-verify", dest="verify", action="store_false",
+                        help="skip the misrouting check (recomputing every answer)")
+    parser.add_argument("--domain-id", type=int, default=1 + os.getpid() % 200)
+    parser.add_argument("--json", action="store_true")
+    parser.add_argument("--client", type=int, default=None, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.client is not None:
+        client_main(args.client, args.clients, args.calls, args.timeout)
+        return 0
+    summaries = []
+    for run in range(args.runs):
+        summary = run_once(args, args.domain_id)
+        summaries.append(summary)
+        if args.json:
+            print(json.dumps(summary), flush=True)
+        else:
+            print(f"run {run + 1}: {summary['clients']} clients x {summary['calls_per_client']} "
+                  f"calls: sent {summary['sent']}, answered {summary['answered']}, lost "
+                  f"{summary['lost']}, late {summary['late']}, duplicated "
+                  f"{summary['duplicated']}, misrouted {summary['misrouted']}, failed replies "
+                  f"{summary['failed_replies']}; p50 {summary['p50_ms']:.1f} ms, p99 "
+                  f"{summary['p99_ms']:.1f} ms; {summary['calls_per_s']:.1f} calls/s; node RSS "
+                  f"{summary['node_rss_kib_before'] / 1024:.1f} -> "
+                  f"{summary['node_rss_kib_after'] / 1024:.1f} MiB", flush=True)
+    return 0 if all(s["lost"] == 0 and not s["misrouted"] for s in summaries) else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
