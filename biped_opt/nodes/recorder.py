@@ -84,6 +84,11 @@ class RecorderNode(ros.Node):
     """Records sweeps (see the module docstring)."""
 
     def __init__(self, **kwargs: Any) -> None:
+        # what close() needs exists first: a bad parameter below fails the construction and
+        # the context then destroys the half-made node
+        self._stop = threading.Event()
+        self._writer: SweepWriter | None = None
+        self._writer_lock = threading.Lock()
         super().__init__("recorder", **kwargs)
         self.declare_parameter("maneuver", "touchdown")
         self.declare_parameter("theta0_min", -0.2)
@@ -100,9 +105,6 @@ class RecorderNode(ros.Node):
         self._simulator = self.create_client(
             ros.srvs.Simulate, "/biped/simulate", callback_group=group)
         self._sweep_pub = self.create_publisher(ros.msgs.SweepPoint, "/biped/sweep", 10)
-        self._stop = threading.Event()
-        self._writer: SweepWriter | None = None
-        self._writer_lock = threading.Lock()
         self.finished = threading.Event()
         self.last_summary: SweepSummary | None = None
         self.error: BaseException | None = None

@@ -78,10 +78,10 @@ def run_node(make_node: Callable[[], Any], args: list[str] | None, *, threads: i
     Ctrl-C or SIGTERM, also during the warm-up, ends it with status 0; a bad parameter ends it
     with one line on stderr and status 2, as a bad command-line argument would."""
     stop_on_sigterm()
-    ros.init(args=args)
     try:
+        ros.init(args=args)
         node = make_node()
-    except BipedOptError as exc:
+    except ros.STARTUP_ERRORS as exc:
         ros.try_shutdown()
         name = getattr(make_node, "__name__", "node").removesuffix("Node").lower()
         print(f"{name}: error: {exc}", file=sys.stderr)

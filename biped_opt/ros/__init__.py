@@ -26,7 +26,7 @@ __all__ = [
     "Context", "Node", "Future", "Parameter", "SingleThreadedExecutor", "MultiThreadedExecutor",
     "MutuallyExclusiveCallbackGroup", "ReentrantCallbackGroup", "QoSProfile", "HistoryPolicy",
     "ReliabilityPolicy", "DurabilityPolicy", "qos_profile_sensor_data",
-    "qos_profile_services_default", "qos_profile_system_default",
+    "qos_profile_services_default", "qos_profile_system_default", "STARTUP_ERRORS",
 ]
 
 
@@ -77,6 +77,10 @@ if BACKEND == "rclpy":
         ReentrantCallbackGroup,
     )
     from rclpy.context import Context  # type: ignore[import-not-found, no-redef]
+    from rclpy.exceptions import (  # type: ignore[import-not-found]
+        InvalidParameterTypeException as _InvalidType,
+    )
+    from rclpy.exceptions import ParameterException  # type: ignore[import-not-found]
     from rclpy.executors import (  # type: ignore[import-not-found, no-redef]
         MultiThreadedExecutor,
         SingleThreadedExecutor,
@@ -93,6 +97,11 @@ if BACKEND == "rclpy":
         qos_profile_system_default,
     )
     from rclpy.task import Future  # type: ignore[import-not-found, no-redef]
+
+    #: what a node's construction raises for a bad parameter or ``--ros-args`` (besides
+    #: BipedOptError): a bad command line, reported in one line by ``nodes.run.run_node``
+    STARTUP_ERRORS: tuple[type[BaseException], ...] = (BipedOptError, ParameterException,
+                                                       _InvalidType)
 else:
     from .dds import (
         Context,
@@ -119,6 +128,9 @@ else:
         try_shutdown,
     )
     from .interfaces import PACKAGE, load_interfaces
+
+    #: the built-in backend's parameter and ``--ros-args`` errors are BipedOptErrors
+    STARTUP_ERRORS = (BipedOptError,)
 
     _ifc = load_interfaces()
     msgs = types.SimpleNamespace(**{

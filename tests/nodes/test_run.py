@@ -57,6 +57,15 @@ def test_ready_line(context_node, capfd):
 
 @pytest.mark.parametrize(("node", "param", "message"), [
     ("optimiser", "cache_size:=-1", "optimiser: error: cache_size must be >= 0"),
+    ("simulator", "theta0:=abc", "simulator: error: Trying to set parameter 'theta0' to 'abc' "
+                                 "of type 'STRING', expecting type 'DOUBLE'"),
+    ("simulator", "noequals", "simulator: error: --ros-args: couldn't parse parameter override "
+                              "rule -p 'noequals' (expected name:=value)"),
+    ("simulator", "inputs:=[1.0, 2.0", "simulator: error: Trying to set parameter 'inputs'"),
+    ("simulator", "inputs:=[1.0, 'a']", "simulator: error: --ros-args: -p \"inputs:=[1.0, 'a']\": "
+                                        "an array parameter holds values of one type"),
+    ("recorder", "num:=1.5", "recorder: error: Trying to set parameter 'num' to 1.5 of type "
+                             "'DOUBLE', expecting type 'INTEGER'"),
 ])
 def test_a_bad_parameter_ends_the_node_with_status_2_and_one_line(domain_id, node, param,
                                                                  message):

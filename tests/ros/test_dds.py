@@ -147,6 +147,37 @@ def test_parameters(context):
         node.declare_parameter("rate", 1.0)
 
 
+def test_parameters_are_statically_typed_as_in_rclpy(context):
+    """An override of another type than the default's is refused when declared (rclpy's
+    InvalidParameterTypeException, also a TypeError); an empty list fits any array type."""
+    node = dds.Node("typed", context=context,
+                    cli_args=["--ros-args", "-p", "rate:=fast", "-p", "n:=2.5", "-p", "xs:=[]",
+                              "-p", "flag:=1", "-p", "ys:=[1, 2]"])
+    with pytest.raises(dds.InvalidParameterTypeException,
+                       match="'rate' to 'fast' of type 'STRING', expecting type 'DOUBLE'"):
+        node.declare_parameter("rate", 10.0)
+    with pytest.raises(TypeError, match="expecting type 'INTEGER'"):
+        node.declare_parameter("n", 1)
+    with pytest.raises(TypeError, match="of type 'INTEGER', expecting type 'BOOL'"):
+        node.declare_parameter("flag", False)
+    with pytest.raises(TypeError, match="'INTEGER_ARRAY', expecting type 'DOUBLE_ARRAY'"):
+        node.declare_parameter("ys", [0.0])
+    assert node.declare_parameter("xs", [0.0]).value == []
+    assert node.declare_parameter("any", None).value is None  # no default: no type to keep
+
+
+@pytest.mark.parametrize(("args", "match"), [
+    (["-p", "noequals"], "couldn't parse parameter override rule -p 'noequals'"),
+    (["-p", ":=1"], "couldn't parse parameter override rule"),
+    (["-p"], "-p expects an argument"),
+    (["--params-file"], "--params-file expects an argument"),
+    (["-p", "xs:=[1, 'a']"], "an array parameter holds values of one type"),
+])
+def test_malformed_ros_args_are_one_clear_error(args, match):
+    with pytest.raises(dds.RosArgumentError, match=match):
+        dds.parse_ros_args(["--ros-args", *args])
+
+
 def test_context_lifecycle(domain_id):
     ctx = dds.Context()
     assert not ctx.ok()

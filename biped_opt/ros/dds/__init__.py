@@ -29,11 +29,13 @@ from .executors import (
 from .futures import Future
 from .node import (
     Clock,
+    InvalidParameterTypeException,
     MutuallyExclusiveCallbackGroup,
     Node,
     Parameter,
     ParameterNotDeclaredException,
     ReentrantCallbackGroup,
+    RosArgumentError,
     Time,
     parse_ros_args,
 )
@@ -53,6 +55,7 @@ __all__ = [
     "Context", "NotInitializedError", "get_default_context", "init", "localhost_only",
     "loopback_config", "ok", "shutdown", "try_shutdown", "Executor", "MultiThreadedExecutor",
     "SingleThreadedExecutor", "spin", "spin_once", "spin_until_future_complete", "Future",
+    "InvalidParameterTypeException", "RosArgumentError",
     "Client", "Clock", "MalformedMessageError", "MutuallyExclusiveCallbackGroup", "Node",
     "Parameter", "ParameterNotDeclaredException", "Publisher", "ReentrantCallbackGroup", "Service",
     "Subscription", "Time", "Timer", "parse_ros_args", "DurabilityPolicy", "HistoryPolicy",

@@ -28,19 +28,24 @@ from cyclonedds.pub import DataWriter
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from biped_opt.errors import BipedOptError
+from biped_opt.errors import BipedOptError, quoted
 
 from . import graph
 from .entities import delete_dds
 
 __all__ = [
-    "Context", "NotInitializedError", "get_default_context", "init", "shutdown", "try_shutdown",
-    "ok", "localhost_only", "loopback_config",
+    "Context", "InvalidDomainError", "NotInitializedError", "get_default_context", "init",
+    "shutdown", "try_shutdown", "ok", "localhost_only", "loopback_config",
 ]
 
 
 class NotInitializedError(BipedOptError, RuntimeError):
     """A context was used before ``init`` or after ``shutdown``."""
+
+
+class InvalidDomainError(BipedOptError, ValueError):
+    """A domain id (argument or ``$ROS_DOMAIN_ID``) outside 0..232, the ids whose DDS ports
+    (7400 + 250 id + ...) fit in 16 bits."""
 
 
 def localhost_only() -> bool:
@@ -74,12 +79,18 @@ _OPEN: weakref.WeakSet[Context] = weakref.WeakSet()
 
 
 def _domain_id(domain_id: int | None) -> int:
+    source = "domain_id"
     if domain_id is None:
+        source = "ROS_DOMAIN_ID"
         text = os.environ.get("ROS_DOMAIN_ID", "").strip()
-        domain_id = int(text) if text else 0
-    domain_id = int(domain_id)
-    if not 0 <= domain_id <= 232:
-        raise ValueError(f"domain_id must be in 0..232, got {domain_id}")
+        try:
+            domain_id = int(text) if text else 0
+        except ValueError:
+            raise InvalidDomainError(
+                f"ROS_DOMAIN_ID must be an integer in 0..232, got {quoted(text)}") from None
+    if isinstance(domain_id, bool) or not isinstance(domain_id, int) \
+            or not 0 <= domain_id <= 232:
+        raise InvalidDomainError(f"{source} must be an integer in 0..232, got {domain_id!r}")
     return domain_id
 
 

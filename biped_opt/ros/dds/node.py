@@ -18,7 +18,7 @@ from typing import Any
 
 from cyclonedds.topic import Topic
 
-from biped_opt.errors import BipedOptError
+from biped_opt.errors import BipedOptError, quoted
 
 from ..interfaces import ServiceType, load_interfaces
 from ..params_file import load_parameters
@@ -30,12 +30,22 @@ from .services import Client, Service
 
 __all__ = [
     "Node", "Clock", "Time", "Parameter", "ParameterNotDeclaredException",
+    "InvalidParameterTypeException", "RosArgumentError", "parameter_type",
     "MutuallyExclusiveCallbackGroup", "ReentrantCallbackGroup", "parse_ros_args",
 ]
 
 
 class ParameterNotDeclaredException(BipedOptError, LookupError):
     """``get_parameter`` of a name that was never declared."""
+
+
+class InvalidParameterTypeException(BipedOptError, TypeError):
+    """A parameter given a value of another type than its default's (rclpy's exception of the
+    same name: a node's parameters are statically typed unless declared dynamic)."""
+
+
+class RosArgumentError(BipedOptError, ValueError):
+    """A ``--ros-args`` section rcl could not parse (rcl: "Couldn't parse ... rule")."""
 
 
 # -- callback groups -------------------------------------------------------------------------
@@ -89,6 +99,15 @@ class Parameter:
         INTEGER = 2
         DOUBLE = 3
         STRING = 4
+        BYTE_ARRAY = 5
+        BOOL_ARRAY = 6
+        INTEGER_ARRAY = 7
+        DOUBLE_ARRAY = 8
+        STRING_ARRAY = 9
+
+    #: rcl_interfaces' names of the types above
+    TYPE_NAMES = ("NOT_SET", "BOOL", "INTEGER", "DOUBLE", "STRING", "BYTE_ARRAY", "BOOL_ARRAY",
+                  "INTEGER_ARRAY", "DOUBLE_ARRAY", "STRING_ARRAY")
 
     def __init__(self, name: str, type_: Any = None, value: Any = None) -> None:
         # rclpy's signature is (name, type_=None, value=None); a non-int type_ is a value.
@@ -96,13 +115,42 @@ class Parameter:
             type_, value = None, type_
         self.name = name
         self.value = value
-        self.type_ = type_
+        self.type_ = type_ if type_ is not None else parameter_type(value)
 
     def get_parameter_value(self) -> Any:
         return self.value
 
     def __repr__(self) -> str:
         return f"Parameter({self.name!r}, value={self.value!r})"
+
+
+_SCALAR_TYPES = ((bool, Parameter.Type.BOOL), (int, Parameter.Type.INTEGER),
+                 (float, Parameter.Type.DOUBLE), (str, Parameter.Type.STRING))
+
+
+def parameter_type(value: Any) -> int:
+    """The ``Parameter.Type`` of a Python value, as rclpy infers it; an empty list is NOT_SET
+    (it fits any array type). A list mixing types has none."""
+    if value is None:
+        return Parameter.Type.NOT_SET
+    if isinstance(value, (bytes, bytearray)):
+        return Parameter.Type.BYTE_ARRAY
+    if isinstance(value, (list, tuple)):
+        if not value:
+            return Parameter.Type.NOT_SET
+        kinds = {parameter_type(v) for v in value}
+        if len(kinds) != 1 or not kinds <= {1, 2, 3, 4}:
+            raise InvalidParameterTypeException(
+                f"an array parameter holds values of one type, got {quoted(value)}")
+        return kinds.pop() + Parameter.Type.BOOL_ARRAY - Parameter.Type.BOOL
+    for cls, kind in _SCALAR_TYPES:  # bool first: a bool is an int in Python
+        if isinstance(value, cls):
+            return kind
+    raise InvalidParameterTypeException(f"{type(value).__name__} is not a parameter type")
+
+
+def _type_name(kind: int) -> str:
+    return Parameter.TYPE_NAMES[kind]
 
 
 def _parse_value(text: str) -> Any:
@@ -133,13 +181,22 @@ def parse_ros_args(args: Iterable[str] | None, node_name: str | None = None) -> 
             inside = True
         elif arg == "--":
             inside = False
-        elif inside and arg in ("-p", "--param") and i + 1 < len(items):
-            name, sep, value = items[i + 1].partition(":=")
-            if not sep:
-                raise ValueError(f"--ros-args -p expects name:=value, got {items[i + 1]!r}")
+        elif inside and arg in ("-p", "--param", "--params-file") and i + 1 == len(items):
+            raise RosArgumentError(f"--ros-args: {arg} expects an argument")
+        elif inside and arg in ("-p", "--param"):
+            rule = items[i + 1]
+            name, sep, value = rule.partition(":=")
+            if not sep or not name:
+                raise RosArgumentError(
+                    f"--ros-args: couldn't parse parameter override rule {arg} {quoted(rule)}"
+                    " (expected name:=value)")
             params[name] = _parse_value(value)
+            try:
+                parameter_type(params[name])
+            except InvalidParameterTypeException as exc:
+                raise RosArgumentError(f"--ros-args: {arg} {quoted(rule)}: {exc}") from None
             i += 1
-        elif inside and arg == "--params-file" and i + 1 < len(items):
+        elif inside and arg == "--params-file":
             if node_name is not None:
                 params.update(load_parameters(items[i + 1], node_name))
             i += 1
@@ -321,9 +378,17 @@ class Node:
                           ignore_override: bool = False) -> Parameter:
         if name in self._parameters:
             raise ValueError(f"parameter {name!r} has already been declared")
+        expected = parameter_type(value)
         if not ignore_override and name in self._overrides:
             value = self._overrides[name]
         param = Parameter(name, value=value)
+        # static typing as in rclpy: an override keeps its default's type (an empty list fits
+        # any array type)
+        if expected != Parameter.Type.NOT_SET and param.type_ not in (
+                expected, *((Parameter.Type.NOT_SET,) if isinstance(value, list) else ())):
+            raise InvalidParameterTypeException(
+                f"Trying to set parameter {name!r} to {quoted(value)} of type "
+                f"'{_type_name(param.type_)}', expecting type '{_type_name(expected)}'")
         self._parameters[name] = param
         return param
 
