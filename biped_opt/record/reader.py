@@ -1,13 +1,17 @@
 """Reading biped_opt MCAP recordings back, including files a killed recorder left unfinished.
 
-:func:`read_raw` first tries the indexed reader (a finished file); if the file has no valid
-summary - its writer was killed before ``finish()`` - it falls back to a stream reader that keeps
-every complete chunk and reports how much it recovered (MCAP.md: crash safety).
+:func:`read_raw` first tries the indexed reader (a finished file, every chunk's CRC checked); if
+the file has no valid summary - its writer was killed before ``finish()`` - or a chunk is damaged,
+it falls back to a scan that keeps every complete, intact chunk, skips and counts damaged ones,
+and reports how much it recovered (MCAP.md: crash safety). A file that is not MCAP, or holds
+nothing recoverable, is an error.
 :func:`read_recording` decodes what :func:`read_raw` returns.
 """
 
 from __future__ import annotations
 
+import io
+import struct
 from collections import defaultdict
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -16,10 +20,13 @@ from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
+import zstandard
+from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
+from mcap.opcode import Opcode
 from mcap.reader import make_reader
-from mcap.records import Channel, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
+from mcap.records import Channel, Chunk, Footer, Message, Metadata, Schema
+from mcap.stream_reader import breakup_chunk
 
 from biped_opt.record.writer import RecordError
 from biped_opt.ros.interfaces import load_interfaces
@@ -111,8 +118,9 @@ class RawMessage(NamedTuple):
 class RawRecording:
     """A recording's channels and still-serialized messages in log-time order.
 
-    ``complete`` is False for an unfinished file (its writer was killed) read by recovery;
-    ``bytes_read`` is then how far into the file the last complete record reached.
+    ``complete`` is False for a file read by recovery: unfinished (its writer was killed) or
+    with damaged chunks; ``bytes_read`` is then how far into the file the last complete record
+    reached.
     """
 
     path: Path
@@ -123,6 +131,8 @@ class RawRecording:
     note: str
     file_size: int
     bytes_read: int
+    #: chunks skipped because their CRC or decompression failed (recovery only)
+    damaged_chunks: int = 0
 
     @property
     def counts(self) -> dict[str, int]:
@@ -151,21 +161,32 @@ def _raw_channel(schema: Schema | None, channel: Channel) -> RawChannel:
 
 def read_raw(path: str | Path, topics: Iterable[str] | None = None) -> RawRecording:
     """Channels and serialized messages of a recording (only ``topics`` when given), sorted by
-    log time; an unfinished file is recovered like :func:`read_recording` does."""
+    log time. A finished file is read through its index with every chunk's CRC checked; an
+    unfinished or damaged one is recovered record by record (:func:`_recover`). A file that is
+    not MCAP, or holds nothing recoverable, is a :class:`RecordError`."""
     path = Path(path)
+    if path.is_dir():
+        raise RecordError(f"{path}: is a directory, not a recording")
     if not path.is_file():
         raise RecordError(f"no such recording: {path}")
     wanted = None if topics is None else set(topics)
     try:
+        with open(path, "rb") as stream:
+            head = stream.read(len(MAGIC))
+    except OSError as exc:
+        raise RecordError(f"{path}: cannot read: {exc.strerror}") from None
+    if head != MAGIC:
+        raise RecordError(f"{path}: not an MCAP file (it does not start with the MCAP magic)")
+    try:
         return _read_raw_indexed(path, wanted)
-    except (McapError, ValueError, EOFError, AssertionError, KeyError):
-        return _read_raw_stream(path, wanted)
+    except (*_DAMAGED, OSError):  # (a file shorter than a footer: seeking before its start)
+        return _recover(path, wanted)
 
 
 def _read_raw_indexed(path: Path, wanted: set[str] | None) -> RawRecording:
     size = path.stat().st_size
     with open(path, "rb") as stream:
-        reader = make_reader(stream)
+        reader = make_reader(stream, validate_crcs=True)
         summary = reader.get_summary()
         if summary is None:
             raise McapError("no summary")
@@ -183,40 +204,95 @@ def _read_raw_indexed(path: Path, wanted: set[str] | None) -> RawRecording:
                         complete=True, note="indexed", file_size=size, bytes_read=size)
 
 
-def _read_raw_stream(path: Path, wanted: set[str] | None) -> RawRecording:
-    size = path.stat().st_size
+# -- recovery --------------------------------------------------------------------------------
+
+MAGIC = b"\x89MCAP0\r\n"
+#: opcode (1 byte) and content length (8 bytes) in front of every record
+_PREFIX = struct.Struct("<BQ")
+#: what parsing a damaged record can raise: all of it means "this record is unusable"
+#: (lz4 reports a bad frame as RuntimeError)
+_DAMAGED = (McapError, EOFError, ValueError, KeyError, AssertionError, struct.error,
+            UnicodeDecodeError, zstandard.ZstdError, RuntimeError)
+
+
+def _recover(path: Path, wanted: set[str] | None) -> RawRecording:
+    """Every complete record of a file whose summary cannot be used: the writer was killed
+    (the file ends inside a record), or a chunk is damaged.
+
+    The scan walks the top-level records by their length prefixes and stops at the first one
+    that does not fit in the file; each complete chunk is decompressed and checked against its
+    CRC, and a chunk that fails is skipped and counted, the scan going on after it. Messages of a
+    channel whose definition was lost with a damaged chunk cannot be decoded and are counted
+    too."""
+    data = path.read_bytes()
     schemas: dict[int, Schema] = {}
     by_id: dict[int, Channel] = {}
-    out: list[RawMessage] = []
+    raw: list[Message] = []
     metadata: dict[str, dict[str, str]] = {}
-    good = 0
-    with open(path, "rb") as stream:
-        reader = StreamReader(stream, skip_magic=False, emit_chunks=False)
+    corrupt = 0
+    finished = False
+    pos = good = len(MAGIC)
+    while pos + _PREFIX.size <= len(data):
+        opcode, length = _PREFIX.unpack_from(data, pos)
+        end = pos + _PREFIX.size + length
+        if end > len(data):
+            break  # the record the writer was writing when it stopped
+        body = ReadDataStream(io.BytesIO(data[pos + _PREFIX.size:end]))
         try:
-            for record in reader.records:
-                if isinstance(record, Schema):
-                    schemas[record.id] = record
-                elif isinstance(record, Channel):
-                    by_id[record.id] = record
-                elif isinstance(record, Message):
-                    topic = by_id[record.channel_id].topic
-                    if wanted is None or topic in wanted:
-                        out.append(RawMessage(topic, record.log_time, record.publish_time,
-                                              record.data))
-                elif isinstance(record, Metadata):
-                    metadata[record.name] = dict(record.metadata)
-                # a chunk is read whole before its records are yielded, so the position after
-                # a record is the end of a complete record
-                good = stream.tell()
-        except (McapError, EOFError, ValueError, KeyError, AssertionError):
-            pass  # the truncated tail: everything before it is complete
+            if opcode == Opcode.CHUNK:
+                records = breakup_chunk(Chunk.read(body), validate_crc=True)
+            elif opcode in _TOP_LEVEL:
+                records = [_TOP_LEVEL[opcode](body, length)]
+            else:  # indexes, statistics, attachments: not needed to recover the messages
+                records = []
+        except _DAMAGED:
+            if opcode != Opcode.CHUNK:
+                break  # a damaged record outside a chunk: its length may be wrong too
+            corrupt += 1
+            records = []
+        for record in records:
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                by_id[record.id] = record
+            elif isinstance(record, Message):
+                raw.append(record)
+            elif isinstance(record, Metadata):
+                metadata[record.name] = dict(record.metadata)
+        pos = good = end
+        if opcode == Opcode.FOOTER:
+            finished = True
+            break
+    decodable = [m for m in raw if m.channel_id in by_id]
+    orphans = len(raw) - len(decodable)
+    losses = "".join([f"; {corrupt} damaged chunks (CRC or decompression failed) skipped"
+                      if corrupt else "",
+                      f"; {orphans} messages of channels defined in a damaged chunk dropped"
+                      if orphans else ""])
+    if not decodable:
+        raise RecordError(f"{path}: nothing recoverable: no complete message in its "
+                          f"{len(data)} bytes{losses}")
+    out = [RawMessage(by_id[m.channel_id].topic, m.log_time, m.publish_time, m.data)
+           for m in decodable if wanted is None or by_id[m.channel_id].topic in wanted]
     out.sort(key=lambda m: m.log_time_ns)
     channels = {
         ch.topic: _raw_channel(schemas.get(ch.schema_id), ch)
         for ch in by_id.values() if wanted is None or ch.topic in wanted
     }
-    note = (f"recovered {len(out)} messages from the complete chunks of an unfinished file "
-            f"(its writer was killed): {good} of {size} bytes ({good / max(size, 1):.1%}) "
-            "were readable")
+    how = ("a finished file with damaged chunks" if finished
+           else "an unfinished file (its writer was killed)")
+    note = (f"recovered {len(out)} messages from the complete chunks of {how}: {good} of "
+            f"{len(data)} bytes ({good / max(len(data), 1):.1%}) were readable{losses}")
     return RawRecording(path=path, channels=channels, messages=tuple(out), metadata=metadata,
-                        complete=False, note=note, file_size=size, bytes_read=good)
+                        complete=False, note=note, file_size=len(data), bytes_read=good,
+                        damaged_chunks=corrupt)
+
+
+#: readers of the records that may stand outside chunks
+_TOP_LEVEL = {
+    Opcode.SCHEMA: lambda stream, _length: Schema.read(stream),
+    Opcode.CHANNEL: lambda stream, _length: Channel.read(stream),
+    Opcode.MESSAGE: Message.read,
+    Opcode.METADATA: lambda stream, _length: Metadata.read(stream),
+    Opcode.FOOTER: lambda stream, _length: Footer.read(stream),
+}
