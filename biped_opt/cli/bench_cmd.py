@@ -14,13 +14,13 @@ from __future__ import annotations
 import argparse
 import importlib
 import importlib.util
-import json
 import math
 import sys
 from pathlib import Path
 from types import ModuleType
 
 import biped_opt
+from biped_opt import strict_json
 from biped_opt.cli.args import int_at_least
 from biped_opt.errors import BipedOptError
 
@@ -129,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
         n_cases=args.cases, quick=args.quick, compile_cost=not args.no_compile, **kwargs
     )
     if args.json:
-        print(json.dumps(result))
+        print(strict_json.dumps(result))
     else:
         print(format_table(result))
     return 0

@@ -30,6 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from biped_opt import ros
+    from biped_opt.cli.args import output_directory
     from biped_opt.maneuvers import spec
     from biped_opt.nodes.graph import Graph
     from biped_opt.nodes.recorder import SweepRequest
@@ -37,6 +38,7 @@ def run(args: argparse.Namespace) -> int:
     from biped_opt.plots.reproduce import reproduce
     from biped_opt.record.report import report
 
+    output_directory("--out", args.out)
     stop_on_sigterm()
     start = time.perf_counter()
     print(f"bringing up simulator, optimiser, recorder (ROS backend: {ros.BACKEND})", flush=True)

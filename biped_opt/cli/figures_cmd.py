@@ -5,22 +5,22 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from biped_opt.errors import InvalidInputError
+from biped_opt.cli.args import int_at_least, output_directory
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("figures", help="reproduce the paper's figures (PNG) and nonsmooth table")
     p.add_argument("--out", type=Path, default=Path("out/figures"), help="output directory")
-    p.add_argument("--fixed-num", type=int, default=401, help="angles per fixed sweep")
-    p.add_argument("--optimal-num", type=int, default=201, help="angles per optimal sweep")
+    p.add_argument("--fixed-num", type=int_at_least("--fixed-num", 5), default=401,
+                   help="angles per fixed sweep")
+    p.add_argument("--optimal-num", type=int_at_least("--optimal-num", 5), default=201,
+                   help="angles per optimal sweep")
     p.add_argument("--progress", action="store_true", help="progress bars on stderr")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    for name in ("fixed_num", "optimal_num"):
-        if getattr(args, name) < 5:
-            raise InvalidInputError(f"--{name.replace('_', '-')} must be at least 5")
+    output_directory("--out", args.out)
     from biped_opt.plots.reproduce import reproduce  # matplotlib only when drawing
 
     result = reproduce(args.out, fixed_num=args.fixed_num, optimal_num=args.optimal_num,

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
+
+from biped_opt import strict_json
+from biped_opt.cli.args import new_directory
 
 __all__ = ["register", "func", "describe"]
 
@@ -85,8 +87,10 @@ def _text(info: dict) -> str:
 
 
 def func(args: argparse.Namespace) -> int:
+    if args.to_rosbag2 is not None:
+        new_directory("--to-rosbag2", args.to_rosbag2)
     info = describe(args.file)
-    print(json.dumps(info, indent=2) if args.json else _text(info))
+    print(strict_json.dumps(info, indent=2) if args.json else _text(info))
     if args.to_rosbag2 is not None:
         from biped_opt.record.rosbag2 import export_rosbag2
 

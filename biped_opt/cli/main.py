@@ -9,8 +9,11 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
+import re
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 from biped_opt.errors import BipedOptError
 
@@ -33,8 +36,19 @@ COMMAND_MODULES = (
 EXIT_USAGE = 2
 
 
+#: a negative number in any form Python's float() reads, so that ``--theta0 -1e-6`` is a value:
+#: argparse's own pattern (-1, -.5) misses exponents and treats -1e-6 as an unknown option
+NEGATIVE_NUMBER = re.compile(
+    r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.IGNORECASE)
+
+
 class _Parser(argparse.ArgumentParser):
-    """argparse that reports bad arguments in one line (no usage dump) with exit status 2."""
+    """argparse that reports bad arguments in one line (no usage dump) with exit status 2 and
+    reads every negative number as a value."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_NUMBER
 
     def error(self, message: str) -> None:  # type: ignore[override]
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
@@ -55,13 +69,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        status = int(args.func(args) or 0)
+        sys.stdout.flush()
+        return status
     except BipedOptError as exc:
         print(f"biped-opt {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print(f"biped-opt {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # the reader went away (``biped-opt simulate ... | head``): what it wanted it has, as
+        # with any Unix filter; stdout is pointed at /dev/null so the exit flush stays silent
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+        return 0
 
 
 if __name__ == "__main__":

@@ -32,11 +32,14 @@ def run_node(args: argparse.Namespace) -> int:
 
 
 def run_launch(args: argparse.Namespace) -> int:
+    from biped_opt.cli.args import input_file
     from biped_opt.cli.signals import stop_requested
     from biped_opt.nodes.graph import Graph
 
     # a signal while the graph starts abandons the start; once it runs, a signal (even one that
     # arrives while the "running" line is printed) only ends the wait below
+    if args.params_file is not None:
+        input_file("--params-file", args.params_file)
     with stop_requested(interrupt=True) as stop:
         try:
             graph = Graph(params_file=args.params_file)

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import json
 
+from biped_opt import strict_json
 from biped_opt.cli.optimise_cmd import add_problem_arguments, problem_from_args
 from biped_opt.cli.simulate_cmd import parse_maneuver_arg
 from biped_opt.cli.sweep_cmd import add_range_arguments, grid_from_args, progress_from_args
@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
         grid = grid_from_args(args, maneuver, 401)
         report = find_nonsmooth_fixed(maneuver, grid, FIXED_INPUTS[maneuver], progress=progress)
     if args.json:
-        print(json.dumps([p.as_dict() for p in report.points]))
+        print(strict_json.dumps([p.as_dict() for p in report.points]))
     else:
         kind = "optimal" if report.optimal else "fixed-input"
         print(f"{report.subject} ({kind}), th0 in [{report.theta0_range[0]:g}, "

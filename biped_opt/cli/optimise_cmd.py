@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import math
 
+from biped_opt import strict_json
 from biped_opt.cli.args import finite_float
 from biped_opt.cli.simulate_cmd import add_maneuver_argument, parse_maneuver_arg
 from biped_opt.errors import InvalidInputError, InvalidParameterError
@@ -186,7 +186,7 @@ def run(args: argparse.Namespace) -> int:
     result = optimal_policy(problem, args.theta0)
     derivatives = derivatives_json(problem, args.theta0) if result.success else None
     if args.json:
-        print(json.dumps(result_json(result, derivatives)))
+        print(strict_json.dumps(result_json(result, derivatives)))
         return 0 if result.success else 1
     print(f"problem    {problem.name}  theta0 = {result.theta0:+.12g}")
     print(f"status     {result.status}: {result.message}")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from biped_opt.cli.args import finite_float
+from biped_opt.cli.args import finite_float, input_file, int_in_range, output_file
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -13,9 +13,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--maneuver", required=True)
     p.add_argument("--theta0-min", required=True, type=finite_float("--theta0-min"))
     p.add_argument("--theta0-max", required=True, type=finite_float("--theta0-max"))
-    p.add_argument("--num", required=True, type=int, help="angles (th0 = 0 is always added)")
+    p.add_argument("--num", required=True, type=int_in_range("--num", 2, 100_000),
+                   help="angles (th0 = 0 is always added)")
     p.add_argument("--optimal", action="store_true", help="optimal policies (else fixed inputs)")
-    p.add_argument("--out", required=True, type=Path, help="output .mcap file")
+    p.add_argument("--out", required=True, type=Path,
+                   help="output .mcap file (its directory must exist; never overwritten)")
     p.add_argument("--params-file", type=Path, default=None, help="ROS 2 parameter file")
     p.set_defaults(func=run)
 
@@ -28,6 +30,9 @@ def run(args: argparse.Namespace) -> int:
     request = SweepRequest(maneuver=args.maneuver, theta0_min=args.theta0_min,
                            theta0_max=args.theta0_max, num=args.num, optimal=args.optimal,
                            output=args.out).validated()
+    output_file("--out", args.out, overwrite=False)
+    if args.params_file is not None:
+        input_file("--params-file", args.params_file)
     # Ctrl-C or SIGTERM while the graph starts abandons the start; once it records, either one
     # stops the sweep after the current point, the file is finished and the summary printed
     with stop_requested(interrupt=True) as stop:

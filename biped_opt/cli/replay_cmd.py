@@ -6,7 +6,12 @@ import argparse
 import signal
 import sys
 
+from biped_opt.cli.args import int_in_range, positive_float
+
 __all__ = ["register", "func"]
+
+#: largest ROS_DOMAIN_ID Cyclone DDS accepts (DDS port arithmetic: 7400 + 250 * id < 65536)
+MAX_DOMAIN_ID = 232
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -17,12 +22,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "'ros2 bag play'. Unfinished files (a killed recorder) are replayed from "
                     "their complete chunks. Ctrl-C or SIGTERM stops it (exit status 0).")
     p.add_argument("file", help="the .mcap recording")
-    p.add_argument("--rate", type=float, default=1.0, help="speed factor (default 1)")
+    p.add_argument("--rate", type=positive_float("--rate"), default=1.0,
+                   help="speed factor (default 1)")
     p.add_argument("--loop", action="store_true", help="start again after the last message")
     p.add_argument("--topics", nargs="+", metavar="T", help="replay only these topics")
-    p.add_argument("--domain-id", type=int, default=None,
+    p.add_argument("--domain-id", type=int_in_range("--domain-id", 0, MAX_DOMAIN_ID), default=None,
                    help="DDS domain (default: $ROS_DOMAIN_ID, else 0)")
-    p.add_argument("--delay", type=float, default=0.5,
+    p.add_argument("--delay", type=positive_float("--delay", zero=True), default=0.5,
                    help="seconds to wait for subscribers to be discovered before the first "
                         "message (default 0.5)")
     p.set_defaults(func=func)

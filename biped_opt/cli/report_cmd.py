@@ -24,8 +24,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def func(args: argparse.Namespace) -> int:
+    from biped_opt.cli.args import output_directory
     from biped_opt.record.report import report
 
+    output_directory("--out", args.out, create=False)  # made once the recordings are read
     result = report(args.files, args.out, refine=args.refine)
     for s in result.sweeps:
         state = "complete" if s.complete else f"RECOVERED ({s.note})"

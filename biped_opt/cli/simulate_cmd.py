@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import json
 
+from biped_opt import strict_json
 from biped_opt.cli.args import finite_float
 from biped_opt.errors import InvalidInputError
 from biped_opt.hybrid import simulate
@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidInputError(f"--theta0: {exc}") from None
     tr = simulate(maneuver, args.theta0, (args.u1, args.u2, args.u12))
     if args.json:
-        print(json.dumps(trajectory_json(tr)))
+        print(strict_json.dumps(trajectory_json(tr)))
     else:
         print(f"maneuver   {tr.maneuver}  theta0 = {tr.theta0:+.12g}")
         print(f"status     {tr.status.name}: {tr.message}")

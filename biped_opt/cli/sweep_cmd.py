@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
-from biped_opt.cli.args import finite_float, int_at_least
+from biped_opt import strict_json
+from biped_opt.cli.args import finite_float, int_at_least, output_file
 from biped_opt.cli.optimise_cmd import add_problem_arguments, problem_from_args
 from biped_opt.cli.simulate_cmd import parse_maneuver_arg
 from biped_opt.errors import InvalidInputError
@@ -87,9 +89,10 @@ def run(args: argparse.Namespace) -> int:
                  for k, th in enumerate(result.theta0)]
         ok = bool(result.success.all())
     if args.out:
+        output_file("--out", Path(args.out), overwrite=True)
         try:
             with open(args.out, "w", encoding="utf-8") as fh:
-                fh.write(result.to_json())
+                fh.write(strict_json.dumps(result.as_dict()))
         except OSError as exc:
             raise InvalidInputError(f"--out: cannot write {args.out!r}: {exc.strerror}") from None
         print(f"wrote {result.theta0.size} points to {args.out}")

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -52,6 +53,10 @@ Array = npt.NDArray[np.float64]
 
 #: the contact mode in which each input acts (MODEL.md Sec. 2, force coupling)
 INPUT_MODES = {"u1": ContactMode.LEFT, "u2": ContactMode.RIGHT, "u12": ContactMode.GROUND}
+
+
+#: largest cost term allowed: its square must not overflow a double (sqrt of the largest one)
+COST_LIMIT = math.sqrt(sys.float_info.max)
 
 
 def _real(name: str, value: object) -> float:
@@ -139,6 +144,17 @@ class OptimalControlProblem:
                 raise InvalidParameterError(f"alphas[{d}] must be non-negative, got {a}")
         object.__setattr__(self, "alphas", alphas)
         object.__setattr__(self, "theta_star", _real("theta_star", self.theta_star))
+        # every term of the cost must be a number the solver can also square (its fits and
+        # SciPy's interpolation do): a weight of 1e308 overflowed to inf and failed in lstsq
+        for d, a, (lo, hi) in zip(decisions, alphas, checked):
+            if not a * max(lo * lo, hi * hi) <= COST_LIMIT:
+                raise InvalidParameterError(
+                    f"alphas[{d}] = {a:g} with bounds [{lo:g}, {hi:g}] makes the input cost "
+                    f"alpha {d}^2 exceed {COST_LIMIT:.3g}")
+        if not abs(self.theta_star) <= 0.5 * math.sqrt(COST_LIMIT):
+            raise InvalidParameterError(
+                f"theta_star = {self.theta_star:g} makes the terminal cost exceed "
+                f"{COST_LIMIT:.3g}")
         if not isinstance(self.params, BipedParams):
             raise InvalidParameterError(f"params must be BipedParams, got {self.params!r}")
         if not isinstance(self.options, SimulatorOptions):

@@ -423,8 +423,11 @@ def report(paths: Sequence[str | Path], out_dir: str | Path, *, refine: bool = F
     if not paths:
         raise ReportError("no recordings given")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     sweeps = [load_sweep(p) for p in paths]
+    try:  # only now: a bad recording leaves no empty output directory behind
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ReportError(f"cannot create directory {str(out)!r}: {exc.strerror}") from None
     by_key: dict[tuple[str, str], RecordedSweep] = {}
     for s in sweeps:
         by_key[(s.kind, s.maneuver)] = s  # a later file of the same kind and maneuver wins

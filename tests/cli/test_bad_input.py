@@ -1,0 +1,314 @@
+"""Bad command lines: each gets exit status 2 and one line on stderr naming the argument or file,
+never a traceback, and no work is done or file written on its behalf.
+
+The table holds one row per bad invocation (``{tmp}`` and the other placeholders are files the
+fixture makes). Rows run in-process through ``biped_opt.cli.main.main``: argparse's own errors
+arrive as SystemExit(2), the commands' as a return value of 2. Every check of an output path
+happens before any simulation, node or file is started, so no row runs longer than the parsing.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from biped_opt.cli.main import main
+from biped_opt.record import SweepWriter
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+MANEUVERS = "--maneuver: maneuver must be one of touchdown, liftoff; got"
+LONG = "x" * 100_000
+
+# (argv, fragment the one line must contain)
+CASES: list[tuple[list[str], str]] = [
+    # -- top level -----------------------------------------------------------------------
+    ([], "the following arguments are required: command"),
+    (["bogus"], "invalid choice: 'bogus'"),
+    (["--theta0", "0"], "invalid choice: '0'"),
+    (["node", "bogus"], "argument name: invalid choice: 'bogus'"),
+    # -- simulate ------------------------------------------------------------------------
+    (["simulate"], "the following arguments are required: --maneuver, --theta0"),
+    (["simulate", "--maneuver", "touchdown"], "required: --theta0"),
+    (["simulate", "--maneuver", "jump", "--theta0", "0"], f"{MANEUVERS} 'jump'"),
+    (["simulate", "--maneuver", "", "--theta0", "0"], "--maneuver"),
+    (["simulate", "--maneuver", LONG, "--theta0", "0"], "(100000 characters)"),
+    (["simulate", "--maneuver", "touch\udcffdown", "--theta0", "0"], "--maneuver"),
+    (["simulate", "--maneuver", "touchdown", "--theta0", "nan"], "--theta0 must be finite"),
+    (["simulate", "--maneuver", "touchdown", "--theta0", "inf"], "--theta0 must be finite"),
+    (["simulate", "--maneuver", "touchdown", "--theta0", "-inf"], "--theta0 must be finite"),
+    (["simulate", "--maneuver", "touchdown", "--theta0", "1e400"], "--theta0 must be finite"),
+    (["simulate", "--maneuver", "touchdown", "--theta0", "abc"], "--theta0 must be a number"),
+    (["simulate", "--maneuver", "touchdown", "--theta0", ""], "--theta0 must be a number"),
+    (["simulate", "--maneuver", "touchdown", "--theta0", "0x1p-3"], "--theta0 must be a number"),
+    (["simulate", "--maneuver", "touchdown", "--theta0", "3.0"], "--theta0:"),
+    (["simulate", "--maneuver", "touchdown", "--theta0", "-3"], "--theta0:"),
+    (["simulate", "--maneuver", "liftoff", "--theta0", "-1e3"], "--theta0:"),
+    (["simulate", "--maneuver", "touchdown", "--theta0"], "--theta0: expected one argument"),
+    (["simulate", "--maneuver", "touchdown", "--theta0", "0", "--u1", "nan"], "--u1 must be"),
+    (["simulate", "--maneuver", "touchdown", "--theta0", "0", "--u2", "x"], "--u2 must be"),
+    (["simulate", "--maneuver", "touchdown", "--theta0", "0", "--u12", "-inf"], "--u12 must be"),
+    (["simulate", "--maneuver", "touchdown", "--theta0", "0", "--u3", "1"],
+     "unrecognized arguments: --u3"),
+    (["simulate", "--maneuver", "touchdown", "--theta0", "0", "extra"],
+     "unrecognized arguments: extra"),
+    # -- optimise ------------------------------------------------------------------------
+    (["optimise", "--maneuver", "touchdown"], "required: --theta0"),
+    (["optimise", "--maneuver", "hop", "--theta0", "0"], f"{MANEUVERS} 'hop'"),
+    (["optimise", "--maneuver", "touchdown", "--theta0", "nan"], "--theta0 must be finite"),
+    (["optimise", "--maneuver", "touchdown", "--theta0", "2"], "--theta0:"),
+    (["optimise", "--maneuver", "touchdown", "--theta0", "0", "--alpha", "u1=1e308"],
+     "--alpha: alphas[u1] = 1e+308"),
+    (["optimise", "--maneuver", "touchdown", "--theta0", "0", "--alpha", "u3=1"],
+     "--alpha must look like NAME=VALUE"),
+    (["optimise", "--maneuver", "touchdown", "--theta0", "0", "--alpha", "u1"],
+     "--alpha must look like NAME=VALUE"),
+    (["optimise", "--maneuver", "touchdown", "--theta0", "0", "--alpha", "u1=abc"],
+     "--alpha u1: 'abc' is not a number"),
+    (["optimise", "--maneuver", "touchdown", "--theta0", "0", "--alpha", "u1=nan"],
+     "--alpha u1: must be finite"),
+    (["optimise", "--maneuver", "touchdown", "--theta0", "0", "--alpha", "u1=-1"],
+     "--alpha: alphas[u1] must be non-negative"),
+    (["optimise", "--maneuver", "touchdown", "--theta0", "0", "--alpha", "u12=1"],
+     "--alpha: 'u12' is not a decision input"),
+    (["optimise", "--maneuver", "touchdown", "--theta0", "0", "--bounds", "u1=1,0"],
+     "--bounds: bounds[u1] must have lower < upper"),
+    (["optimise", "--maneuver", "touchdown", "--theta0", "0", "--bounds", "u1=1"],
+     "--bounds u1: expected LO,HI"),
+    (["optimise", "--maneuver", "touchdown", "--theta0", "0", "--bounds", "u1=a,b"],
+     "--bounds u1: 'a' is not a number"),
+    (["optimise", "--maneuver", "touchdown", "--theta0", "0", "--bounds", "u1=0,inf"],
+     "--bounds u1: must be finite"),
+    (["optimise", "--maneuver", "touchdown", "--theta0", "0", "--bounds", "u1=-1e200,1e200"],
+     "--bounds: alphas[u1]"),
+    (["optimise", "--maneuver", "touchdown", "--theta0", "0", "--fixed", "u1=1"],
+     "--fixed: u1 is a decision"),
+    (["optimise", "--maneuver", "touchdown", "--theta0", "0", "--fixed", "u12=nan"],
+     "--fixed u12: must be finite"),
+    (["optimise", "--maneuver", "touchdown", "--theta0", "0", "--theta-star", "1e300"],
+     "--theta-star"),
+    (["optimise", "--maneuver", "touchdown", "--theta0", "0", "--theta-star", "nan"],
+     "--theta-star must be finite"),
+    (["optimise", "--maneuver", "touchdown", "--theta0", "0", "--variant"],
+     "--variant: only the liftoff maneuver"),
+    # -- sweep ---------------------------------------------------------------------------
+    (["sweep", "--maneuver", "touchdown", "--num", "1"], "--num must be at least 2"),
+    (["sweep", "--maneuver", "touchdown", "--num", "0"], "--num must be at least 2"),
+    (["sweep", "--maneuver", "touchdown", "--num", "-3"], "--num must be at least 2"),
+    (["sweep", "--maneuver", "touchdown", "--num", "abc"], "--num must be an integer"),
+    (["sweep", "--maneuver", "touchdown", "--num", "2.5"], "--num must be an integer"),
+    (["sweep", "--maneuver", "touchdown", "--theta0-min", "0.1", "--theta0-max", "-0.1"],
+     "--theta0-min must be below --theta0-max"),
+    (["sweep", "--maneuver", "touchdown", "--theta0-min", "0.1", "--theta0-max", "0.1"],
+     "--theta0-min must be below --theta0-max"),
+    (["sweep", "--maneuver", "touchdown", "--theta0-min", "nan"], "--theta0-min must be finite"),
+    (["sweep", "--maneuver", "touchdown", "--theta0-max", "5"], "--theta0-max:"),
+    (["sweep", "--maneuver", "touchdown", "--theta0-min", "-5e0"], "--theta0-min:"),
+    (["sweep", "--maneuver", "touchdown", "--out", "{dir}"], "--out: '{dir}' is a directory"),
+    (["sweep", "--maneuver", "touchdown", "--out", "{tmp}/missing/s.json"],
+     "--out: directory '{tmp}/missing' does not exist"),
+    (["sweep", "--maneuver", "touchdown", "--out", "{text}/s.json"],
+     "--out: directory '{text}' does not exist"),
+    (["sweep", "--maneuver", "touchdown", "--optimal", "--alpha", "u1=1e308"], "--alpha:"),
+    (["sweep", "--maneuver", "touchdown", "--u1", "nan"], "--u1 must be finite"),
+    (["sweep", "--maneuver", "liftoff", "--variant", "--bounds", "u12=0,1"],
+     "--bounds: 'u12' is not a decision input"),
+    # -- nonsmooth -----------------------------------------------------------------------
+    (["nonsmooth", "--maneuver", "touchdown", "--num", "1"], "--num must be at least 2"),
+    (["nonsmooth", "--maneuver", "touchdown", "--theta0-min", "1e-3", "--theta0-max", "-1e-3"],
+     "--theta0-min must be below --theta0-max"),
+    (["nonsmooth", "--maneuver", "x"], f"{MANEUVERS} 'x'"),
+    (["nonsmooth", "--maneuver", "touchdown", "--variant"], "--variant: only the liftoff"),
+    (["nonsmooth", "--maneuver", "touchdown", "--optimal", "--bounds", "u1=2,1"],
+     "--bounds: bounds[u1] must have lower < upper"),
+    (["nonsmooth", "--maneuver", "touchdown", "--json", "--num", "x"], "--num must be"),
+    # -- figures -------------------------------------------------------------------------
+    (["figures", "--out", "{text}"], "--out: '{text}' exists and is not a directory"),
+    (["figures", "--out", "{text}/sub"], "--out: cannot create directory '{text}/sub'"),
+    (["figures", "--out", "/proc/biped_opt_figures"], "--out: cannot create directory"),
+    (["figures", "--fixed-num", "4"], "--fixed-num must be at least 5"),
+    (["figures", "--fixed-num", "x"], "--fixed-num must be an integer"),
+    (["figures", "--optimal-num", "0"], "--optimal-num must be at least 5"),
+    (["figures", "--optimal-num", "-1"], "--optimal-num must be at least 5"),
+    # -- demo ----------------------------------------------------------------------------
+    (["demo", "--out", "{text}"], "--out: '{text}' exists and is not a directory"),
+    (["demo", "--out", "{text}/sub"], "--out: cannot create directory '{text}/sub'"),
+    (["demo", "--out", "/proc/biped_opt_demo"], "--out: cannot create directory"),
+    # -- record --------------------------------------------------------------------------
+    (["record"], "the following arguments are required"),
+    (["record", "--maneuver", "touchdown", "--theta0-min", "-0.1", "--theta0-max", "0.1",
+      "--num", "3", "--out", "{text}"], "--out: '{text}' exists"),
+    (["record", "--maneuver", "touchdown", "--theta0-min", "-0.1", "--theta0-max", "0.1",
+      "--num", "3", "--out", "{mcap}"], "--out: '{mcap}' exists"),
+    (["record", "--maneuver", "touchdown", "--theta0-min", "-0.1", "--theta0-max", "0.1",
+      "--num", "3", "--out", "{dir}"], "--out: '{dir}' is a directory"),
+    (["record", "--maneuver", "touchdown", "--theta0-min", "-0.1", "--theta0-max", "0.1",
+      "--num", "3", "--out", "{tmp}/missing/r.mcap"],
+     "--out: directory '{tmp}/missing' does not exist"),
+    (["record", "--maneuver", "touchdown", "--theta0-min", "-0.1", "--theta0-max", "0.1",
+      "--num", "3", "--out", "{text}/r.mcap"], "--out: directory '{text}' does not exist"),
+    (["record", "--maneuver", "touchdown", "--theta0-min", "-0.1", "--theta0-max", "0.1",
+      "--num", "1", "--out", "{tmp}/r.mcap"], "--num must be between 2 and 100000"),
+    (["record", "--maneuver", "touchdown", "--theta0-min", "-0.1", "--theta0-max", "0.1",
+      "--num", "100001", "--out", "{tmp}/r.mcap"], "--num must be between 2 and 100000"),
+    (["record", "--maneuver", "touchdown", "--theta0-min", "-0.1", "--theta0-max", "0.1",
+      "--num", "x", "--out", "{tmp}/r.mcap"], "--num must be an integer"),
+    (["record", "--maneuver", "walk", "--theta0-min", "-0.1", "--theta0-max", "0.1",
+      "--num", "3", "--out", "{tmp}/r.mcap"], "got 'walk'"),
+    (["record", "--maneuver", "touchdown", "--theta0-min", "0.1", "--theta0-max", "-0.1",
+      "--num", "3", "--out", "{tmp}/r.mcap"], "theta0_min must be below theta0_max"),
+    (["record", "--maneuver", "touchdown", "--theta0-min", "nan", "--theta0-max", "0.1",
+      "--num", "3", "--out", "{tmp}/r.mcap"], "--theta0-min must be finite"),
+    (["record", "--maneuver", "touchdown", "--theta0-min", "-1e-6", "--theta0-max", "1e-6",
+      "--num", "3", "--out", "{tmp}/r.mcap", "--params-file", "{tmp}/none.yaml"],
+     "--params-file: no such file '{tmp}/none.yaml'"),
+    (["record", "--maneuver", "touchdown", "--theta0-min", "-0.1", "--theta0-max", "0.1",
+      "--num", "3", "--out", "{tmp}/r.mcap", "--params-file", "{dir}"],
+     "--params-file: '{dir}' is not a file"),
+    # -- launch --------------------------------------------------------------------------
+    (["launch", "--params-file", "{tmp}/none.yaml"], "--params-file: no such file"),
+    (["launch", "--params-file", "{dir}"], "--params-file: '{dir}' is not a file"),
+    # -- report --------------------------------------------------------------------------
+    (["report", "--out", "{tmp}/rep"], "the following arguments are required: FILE"),
+    (["report", "{mcap}"], "the following arguments are required: --out"),
+    (["report", "{tmp}/none.mcap", "--out", "{tmp}/rep"], "no such recording"),
+    (["report", "{text}", "--out", "{tmp}/rep"], "{text}: not an MCAP file"),
+    (["report", "{empty}", "--out", "{tmp}/rep"], "{empty}: not an MCAP file"),
+    (["report", "{dir}", "--out", "{tmp}/rep"], "{dir}"),
+    (["report", "{mcap}", "--out", "{text}"], "--out: '{text}' exists and is not a directory"),
+    (["report", "{mcap}", "--out", "{text}/sub/rep"],
+     "--out: cannot create directory '{text}/sub/rep': '{text}' is not a directory"),
+    # -- info ----------------------------------------------------------------------------
+    (["info"], "the following arguments are required: file"),
+    (["info", "{tmp}/none.mcap"], "no such recording"),
+    (["info", "{text}"], "{text}: not an MCAP file"),
+    (["info", "{empty}"], "{empty}: not an MCAP file"),
+    (["info", "{magic}"], "{magic}"),
+    (["info", "{dir}"], "{dir}"),
+    (["info", "{mcap}", "--to-rosbag2", "{text}"],
+     "--to-rosbag2: '{text}' exists and is not a directory"),
+    (["info", "{mcap}", "--to-rosbag2", "{full}"], "--to-rosbag2: directory '{full}' is not empty"),
+    (["info", "{mcap}", "--to-rosbag2", "{tmp}/missing/bag"],
+     "--to-rosbag2: directory '{tmp}/missing' does not exist"),
+    (["info", "{text}", "--json"], "not an MCAP file"),
+    # -- replay --------------------------------------------------------------------------
+    (["replay", "{mcap}", "--domain-id", "300"], "--domain-id must be between 0 and 232"),
+    (["replay", "{mcap}", "--domain-id", "-1"], "--domain-id must be between 0 and 232"),
+    (["replay", "{mcap}", "--domain-id", "x"], "--domain-id must be an integer"),
+    (["replay", "{mcap}", "--rate", "0"], "--rate must be positive"),
+    (["replay", "{mcap}", "--rate", "-1"], "--rate must be positive"),
+    (["replay", "{mcap}", "--rate", "nan"], "--rate must be finite"),
+    (["replay", "{mcap}", "--delay", "-0.5"], "--delay must be at least 0"),
+    (["replay", "{tmp}/none.mcap"], "no such recording"),
+    (["replay", "{text}"], "{text}: not an MCAP file"),
+    (["replay", "{empty}"], "{empty}: not an MCAP file"),
+    # -- bench ---------------------------------------------------------------------------
+    (["bench", "--cases", "1"], "--cases must be at least 2"),
+    (["bench", "--cases", "many"], "--cases must be an integer"),
+]
+
+
+@pytest.fixture(scope="module")
+def places(tmp_path_factory) -> dict[str, str]:
+    tmp = tmp_path_factory.mktemp("bad_input")
+    (tmp / "notes.txt").write_text("these are notes, not a recording\n")
+    (tmp / "empty.mcap").write_bytes(b"")
+    (tmp / "magic.mcap").write_bytes(MCAP_MAGIC)
+    (tmp / "dir").mkdir()
+    (tmp / "full").mkdir()
+    (tmp / "full" / "x").write_text("x")
+    with SweepWriter(tmp / "good.mcap", metadata={"maneuver": "touchdown"}) as w:
+        w.write("/biped/contact_mode", {"header": {"stamp": {"sec": 0, "nanosec": 0},
+                                                   "frame_id": "biped"}, "mode": 0}, 0)
+    return {"tmp": str(tmp), "text": str(tmp / "notes.txt"), "empty": str(tmp / "empty.mcap"),
+            "magic": str(tmp / "magic.mcap"), "dir": str(tmp / "dir"),
+            "full": str(tmp / "full"), "mcap": str(tmp / "good.mcap")}
+
+
+def _fill(text: str, places: dict[str, str]) -> str:
+    for key, value in places.items():
+        text = text.replace("{" + key + "}", value)
+    return text
+
+
+def _listing(root: Path) -> set[Path]:
+    return set(root.rglob("*"))
+
+
+def test_there_are_at_least_100_cases():
+    assert len(CASES) >= 100
+
+
+@pytest.mark.parametrize(("argv", "fragment"), CASES,
+                         ids=[" ".join(a)[:60] or "(none)" for a, _ in CASES])
+def test_bad_invocation_is_one_line_and_status_2(argv, fragment, places, capsys):
+    tmp = Path(places["tmp"])
+    before = _listing(tmp)
+    argv = [_fill(a, places) for a in argv]
+    try:
+        status = main(argv)
+    except SystemExit as exc:  # argparse's own errors
+        status = exc.code
+    out, err = capsys.readouterr()
+    assert status == 2, (out, err)
+    assert err.endswith("\n") and err.count("\n") == 1, err
+    assert "Traceback" not in err and len(err) < 400, err
+    assert _fill(fragment, places) in err, err
+    assert out == ""
+    assert _listing(tmp) == before  # nothing created, nothing left half-written
+
+
+@pytest.mark.parametrize("value", ["-1e-6", "-1E-6", "-.5e-3", "-0.", "-0", "-0.1e+0"])
+def test_negative_numbers_in_any_form_are_values(value, capsys):
+    """argparse alone reads -1e-6 as an unknown option; near 0 is where the paper's kink and
+    jump are, so every form float() accepts must reach the command as a value."""
+    assert main(["simulate", "--maneuver", "touchdown", "--theta0", value, "--json"]) == 0
+    assert f'"theta0": {float(value)!r}' in capsys.readouterr().out.replace("-0.0", "-0.0")
+
+
+def test_json_output_is_strict_json(capsys):
+    """A non-finite number (an infinite cost, a NaN slope) is printed as null, never as the
+    Infinity/NaN that Python's json writes and other parsers reject."""
+    import json
+
+    import numpy as np
+
+    from biped_opt import strict_json
+
+    text = strict_json.dumps({"value": float("inf"), "d": [np.nan, np.float64(1.5)],
+                              "a": np.array([-np.inf, 2.0]), "n": np.int64(3), "ok": np.True_})
+    assert json.loads(text) == {"value": None, "d": [None, 1.5], "a": [None, 2.0], "n": 3,
+                                "ok": True}
+    # a failed optimisation: no grid point of the (absurd) bounds simulates
+    main(["optimise", "--maneuver", "touchdown", "--theta0", "0.01", "--json",
+          "--bounds", "u1=1e30,2e30"])
+    out = json.loads(capsys.readouterr().out,
+                     parse_constant=lambda name: pytest.fail(f"{name} in JSON output"))
+    assert out["success"] is False and out["value"] is None
+
+
+def test_a_closed_pipe_ends_the_command_quietly():
+    """``sweep ... | head -c 10``: the reader leaves early; the command stops with status 0 and
+    says nothing (no BrokenPipeError traceback), as a Unix filter does."""
+    # ~1 MB of table: far more than a pipe holds, so the writer meets the closed pipe
+    proc = subprocess.run(
+        f"{sys.executable} -m biped_opt.cli.main sweep --maneuver touchdown --num 20001 "
+        "--no-progress | head -c 10; exit ${PIPESTATUS[0]}",
+        shell=True, executable="/bin/bash", capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0 and proc.stderr == "" and len(proc.stdout) == 10, proc
+
+
+@pytest.mark.parametrize(("value", "fragment"), [
+    ("abc", "ROS_DOMAIN_ID must be an integer in 0..232, got 'abc'"),
+    ("300", "ROS_DOMAIN_ID must be an integer in 0..232, got 300"),
+    ("-1", "ROS_DOMAIN_ID must be an integer in 0..232, got -1"),
+])
+@pytest.mark.parametrize("argv", [["launch"], ["replay", "{mcap}"]])
+def test_a_bad_domain_in_the_environment_is_one_line(value, fragment, argv, places, monkeypatch,
+                                                     capsys):
+    monkeypatch.setenv("ROS_DOMAIN_ID", value)
+    assert main([_fill(a, places) for a in argv]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and fragment in err, err
