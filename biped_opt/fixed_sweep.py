@@ -19,9 +19,14 @@ FIXED_INPUTS = {
 
 
 def theta_grid(lo: float, hi: float, num: int) -> npt.NDArray[np.float64]:
-    """``num`` evenly spaced angles in [lo, hi], with 0 inserted exactly if it lies inside."""
+    """``num`` evenly spaced angles in [lo, hi], both ends kept, with 0 exactly if it lies
+    inside: the interior angle nearest to 0 moves onto it, or, when the nearest is an end (a
+    grid of 2 or a range whose end lies close to 0), 0 is added (num + 1 angles)."""
     grid = np.linspace(lo, hi, num)
-    if lo < 0.0 < hi:
-        grid[np.argmin(np.abs(grid))] = 0.0
-        grid = np.unique(grid)
+    if lo < 0.0 < hi and 0.0 not in grid:
+        nearest = int(np.argmin(np.abs(grid)))
+        if 0 < nearest < num - 1:
+            grid[nearest] = 0.0
+        else:
+            grid = np.insert(grid, nearest + (grid[nearest] < 0.0), 0.0)
     return grid

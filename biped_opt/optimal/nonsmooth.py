@@ -7,8 +7,11 @@ can only arise where one of them changes, so the analysis
 1. labels every grid point with (mode order, acting decision, active bound) - for fixed inputs
    the mode order alone;
 2. locates every change of label to a bracket of width <= 1e-10 in th0 by bisection
-   (:func:`biped_opt.nonsmooth.locate_switch`); changes closer than :data:`MERGE_TOL` (the band
-   of simultaneous events around th0 = 0) are one point, put at 0 when the band holds 0;
+   (:func:`biped_opt.nonsmooth.locate_switch`), searching again right of each change found (a
+   coarse grid's interval can hold several); a bracket that ends in a band thinner than
+   :data:`MERGE_TOL` (the simultaneous events around th0 = 0 have a label of their own) is
+   widened over it, and changes closer than MERGE_TOL are one point, put at 0 when the band
+   holds 0. So the bracket holds the point on any grid, two angles included;
 3. measures one-sided limits, first and second derivatives of each quantity there
    (:func:`biped_opt.nonsmooth.one_sided`) and classifies: **jump** (limits differ), **kink**
    (continuous, first derivatives differ), **second-derivative** (C^1, second derivatives differ;
@@ -64,6 +67,8 @@ JUMP_TOL = {"outcome": 1e-7, "value": 1e-7, "policy": 1e-5}
 KINK_TOL = {"outcome": 1e-5, "value": 1e-5, "policy": 1e-3}
 #: relative threshold on second derivatives (C^1 quantities only)
 SECOND_TOL = 1e-2
+#: label changes searched for between two neighbouring grid points
+MAX_SWITCHES_PER_INTERVAL = 16
 #: largest and smallest one-sided steps [rad]
 H0 = 1e-2
 H_MIN = 1e-6
@@ -208,19 +213,48 @@ def _optimal_sample(r: OptimalResult) -> _Sample:
 
 
 # --- the engine -------------------------------------------------------------------------------
-def _switches(ev: _Evaluator, grid: npt.NDArray[np.float64], progress: Progress
+def _across_band(ev: _Evaluator, lo: float, hi: float, la: Hashable, lb: Hashable,
+                 limit: float) -> tuple[float, float, Hashable, Hashable]:
+    """Widen the bracket [lo, hi] of a change la | lb over a thin band on either side.
+
+    Near-simultaneous events are simulated as simultaneous within a band ~1e-9 wide around the
+    point where they coincide, and that band has a label of its own (AIR->GROUND between
+    AIR->RIGHT->GROUND and AIR->LEFT->GROUND). When a grid point falls inside the band, bisection
+    finds only the band's edge, a bracket that excludes the point itself (th0 = 2e-9 instead of
+    0). So: a label that does not reach MERGE_TOL beyond the bracket is a band, and the bracket
+    extends to its far edge."""
+    outer = max(lo - MERGE_TOL, -limit)
+    if outer < lo and ev.label(outer) != ev.label(lo):
+        lo, _ = locate_switch(ev.label, outer, lo, tol=LOCATE_TOL)
+        la = ev.label(outer)
+    outer = min(hi + MERGE_TOL, limit)
+    if outer > hi and ev.label(outer) != ev.label(hi):
+        _, hi = locate_switch(ev.label, hi, outer, tol=LOCATE_TOL)
+        lb = ev.label(outer)
+    return lo, hi, la, lb
+
+
+def _switches(ev: _Evaluator, grid: npt.NDArray[np.float64], limit: float, progress: Progress
               ) -> list[tuple[float, float, Hashable, Hashable]]:
     """Located label changes as (lo, hi, label_left, label_right), merged across bands."""
     labels = [ev.label(x) for x in grid]
     raw = []
     pairs = [k for k in range(grid.size - 1) if labels[k] != labels[k + 1]]
     for i, k in enumerate(pairs):
-        lo, hi = locate_switch(ev.label, float(grid[k]), float(grid[k + 1]), tol=LOCATE_TOL)
-        raw.append((lo, hi, labels[k], labels[k + 1]))
+        # bisection finds one change; on a coarse grid one interval can hold several (the band
+        # at 0 and a bound reached further on): search again right of each one found
+        a, b = float(grid[k]), float(grid[k + 1])
+        for _ in range(MAX_SWITCHES_PER_INTERVAL):
+            lo, hi = locate_switch(ev.label, a, b, tol=LOCATE_TOL)
+            raw.append(_across_band(ev, lo, hi, ev.label(lo), ev.label(hi), limit))
+            a = max(hi, raw[-1][1])
+            if a >= b or ev.label(a) == ev.label(b):
+                break
         progress.update(i + 1, max(len(pairs), 1))
+    raw.sort(key=lambda r: r[0])
     merged: list[tuple[float, float, Hashable, Hashable]] = []
     for lo, hi, la, lb in raw:
-        if merged and lo - merged[-1][1] <= MERGE_TOL:
+        if merged and lo - merged[-1][1] <= MERGE_TOL:  # (overlapping once widened, too)
             plo, _, pla, _ = merged[-1]
             merged[-1] = (plo, hi, pla, lb)
         else:
@@ -289,7 +323,7 @@ def _analyse(
     optimal: bool,
     progress: Progress,
 ) -> list[NonsmoothPoint]:
-    switches = _switches(ev, grid, progress)
+    switches = _switches(ev, grid, limit, progress)
     points: list[NonsmoothPoint] = []
     xs = [0.0 if lo <= 0.0 <= hi else 0.5 * (lo + hi) for lo, hi, _, _ in switches]
     for i, (lo, hi, _, _) in enumerate(switches):
