@@ -31,30 +31,41 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from biped_opt import ros
     from biped_opt.cli.args import output_directory
+    from biped_opt.cli.signals import stop_requested
     from biped_opt.maneuvers import spec
     from biped_opt.nodes.graph import Graph
     from biped_opt.nodes.recorder import SweepRequest
-    from biped_opt.nodes.run import stop_on_sigterm
     from biped_opt.plots.reproduce import reproduce
     from biped_opt.record.report import report
 
     output_directory("--out", args.out)
-    stop_on_sigterm()
     start = time.perf_counter()
     print(f"bringing up simulator, optimiser, recorder (ROS backend: {ros.BACKEND})", flush=True)
     recorded = []
-    with Graph(overrides={"simulator": {"autostart": False}}) as graph:
-        for maneuver, optimal, num in SWEEPS:
-            limit = spec(maneuver).theta0_limit
-            kind = "optimal" if optimal else "fixed"
-            t0 = time.perf_counter()
-            summary = graph.recorder.record(SweepRequest(
-                maneuver=maneuver, theta0_min=-limit, theta0_max=limit, num=num,
-                optimal=optimal, output=args.out / f"{maneuver}_{kind}.mcap"))
-            recorded.append(summary)
-            counts = ", ".join(f"{n} {t}" for t, n in summary.counts.items())
-            print(f"  {maneuver:9s} {kind:7s} {summary.points} angles -> {summary.path} "
-                  f"({counts}; {time.perf_counter() - t0:.1f} s)", flush=True)
+    # as `record`: a signal while the graph starts abandons it; during the sweeps it stops the
+    # current one after its point, finishes its file and skips the rest
+    with stop_requested(interrupt=True) as stop:
+        try:
+            graph = Graph(overrides={"simulator": {"autostart": False}})
+        except KeyboardInterrupt:
+            return 0
+        with graph:
+            stop.defer(graph.recorder.stop)
+            for maneuver, optimal, num in SWEEPS:
+                limit = spec(maneuver).theta0_limit
+                kind = "optimal" if optimal else "fixed"
+                t0 = time.perf_counter()
+                summary = graph.recorder.record(SweepRequest(
+                    maneuver=maneuver, theta0_min=-limit, theta0_max=limit, num=num,
+                    optimal=optimal, output=args.out / f"{maneuver}_{kind}.mcap"))
+                recorded.append(summary)
+                counts = ", ".join(f"{n} {t}" for t, n in summary.counts.items())
+                print(f"  {maneuver:9s} {kind:7s} {summary.recorded} angles -> {summary.path} "
+                      f"({counts}; {time.perf_counter() - t0:.1f} s)", flush=True)
+                if stop.is_set():
+                    print(f"stopped by a signal: {len(recorded)} of {len(SWEEPS)} sweeps "
+                          "recorded (the last one in part), no analysis", flush=True)
+                    return 0
     print("\nanalysing the recordings offline (biped-opt report) ...", flush=True)
     offline = report([s.path for s in recorded], args.out / "report")
     print("\nreproducing the figures and the exact nonsmooth table ...", flush=True)

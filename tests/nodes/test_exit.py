@@ -99,3 +99,28 @@ def test_record_stops_after_the_current_point_on_a_signal(sig, tmp_path):
     assert recording.complete
     points = len(recording.sweep_points())
     assert 0 < points < 4000 and f"after {points} of " in out_text
+
+
+def test_demo_stops_after_the_current_point_on_a_signal(tmp_path):
+    """``demo`` records four sweeps through the graph; SIGINT during the first one ends it with
+    status 0, that sweep's file finished, and no analysis."""
+    from biped_opt.record.reader import read_raw
+
+    proc = subprocess.Popen([sys.executable, "-m", "biped_opt.cli.main", "demo", "--out",
+                             str(tmp_path)], env=_env(unique_domain_id()),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stderr is not None
+        for line in proc.stderr:
+            if "[recorder]: ready: " in line:
+                break
+        time.sleep(1.0)  # inside the first (401-angle fixed-input) sweep
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=HANG_S)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert not [line for line in err.splitlines() if any(n in line for n in NOISE)], err
+    assert "stopped by a signal: 1 of 4 sweeps" in out, out
+    assert read_raw(tmp_path / "touchdown_fixed.mcap").complete
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["touchdown_fixed.mcap"]
