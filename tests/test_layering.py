@@ -8,7 +8,7 @@ import sys
 
 CORE = ["biped_opt", "biped_opt.model", "biped_opt.hybrid", "biped_opt.maneuvers",
         "biped_opt.nonsmooth", "biped_opt.fixed_sweep", "biped_opt.optimal",
-        "biped_opt.optimal.derivatives"]
+        "biped_opt.optimal.derivatives", "biped_opt.systems"]
 FORBIDDEN = ["rclpy", "cyclonedds", "rosbags", "mcap", "mcap_ros2", "matplotlib",
              "biped_opt.ros", "biped_opt.plots", "biped_opt.nodes", "biped_opt.record"]
 

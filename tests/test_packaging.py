@@ -34,6 +34,7 @@ ROSDEP_KEYS = {
     "scipy": "python3-scipy",
     "pyyaml": "python3-yaml",
     "matplotlib": "python3-matplotlib",
+    "sympy": "python3-sympy",
     "pytest": "python3-pytest",
 }
 

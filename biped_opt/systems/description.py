@@ -1,0 +1,198 @@
+"""A mechanical system subject to unilateral constraints, written symbolically (SYSTEMS.md Sec. 1).
+
+What a researcher writes to bring their own system: coordinates, parameters with defaults, named
+inputs, the mass matrix M(q), the generalised forces f_J(q, q', u) of each contact mode J, the
+unilateral constraints a_j(q) >= 0, the coefficient of restitution and the maneuvers. Everything
+is a SymPy expression in the symbols the :class:`System` hands out (``sympy.physics.mechanics``
+output works as long as it is expressed in them). Nothing here is numeric: the Jacobian Da, the
+velocity term (d/dt Da) q' and the checks of shapes and symbols are derived by
+:mod:`biped_opt.systems.derive`.
+
+    bar = System("rocking_bar", ["x", "z", "th"], parameters={"m": 1, "w": 0.5, "g": 1})
+    x, z, th = bar.q
+    bar.mass_matrix = sympy.diag(bar.p.m, bar.p.m, bar.p.m * bar.p.w ** 2 / 3)
+    bar.forces = lambda J: [0, -bar.p.m * bar.p.g, 0]
+    bar.constraint("left", z - bar.p.w * sympy.sin(th))
+    ...
+
+A contact mode J is given to ``forces`` as a frozenset of constraint names (``"left" in J``);
+any dependence of the forces on J is allowed: that is force coupling.
+"""
+
+from __future__ import annotations
+
+import keyword
+import re
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import sympy as sp
+
+from biped_opt.errors import BipedOptError
+
+__all__ = ["System", "ManeuverDescription", "SystemDescriptionError", "Symbols"]
+
+_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+
+class SystemDescriptionError(BipedOptError, ValueError):
+    """A system description is wrong; the message names the system, the item and what is
+    wrong (and the file, for a system loaded from one)."""
+
+
+class Symbols:
+    """Named symbols with attribute and item access (``sys.p.m``, ``sys.p["m"]``), in order."""
+
+    def __init__(self, kind: str, names: Sequence[str], symbols: Sequence[sp.Symbol]) -> None:
+        self._kind = kind
+        self._by_name = dict(zip(names, symbols))
+
+    def __getattr__(self, name: str) -> sp.Symbol:
+        try:
+            return self.__dict__["_by_name"][name]
+        except KeyError:
+            raise AttributeError(f"no {self.__dict__['_kind']} named {name!r}") from None
+
+    def __getitem__(self, name: str) -> sp.Symbol:
+        try:
+            return self._by_name[name]
+        except KeyError:
+            raise KeyError(f"no {self._kind} named {name!r}") from None
+
+    def __iter__(self):
+        return iter(self._by_name.values())
+
+    def __len__(self) -> int:
+        return len(self._by_name)
+
+    def names(self) -> tuple[str, ...]:
+        return tuple(self._by_name)
+
+    def __repr__(self) -> str:
+        return f"{self._kind}s({', '.join(self._by_name)})"
+
+
+@dataclass(frozen=True)
+class ManeuverDescription:
+    """A maneuver (SYSTEMS.md Sec. 1): an initial-state family x0(s) of one scalar s, the initial
+    mode, a terminal guard (ends when it falls through 0), an outcome of the final state.
+
+    ``initial`` maps coordinates and velocities (symbols of ``System.q``/``System.dq``) to
+    expressions in ``System.s`` and the parameters; those not given start at 0.
+    ``armed_after="touchdown"``: the terminal guard counts only after the first touchdown.
+    ``final_mode``: the mode the terminal event must happen in (None: any).
+    ``s_range``: the valid range of s (beyond it other mode sequences appear).
+    """
+
+    name: str
+    initial: Mapping[sp.Symbol, Any]
+    mode: frozenset[str]
+    terminal: Any
+    outcome: Any
+    armed_after: str | None = None
+    final_mode: frozenset[str] | None = None
+    s_range: tuple[float, float] = (-1.0, 1.0)
+    description: str = ""
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+
+class System:
+    """A mechanical system subject to unilateral constraints, described symbolically.
+
+    ``coordinates`` names q (d of them); the velocities are ``<name>_dot``. ``parameters`` maps
+    names to default values (runtime data: changing one never recompiles); ``inputs`` names the
+    inputs u. ``restitution`` may be a number or an expression in the parameters.
+    """
+
+    def __init__(self, name: str, coordinates: Sequence[str], *,
+                 parameters: Mapping[str, float] | None = None, inputs: Sequence[str] = (),
+                 restitution: Any = 0, s: str = "s") -> None:
+        _check_name("system name", name, name)
+        self.name = name
+        coordinates = list(coordinates)
+        parameters = dict(parameters or {})
+        inputs = list(inputs)
+        taken: dict[str, str] = {}
+        for kind, names in (("coordinate", coordinates),
+                            ("velocity", [f"{c}_dot" for c in coordinates]),
+                            ("parameter", list(parameters)), ("input", inputs), ("s", [s])):
+            for item in names:
+                _check_name(kind, item, name)
+                if item in taken:
+                    raise SystemDescriptionError(
+                        f"{name}: {kind} {item!r} is also a {taken[item]} name")
+                taken[item] = kind
+        if not coordinates:
+            raise SystemDescriptionError(f"{name}: coordinates: at least one is needed")
+        for key, value in parameters.items():
+            try:
+                parameters[key] = float(value)
+            except (TypeError, ValueError):
+                raise SystemDescriptionError(
+                    f"{name}: parameter {key!r}: default must be a number, got {value!r}"
+                ) from None
+        self.q = tuple(sp.Symbol(c, real=True) for c in coordinates)
+        self.dq = tuple(sp.Symbol(f"{c}_dot", real=True) for c in coordinates)
+        self.p = Symbols("parameter", list(parameters),
+                         [sp.Symbol(k, real=True) for k in parameters])
+        self.u = Symbols("input", inputs, [sp.Symbol(k, real=True) for k in inputs])
+        self.s = sp.Symbol(s, real=True)
+        self.defaults: dict[str, float] = parameters
+        self.mass_matrix: Any = None
+        self.forces: Callable[[frozenset[str]], Any] | Any = None
+        self.restitution: Any = restitution
+        self.constraints: dict[str, Any] = {}
+        self.maneuvers: dict[str, ManeuverDescription] = {}
+        self.source: str | None = None  #: the file a system was loaded from, for messages
+
+    # -- building ---------------------------------------------------------------------------
+    @property
+    def coordinate_names(self) -> tuple[str, ...]:
+        return tuple(str(c) for c in self.q)
+
+    def constraint(self, name: str, expression: Any) -> System:
+        """Unilateral constraint a_j(q) >= 0 named ``name`` (contact where it is 0)."""
+        _check_name("constraint name", name, self.name)
+        if name in self.constraints:
+            raise SystemDescriptionError(f"{self.name}: constraint {name!r} is given twice")
+        self.constraints[name] = expression
+        return self
+
+    def maneuver(self, name: str, *, initial: Mapping[Any, Any], terminal: Any, outcome: Any,
+                 mode: Iterable[str] = (), armed_after: str | None = None,
+                 final_mode: Iterable[str] | None = None,
+                 s_range: tuple[float, float] = (-1.0, 1.0), description: str = "",
+                 **extra: Any) -> System:
+        """Add a maneuver (see :class:`ManeuverDescription`)."""
+        _check_name("maneuver name", name, self.name)
+        if name in self.maneuvers:
+            raise SystemDescriptionError(f"{self.name}: maneuver {name!r} is given twice")
+        if armed_after not in (None, "touchdown"):
+            raise SystemDescriptionError(
+                f"{self.name}: maneuver {name!r}: armed_after must be None or 'touchdown', "
+                f"got {armed_after!r}")
+        lo, hi = (float(v) for v in s_range)
+        if not lo < hi:
+            raise SystemDescriptionError(
+                f"{self.name}: maneuver {name!r}: s_range must have lo < hi, got {s_range!r}")
+        self.maneuvers[name] = ManeuverDescription(
+            name=name, initial=dict(initial), mode=frozenset(mode), terminal=terminal,
+            outcome=outcome, armed_after=armed_after,
+            final_mode=None if final_mode is None else frozenset(final_mode),
+            s_range=(lo, hi), description=description, extra=dict(extra))
+        return self
+
+    def where(self) -> str:
+        """How messages name this system: its file when it came from one."""
+        return f"{self.source}: {self.name}" if self.source else self.name
+
+    def __repr__(self) -> str:
+        return (f"System({self.name!r}, d={len(self.q)}, constraints={list(self.constraints)}, "
+                f"inputs={list(self.u.names())}, maneuvers={list(self.maneuvers)})")
+
+
+def _check_name(kind: str, name: Any, system: str) -> None:
+    if not isinstance(name, str) or not _NAME.match(name) or keyword.iskeyword(name):
+        raise SystemDescriptionError(
+            f"{system}: {kind} must be a Python identifier, got {name!r}")
