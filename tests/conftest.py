@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import os
+from pathlib import Path
 
 import pytest
 
@@ -27,6 +28,9 @@ def params() -> BipedParams:
 # exists so subprocesses inherit it too.
 os.environ["ROS_LOCALHOST_ONLY"] = "1"
 os.environ.pop("CYCLONEDDS_URI", None)
+
+# compiled system modules go to the checkout's own cache (a fresh clone compiles them afresh)
+os.environ.setdefault("BIPED_OPT_CACHE", str(Path(__file__).resolve().parents[1] / ".cache"))
 
 _DOMAIN_COUNTER = itertools.count()
 

@@ -1,0 +1,461 @@
+"""The event-driven kernel of every generated system module (MODEL.md Sec. 3, SYSTEMS.md Sec. 1).
+
+:mod:`biped_opt.systems.codegen` appends the code below the ``# --- kernel ---`` marker to each
+system's module, after the system's own functions (``vector_field``, ``apply_impact``,
+``guard_value``, ``constraint_rates``, ``terminal_value``, ``outcome_value``, ``initial_state``)
+and its DOP853 step; those names, and ``NSTATE``, ``NCON``, ``NGUARDS``, ``WORKSPACE``,
+``TERM_AFTER_TOUCHDOWN``, ``FINAL_MODE``, ``INITIAL_MODE``, are defined there, which is why this
+file is not imported itself (ruff's undefined-name check is off for it).
+
+It is the biped kernel's algorithm (:mod:`biped_opt.hybrid._kernel`: DOP853 with 7th-order dense
+output, guards monitored at step ends and stages, event roots by Anderson-Bjorck regula falsi on
+the interpolant, simultaneous events by the guards' rates) for n constraints, plus restitution:
+after an impact with gamma > 0 a constraint whose velocity Da_j q'+ is positive separates at once
+and its guard stays disarmed until a_j > REARM_TOL.
+
+Layouts: ``events[k] = [t, kind, touchdown_mask, liftoff_mask, mode_before, mode_after,
+y_before (2d), y_after (2d)]``; ``samples[k] = [t, y (2d), mode, lambda (n)]``.
+"""
+
+import math  # noqa: F401  (used by the generated module this text is appended to)
+
+import numba as nb  # noqa: F401
+import numpy as np  # noqa: F401
+
+# --- kernel ---
+
+OK = 0
+HORIZON = 1
+MAX_EVENTS = 2
+INCONSISTENT = 3
+APEX_IN_CONTACT = 4
+STEP_FAILURE = 5
+
+EVENT_CONTACT = 1
+EVENT_TERMINAL = 2
+EVENT_WIDTH = 6 + 2 * NSTATE
+SAMPLE_WIDTH = 2 + NSTATE + NCON
+NLAM = max(NCON, 1)
+
+SIMULTANEOUS_TOL = 1e-9
+REARM_TOL = 1e-10
+#: a constraint separates after an impact when its velocity exceeds this
+SEPARATION_TOL = 1e-12
+
+_SAFETY = 0.9
+_MIN_FACTOR = 0.2
+_MAX_FACTOR = 10.0
+_MAX_STEPS = 100_000
+_MIN_FACTOR_TRIAL = 1e-3
+_EVENT_STEP_FRACTION = 0.7
+_ROOT_XTOL = 1e-13
+
+CFG_T_END = 0
+CFG_MAX_EVENTS = 1
+CFG_RTOL = 2
+CFG_ATOL = 3
+CFG_H_MAX = 4
+CFG_SAMPLE_DT = 5
+CFG_SIZE = 6
+
+
+@nb.njit(**HOT_PATH)
+def _inverse_eighth_root(err):
+    return 1.0 / math.sqrt(math.sqrt(math.sqrt(err)))
+
+
+@nb.njit(**HOT_PATH)
+def _dense_eval(F, y, x, out):
+    """The 7th-order interpolant at fraction x of the step that started at y."""
+    xm = 1.0 - x
+    for i in range(y.shape[0]):
+        out[i] = y[i] + x * (F[0, i] + xm * (F[1, i] + x * (F[2, i] + xm * (
+            F[3, i] + x * (F[4, i] + xm * (F[5, i] + x * F[6, i]))))))
+
+
+@nb.njit(**HOT_PATH)
+def _guard_at(p, mode, u, code, y, i, dy, lam):
+    """Guard i at a state y whose reactions are not known yet (dy, lam: scratch)."""
+    if i < NCON and mode >> i & 1:
+        vector_field(p, mode, y, 0, u, dy, 0, lam, 0)
+    return guard_value(p, mode, u, code, y, 0, lam, 0, i)
+
+
+@nb.njit(**HOT_PATH)
+def _guard_on_dense(p, mode, u, code, F, y, x, i, tmp, dy, lam):
+    _dense_eval(F, y, x, tmp)
+    return _guard_at(p, mode, u, code, tmp, i, dy, lam)
+
+
+@nb.njit(**HOT_PATH)
+def _guard_rate(p, mode, u, code, y, f, i, tmp, dy, lam):
+    """d/dt of guard i along the flow of ``mode`` at y (f = vector field at y), by a central
+    difference: only its sign is used, to decide which near-zero guards flip together."""
+    eps = 1e-6
+    for m in range(y.shape[0]):
+        tmp[m] = y[m] + eps * f[m]
+    g_plus = _guard_at(p, mode, u, code, tmp, i, dy, lam)
+    for m in range(y.shape[0]):
+        tmp[m] = y[m] - eps * f[m]
+    g_minus = _guard_at(p, mode, u, code, tmp, i, dy, lam)
+    return (g_plus - g_minus) / (2.0 * eps)
+
+
+@nb.njit(**HOT_PATH)
+def _root_on_dense(p, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, dy, lam):
+    """Root in (xa, xb] of guard i on the dense output (ga > 0 >= gb), by regula falsi with
+    the Anderson-Bjorck modification, to a bracket below _ROOT_XTOL of the step."""
+    side = 0
+    for _ in range(200):
+        if xb - xa <= _ROOT_XTOL:
+            break
+        x = (xa * gb - xb * ga) / (gb - ga)
+        if not xa < x < xb:
+            x = 0.5 * (xa + xb)
+        x = min(max(x, xa + 0.5 * _ROOT_XTOL), xb - 0.5 * _ROOT_XTOL)
+        gx = _guard_on_dense(p, mode, u, code, F, y, x, i, tmp, dy, lam)
+        if gx > 0.0:
+            if side == 1:
+                m = 1.0 - gx / ga
+                gb *= m if m > 0.0 else 0.5
+            xa, ga = x, gx
+            side = 1
+        else:
+            if gx == 0.0:
+                xb = x
+                break
+            if side == -1:
+                m = 1.0 - gx / gb
+                ga *= m if m > 0.0 else 0.5
+            xb, gb = x, gx
+            side = -1
+    return xb
+
+
+@nb.njit(**HOT_PATH)
+def _record_sample(samples, ns, t, y, mode, lam):
+    if ns < samples.shape[0]:
+        samples[ns, 0] = t
+        for k in range(NSTATE):
+            samples[ns, 1 + k] = y[k]
+        samples[ns, 1 + NSTATE] = mode
+        for j in range(NCON):
+            samples[ns, 2 + NSTATE + j] = lam[j]
+    return ns + 1
+
+
+@nb.njit(**HOT_PATH)
+def _initial_step(p, mode, u, y, f, rtol, atol, h_max, tmp, ftmp, lam):
+    """Starting step size (Hairer, Norsett and Wanner, Sec. II.4), one extra evaluation."""
+    n = y.shape[0]
+    d0 = 0.0
+    d1 = 0.0
+    for i in range(n):
+        scale = atol + rtol * abs(y[i])
+        d0 += (y[i] / scale) ** 2
+        d1 += (f[i] / scale) ** 2
+    d0 = math.sqrt(d0 / n)
+    d1 = math.sqrt(d1 / n)
+    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    for i in range(n):
+        tmp[i] = y[i] + h0 * f[i]
+    vector_field(p, mode, tmp, 0, u, ftmp, 0, lam, 0)
+    d2 = 0.0
+    for i in range(n):
+        scale = atol + rtol * abs(y[i])
+        d2 += ((ftmp[i] - f[i]) / scale) ** 2
+    d2 = math.sqrt(d2 / n) / h0
+    if d1 <= 1e-15 and d2 <= 1e-15:
+        h1 = max(1e-6, h0 * 1e-3)
+    else:
+        h1 = (0.01 / max(d1, d2)) ** (1.0 / 8.0)
+    return min(100.0 * h0, h1, h_max)
+
+
+@nb.njit(**HOT_PATH)
+def _all_guards(p, mode, u, code, y, lam, out):
+    for i in range(NGUARDS):
+        out[i] = guard_value(p, mode, u, code, y, 0, lam, 0, i)
+
+
+@nb.njit(**HOT_PATH)
+def simulate_kernel(p, code, y0, mode0, u, cfg, samples, events, y_out):
+    """Integrate maneuver ``code`` from (t = 0, y0, mode0) to its terminal event.
+
+    Returns (status, t_final, mode_final, n_events, n_samples, nfev, nsteps, nrejected).
+    """
+    term_after_touchdown = TERM_AFTER_TOUCHDOWN[code] != 0
+    term_mode = FINAL_MODE[code]
+    t_end = cfg[CFG_T_END]
+    max_events = int(cfg[CFG_MAX_EVENTS])
+    rtol = cfg[CFG_RTOL]
+    atol = cfg[CFG_ATOL]
+    h_max = cfg[CFG_H_MAX]
+    sample_dt = cfg[CFG_SAMPLE_DT]
+    term = NCON  # index of the terminal guard
+
+    n = NSTATE
+    W = np.zeros(WORKSPACE)
+    F = np.zeros((7, n))
+    y = np.zeros(n)
+    f = np.zeros(n)
+    y_new = np.zeros(n)
+    f_new = np.zeros(n)
+    tmp = np.zeros(n)
+    tmp2 = np.zeros(n)
+    rates = np.zeros(NLAM)
+    lam = np.zeros(NLAM)
+    lam_new = np.zeros(NLAM)
+    lam_tmp = np.zeros(NLAM)
+    gv = np.zeros(NGUARDS)
+    gv_new = np.zeros(NGUARDS)
+    probe = np.zeros(NGUARDS)
+    armed = np.zeros(NGUARDS, dtype=np.bool_)
+    flips = np.zeros(NGUARDS, dtype=np.bool_)
+    for k in range(n):
+        y[k] = y0[k]
+
+    mode = mode0
+    t = 0.0
+    nfev = 0
+    nsteps = 0
+    nrejected = 0
+    n_events = 0
+    ns = 0
+    status = OK
+    term_enabled = not term_after_touchdown
+    sampling = sample_dt > 0.0
+    next_sample = 0
+
+    vector_field(p, mode, y, 0, u, f, 0, lam, 0)
+    nfev += 1
+    _all_guards(p, mode, u, code, y, lam, gv)
+    for i in range(NGUARDS):
+        armed[i] = gv[i] > REARM_TOL
+    if not term_enabled:
+        armed[term] = False
+    if sampling:
+        ns = _record_sample(samples, ns, t, y, mode, lam)
+        next_sample = 1
+
+    h = _initial_step(p, mode, u, y, f, rtol, atol, h_max, tmp, tmp2, lam_tmp)
+    nfev += 1
+    trial = True
+    step_rejected = False
+    finished = False
+
+    while not finished:
+        if nsteps >= _MAX_STEPS or h < 1e-14 * max(1.0, t):
+            status = STEP_FAILURE
+            break
+        if t >= t_end:
+            status = HORIZON
+            break
+        h_step = min(h, h_max, t_end - t)
+        err = step(p, mode, u, code, y, f, h_step, W, y_new, f_new, lam_new, rtol, atol, probe)
+        nfev += 12
+        nsteps += 1
+        if not err < 1.0:
+            h = h_step * max(_MIN_FACTOR_TRIAL if trial else _MIN_FACTOR,
+                             _SAFETY * _inverse_eighth_root(err))
+            nrejected += 1
+            step_rejected = True
+            continue
+        if err == 0.0:
+            factor = _MAX_FACTOR
+        else:
+            factor = min(_MAX_FACTOR, _SAFETY * _inverse_eighth_root(err))
+        if step_rejected:
+            factor = min(1.0, factor)
+        step_rejected = False
+        trial = False
+        h = h_step * factor
+
+        _all_guards(p, mode, u, code, y_new, lam_new, gv_new)
+        any_candidate = False
+        for i in range(NGUARDS):
+            if armed[i] and gv[i] > 0.0 and (gv_new[i] <= 0.0 or probe[i] <= 1.0):
+                any_candidate = True
+
+        dense_ready = False
+        if any_candidate or sampling:
+            dense_coefficients(p, mode, u, y, f, h_step, W, y_new, f_new, F)
+            nfev += 3
+            dense_ready = True
+
+        first = -1
+        x_first = 2.0
+        if any_candidate:
+            for i in range(NGUARDS):
+                if not (armed[i] and gv[i] > 0.0):
+                    continue
+                if gv_new[i] <= 0.0:
+                    xb = 1.0
+                    gb = gv_new[i]
+                elif probe[i] <= 1.0:
+                    xb = -1.0
+                    gb = 0.0
+                    for m in range(1, 9):
+                        xm = probe[i] * m / 8.0
+                        gm = _guard_on_dense(p, mode, u, code, F, y, xm, i, tmp, tmp2,
+                                             lam_tmp)
+                        if gm <= 0.0:
+                            xb = xm
+                            gb = gm
+                            break
+                    if xb < 0.0:
+                        continue
+                else:
+                    continue
+                x = _root_on_dense(p, mode, u, code, F, y, i, 0.0, gv[i], xb, gb, tmp, tmp2,
+                                   lam_tmp)
+                if x < x_first:
+                    x_first = x
+                    first = i
+        t_stop = t + h_step if first < 0 else t + x_first * h_step
+
+        if sampling and dense_ready:
+            while True:
+                ts = next_sample * sample_dt
+                if ts > t_stop or (first >= 0 and ts >= t_stop):
+                    break
+                _dense_eval(F, y, (ts - t) / h_step, tmp)
+                vector_field(p, mode, tmp, 0, u, tmp2, 0, lam_tmp, 0)
+                nfev += 1
+                ns = _record_sample(samples, ns, ts, tmp, mode, lam_tmp)
+                next_sample += 1
+
+        if first < 0:
+            t = t_stop
+            for k in range(n):
+                y[k] = y_new[k]
+                f[k] = f_new[k]
+            for j in range(NLAM):
+                lam[j] = lam_new[j]
+            for i in range(NGUARDS):
+                gv[i] = gv_new[i]
+                if not armed[i] and (i < term or term_enabled):
+                    if gv[i] > REARM_TOL:
+                        armed[i] = True
+                    elif i < term and gv[i] < -REARM_TOL:
+                        status = INCONSISTENT  # a disarmed contact guard went the wrong way
+                        finished = True
+            continue
+
+        # --- event at t_stop: the state is the 7th-order interpolant at the root -----------
+        t = t_stop
+        _dense_eval(F, y, x_first, tmp)
+        for k in range(n):
+            y[k] = tmp[k]
+        vector_field(p, mode, y, 0, u, f, 0, lam, 0)
+        nfev += 1
+        _all_guards(p, mode, u, code, y, lam, gv_new)
+        for i in range(NGUARDS):
+            flips[i] = i == first
+            if i != first and armed[i]:
+                if abs(gv_new[i]) <= SIMULTANEOUS_TOL:
+                    flips[i] = _guard_rate(p, mode, u, code, y, f, i, tmp, tmp2, lam_tmp) < 0.0
+        touchdown = 0
+        liftoff = 0
+        for j in range(NCON):
+            if flips[j]:
+                if mode >> j & 1:
+                    liftoff |= 1 << j
+                else:
+                    touchdown |= 1 << j
+        if touchdown | liftoff:
+            row = events[n_events]
+            row[0] = t
+            row[1] = EVENT_CONTACT
+            row[2] = touchdown
+            row[3] = liftoff
+            row[4] = mode
+            for k in range(n):
+                row[6 + k] = y[k]
+            if sampling:
+                ns = _record_sample(samples, ns, t, y, mode, lam)
+            mode = mode ^ (touchdown | liftoff)
+            separated = 0
+            if touchdown:
+                apply_impact(p, mode, y)
+                # restitution: an impacted constraint moving apart leaves the mode at once
+                constraint_rates(p, y, 0, rates)
+                for j in range(NCON):
+                    if touchdown >> j & 1 and rates[j] > SEPARATION_TOL:
+                        separated |= 1 << j
+                mode = mode & ~separated
+            vector_field(p, mode, y, 0, u, f, 0, lam, 0)
+            nfev += 1
+            row[5] = mode
+            for k in range(n):
+                row[6 + n + k] = y[k]
+            n_events += 1
+            if sampling:
+                ns = _record_sample(samples, ns, t, y, mode, lam)
+            if touchdown and term_after_touchdown:
+                term_enabled = True
+            for j in range(NCON):
+                if (touchdown & ~separated) >> j & 1 and lam[j] < 0.0:
+                    status = INCONSISTENT  # the new contact would pull into the constraint
+                    finished = True
+            _all_guards(p, mode, u, code, y, lam, gv)
+            for i in range(NGUARDS):
+                if flips[i] or (i < NCON and separated >> i & 1):
+                    armed[i] = False
+                elif not armed[i] and (i < term or term_enabled):
+                    # events can follow each other without a plain step between them (a bar's
+                    # impacts 1e-7 apart): a guard that left its band since is armed again here
+                    armed[i] = gv[i] > REARM_TOL
+            h *= _EVENT_STEP_FRACTION
+            trial = True
+            if not finished and n_events >= max_events and not flips[term]:
+                status = MAX_EVENTS
+                finished = True
+        if flips[term] and not finished:
+            row = events[n_events]
+            row[0] = t
+            row[1] = EVENT_TERMINAL
+            row[2] = 0
+            row[3] = 0
+            row[4] = mode
+            row[5] = mode
+            for k in range(n):
+                row[6 + k] = y[k]
+                row[6 + n + k] = y[k]
+            if term_mode >= 0 and mode != term_mode:
+                status = APEX_IN_CONTACT
+            finished = True
+
+    if sampling:
+        ns = _record_sample(samples, ns, t, y, mode, lam)
+    for k in range(n):
+        y_out[k] = y[k]
+    return status, t, mode, n_events, ns, nfev, nsteps, nrejected
+
+
+@nb.njit(**HOT_PATH)
+def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out):
+    """:func:`simulate_kernel` from maneuver ``code``'s initial state at s."""
+    y0 = np.zeros(NSTATE)
+    initial_state(code, s, p, y0)
+    return simulate_kernel(p, code, y0, INITIAL_MODE[code], u, cfg, samples, events, y_out)
+
+
+@nb.njit(**HOT_PATH, parallel=True)
+def simulate_batch_kernel(p, code, ss, us, cfg, events, y_out, outcome, info):
+    """:func:`simulate_maneuver` over many s and inputs in parallel threads; ``outcome[k]``
+    receives the maneuver's outcome at the final state."""
+    no_samples = np.empty((0, SAMPLE_WIDTH))
+    for k in nb.prange(ss.shape[0]):
+        status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej = simulate_maneuver(
+            p, code, ss[k], us[k], cfg, no_samples, events[k], y_out[k]
+        )
+        outcome[k] = outcome_value(code, p, y_out[k], 0)
+        info[k, 0] = status
+        info[k, 1] = t_f
+        info[k, 2] = mode_f
+        info[k, 3] = n_ev
+        info[k, 4] = n_s
+        info[k, 5] = nfev
+        info[k, 6] = nsteps
+        info[k, 7] = nrej

@@ -1,0 +1,394 @@
+"""Source of a system's compiled module: its Eq. (1) as straight-line code, and the simulator.
+
+:func:`render` turns a :class:`~biped_opt.systems.derive.DerivedSystem` into the text of one
+Python module that Numba compiles (and caches on disk, keyed by that file):
+
+- ``vector_field(p, mode, y, yo, u, out, off, lam, lo)``: (q', q'') and the reactions lambda of
+  mode J at the state y[yo:yo + 2d], Eq. (1a). Per mode, straight-line code on scalars: the
+  forces f_J (common subexpressions shared), an unrolled Cholesky factorisation of M(q) that
+  skips the entries known to be zero (a diagonal M costs d divisions), the active constraints'
+  Schur complement Da_J M^-1 Da_J^T solved the same way. Nothing allocates.
+- ``apply_impact(p, mode, y)``: q'+ = Delta_J q'- on entering J, Eq. (1b).
+- the constraints a(q) and their rates Da q', the maneuvers' initial states, terminal guards and
+  outcomes, and the guards of every mode (a_j in the air, lambda_j in contact, the terminal one);
+- the DOP853 step (:mod:`biped_opt.hybrid._dop853_gen` with this system's dimensions) and the
+  event-driven kernel (:mod:`biped_opt.systems._kernel_body`, appended verbatim).
+
+Parameters and inputs are arguments (``p``, ``u``), never constants: changing a parameter value
+does not change the source, so it does not recompile.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import sympy as sp
+from sympy.printing.pycode import PythonCodePrinter
+
+from biped_opt.hybrid import _dop853_gen
+from biped_opt.systems.derive import DerivedSystem
+
+__all__ = ["render", "source_key", "KERNEL_BODY"]
+
+KERNEL_BODY = Path(__file__).with_name("_kernel_body.py")
+#: bump when the generated code's form changes (the cache key includes it)
+FORMAT = 1
+
+
+class _Printer(PythonCodePrinter):
+    """``math.*`` calls and float literals, the form Numba compiles best."""
+
+    def _print_Integer(self, expr: sp.Integer) -> str:
+        return f"{float(expr)!r}"
+
+    def _print_Rational(self, expr: sp.Rational) -> str:
+        return f"{float(expr)!r}"
+
+    def _print_Half(self, expr: sp.Rational) -> str:
+        return "0.5"
+
+
+class _Emitter:
+    """Lines of one function body with fresh scalar names and structural zeros folded."""
+
+    def __init__(self, indent: str = "    ") -> None:
+        self.lines: list[str] = []
+        self.indent = indent
+        self.count = 0
+        self.printer = _Printer({"fully_qualified_modules": True})
+
+    def line(self, text: str) -> None:
+        self.lines.append(self.indent + text)
+
+    def fresh(self, prefix: str) -> str:
+        self.count += 1
+        return f"_{prefix}{self.count}"  # (user symbols are identifiers without a leading _)
+
+    def expr(self, e: sp.Expr) -> str:
+        return self.printer.doprint(e)
+
+    def assign(self, prefix: str, text: str) -> str:
+        if _is_zero(text):
+            return "0.0"
+        name = self.fresh(prefix)
+        self.line(f"{name} = {text}")
+        return name
+
+    def exprs(self, values: list[sp.Expr], prefix: str) -> list[str]:
+        """Assign each expression (common subexpressions once) and return the names, or
+        "0.0" for the ones that are zero."""
+        subs, reduced = sp.cse(values, symbols=sp.numbered_symbols(f"_s{prefix}{self.count}_"))
+        for sym, sub in subs:
+            self.line(f"{sym} = {self.expr(sub)}")
+        return [self.assign(prefix, self.expr(r)) if r != 0 else "0.0" for r in reduced]
+
+
+def _is_zero(text: str) -> bool:
+    return text in ("0", "0.0", "-0.0")
+
+
+def _mul(a: str, b: str) -> str:
+    return "0.0" if _is_zero(a) or _is_zero(b) else f"{a} * {b}"
+
+
+def _sum(terms: list[str]) -> str:
+    terms = [t for t in terms if not _is_zero(t)]
+    return " + ".join(terms) if terms else "0.0"
+
+
+def _cholesky(em: _Emitter, m: list[list[str]], tag: str) -> list[list[str]]:
+    """Unrolled Cholesky factor L (lower) of the symmetric matrix named by ``m``: entries that
+    are structurally zero stay "0.0", and so do those of L that no fill-in reaches."""
+    k = len(m)
+    L = [["0.0"] * k for _ in range(k)]
+    for j in range(k):
+        diag = _sum([m[j][j], *(f"-({_mul(L[j][r], L[j][r])})" for r in range(j)
+                                if not _is_zero(L[j][r]))])
+        L[j][j] = em.assign(f"{tag}d", f"math.sqrt({diag})")
+        inv = em.assign(f"{tag}i", f"1.0 / {L[j][j]}")
+        for i in range(j + 1, k):
+            terms = [m[i][j], *(f"-({_mul(L[i][r], L[j][r])})" for r in range(j)
+                                if not _is_zero(_mul(L[i][r], L[j][r])))]
+            total = _sum(terms)
+            L[i][j] = "0.0" if _is_zero(total) else em.assign(f"{tag}l", f"({total}) * {inv}")
+    return L
+
+
+def _solve(em: _Emitter, L: list[list[str]], b: list[str], tag: str) -> list[str]:
+    """x with L L^T x = b (forward then back substitution, zeros skipped)."""
+    k = len(L)
+    z = []
+    for i in range(k):
+        total = _sum([b[i], *(f"-({_mul(L[i][r], z[r])})" for r in range(i)
+                              if not _is_zero(_mul(L[i][r], z[r])))])
+        z.append("0.0" if _is_zero(total) else em.assign(tag, f"({total}) / {L[i][i]}"))
+    x = [""] * k
+    for i in reversed(range(k)):
+        total = _sum([z[i], *(f"-({_mul(L[r][i], x[r])})" for r in range(i + 1, k)
+                              if not _is_zero(_mul(L[r][i], x[r])))])
+        x[i] = "0.0" if _is_zero(total) else em.assign(tag, f"({total}) / {L[i][i]}")
+    return x
+
+
+def _bindings(derived: DerivedSystem, em: _Emitter, *, velocities: bool, inputs: bool) -> dict:
+    """Lines that read q (and q', u, p) into scalars named after the symbols."""
+    system = derived.system
+    d = derived.ndof
+    for i, c in enumerate(system.q):
+        em.line(f"{c} = y[yo + {i}]")
+    if velocities:
+        for i, c in enumerate(system.dq):
+            em.line(f"{c} = y[yo + {d + i}]")
+    for k, name in enumerate(system.p.names()):
+        em.line(f"{system.p[name]} = p[{k}]")
+    if inputs:
+        for k, name in enumerate(system.u.names()):
+            em.line(f"{system.u[name]} = u[{k}]")
+    return {}
+
+
+def _mode_branches(n: int) -> list[tuple[str, int]]:
+    return [("if" if mask == 0 else "elif", mask) for mask in range(1 << n)]
+
+
+def _factors(derived: DerivedSystem, em: _Emitter
+             ) -> tuple[list[list[str]], list[list[str]]]:
+    """Cholesky factor L of M(q) and the entries of Da(q), as scalars of the function body."""
+    d, n = derived.ndof, derived.nconstraints
+    m = em.exprs([derived.mass_matrix[i, j] for i in range(d) for j in range(d)], "m")
+    L = _cholesky(em, [[m[i * d + j] for j in range(d)] for i in range(d)], "c")
+    da = em.exprs(list(derived.jacobian), "a") if n else []
+    return L, [[da[j * d + i] for i in range(d)] for j in range(n)]
+
+
+def _schur(br: _Emitter, L: list[list[str]], Da: list[list[str]], active: list[int]
+           ) -> tuple[list[list[str]], list[list[str]]]:
+    """Columns M^-1 Da_j^T of the active constraints and the Cholesky factor of
+    Da_J M^-1 Da_J^T."""
+    d = len(L)
+    cols = [_solve(br, L, [Da[j][i] for i in range(d)], "y") for j in active]
+    S = [[br.assign("s", _sum([_mul(Da[ja][i], cols[b][i]) for i in range(d)]))
+          for b in range(len(active))] for ja in active]
+    return cols, _cholesky(br, S, "k")
+
+
+def _vector_field(derived: DerivedSystem) -> list[str]:
+    d, n = derived.ndof, derived.nconstraints
+    out = ["@nb.njit(**HOT_PATH)",
+           "def vector_field(p, mode, y, yo, u, out, off, lam, lo):",
+           '    """(q\', q\'\') of mode ``mode`` at y[yo:yo + 2d] to out[off:off + 2d], the',
+           '    reactions to lam[lo:lo + n] (0 for inactive constraints), Eq. (1a)."""']
+    em = _Emitter()
+    _bindings(derived, em, velocities=True, inputs=True)
+    L, Da = _factors(derived, em)
+    rate = em.exprs(list(derived.jacobian_rate), "r") if n else []
+    for i in range(d):
+        em.line(f"out[off + {i}] = y[yo + {d + i}]")
+    out += em.lines
+    for keyword, mask in _mode_branches(n):
+        out.append(f"    {keyword} mode == {mask}:")
+        br = _Emitter("        ")
+        br.count = em.count + 1000 * (mask + 1)
+        f = br.exprs(list(derived.forces[mask]), "f")
+        x = _solve(br, L, f, "x")
+        active = [j for j in range(n) if mask >> j & 1]
+        acc = x
+        lams = {}
+        if active:
+            cols, Ls = _schur(br, L, Da, active)
+            rhs = [br.assign("b", "-(" + _sum([*(_mul(Da[a][i], x[i]) for i in range(d)),
+                                               rate[a]]) + ")")
+                   for a in active]
+            lam = _solve(br, Ls, rhs, "l")
+            lams = dict(zip(active, lam))
+            acc = [br.assign("q", _sum([x[i], *(_mul(cols[b][i], lam[b])
+                                                for b in range(len(active)))]))
+                   for i in range(d)]
+        for i in range(d):
+            br.line(f"out[off + {d + i}] = {acc[i]}")
+        for j in range(n):
+            br.line(f"lam[lo + {j}] = {lams.get(j, '0.0')}")
+        out += br.lines
+    return out
+
+
+def _impact(derived: DerivedSystem) -> list[str]:
+    d, n = derived.ndof, derived.nconstraints
+    out = ["@nb.njit(**HOT_PATH)",
+           "def apply_impact(p, mode, y):",
+           '    """q\'+ = Delta_J q\'- in place on entering mode J, Eq. (1b)."""',
+           "    yo = 0"]
+    em = _Emitter()
+    _bindings(derived, em, velocities=True, inputs=False)
+    gamma = em.assign("g", em.expr(derived.restitution)) if derived.restitution != 0 else "0.0"
+    L, Da = _factors(derived, em)
+    out += em.lines
+    v = [str(c) for c in derived.system.dq]
+    for mask in range(1, 1 << n):  # the air mode has no impact
+        active = [j for j in range(n) if mask >> j & 1]
+        out.append(f"    {'if' if mask == 1 else 'elif'} mode == {mask}:")
+        br = _Emitter("        ")
+        br.count = em.count + 1000 * (mask + 1)
+        cols, Ls = _schur(br, L, Da, active)
+        normal = [br.assign("v", _sum([_mul(Da[a][i], v[i]) for i in range(d)])) for a in active]
+        w = _solve(br, Ls, normal, "w")
+        for i in range(d):
+            delta = _sum([_mul(cols[b][i], w[b]) for b in range(len(active))])
+            if not _is_zero(delta):
+                br.line(f"y[{d + i}] = {v[i]} - (1.0 + {gamma}) * ({delta})")
+        out += br.lines
+    return out
+
+
+def _scalar_function(name: str, doc: str, args: str, derived: DerivedSystem,
+                     exprs: list[sp.Expr], target: str, *, inputs: bool) -> list[str]:
+    out = ["@nb.njit(**HOT_PATH)", f"def {name}({args}):", f'    """{doc}"""']
+    em = _Emitter()
+    _bindings(derived, em, velocities=True, inputs=inputs)
+    values = em.exprs(exprs, "e") if exprs else []
+    for k, v in enumerate(values):
+        em.line(f"{target}[{k}] = {v}")
+    return out + em.lines
+
+
+def _per_maneuver(name: str, doc: str, args: str, derived: DerivedSystem,
+                  pick, *, inputs: bool, returns: bool) -> list[str]:
+    out = ["@nb.njit(**HOT_PATH)", f"def {name}({args}):", f'    """{doc}"""']
+    em = _Emitter()
+    _bindings(derived, em, velocities=True, inputs=inputs)
+    out += em.lines
+    for code, m in enumerate(derived.maneuvers.values()):
+        out.append(f"    {'if' if code == 0 else 'elif'} code == {code}:")
+        br = _Emitter("        ")
+        br.count = em.count + 1000 * (code + 1)
+        (value,) = br.exprs([pick(m)], "t")
+        out += br.lines
+        out.append(f"        return {value}")
+    out.append("    return 0.0")
+    return out
+
+
+def _initial(derived: DerivedSystem) -> list[str]:
+    system = derived.system
+    out = ["@nb.njit(**HOT_PATH)", "def initial_state(code, s, p, y0):",
+           '    """The initial state (q, q\') of maneuver ``code`` at s into y0."""']
+    for k, name in enumerate(system.p.names()):
+        out.append(f"    {system.p[name]} = p[{k}]")
+    out.append(f"    {system.s} = s")
+    for code, m in enumerate(derived.maneuvers.values()):
+        out.append(f"    {'if' if code == 0 else 'elif'} code == {code}:")
+        br = _Emitter("        ")
+        values = br.exprs(list(m.initial), "i")
+        for k, v in enumerate(values):
+            br.line(f"y0[{k}] = {v}")
+        out += br.lines
+    return out
+
+
+def _guards(derived: DerivedSystem) -> list[str]:
+    n = derived.nconstraints
+    out = ["@nb.njit(**HOT_PATH)",
+           "def constraint_value(j, p, y, yo):",
+           '    """a_j(q) at the state y[yo:]."""']
+    em = _Emitter()
+    _bindings(derived, em, velocities=False, inputs=False)
+    out += em.lines
+    for j in range(n):
+        out.append(f"    {'if' if j == 0 else 'elif'} j == {j}:")
+        br = _Emitter("        ")
+        br.count = em.count + 1000 * (j + 1)
+        (value,) = br.exprs([derived.constraints[j]], "a")
+        out += br.lines
+        out.append(f"        return {value}")
+    out.append("    return 0.0")
+    return out + [
+        "",
+        "",
+        "@nb.njit(**HOT_PATH)",
+        "def guard_value(p, mode, u, code, y, yo, lam, lo, i):",
+        '    """Guard i at the state y[yo:] whose reactions lam[lo:] are known: a_i in the air,',
+        '    lambda_i in contact, and for i = n the maneuver\'s terminal guard."""',
+        f"    if i == {n}:",
+        "        return terminal_value(code, p, u, y, yo)",
+        "    if mode >> i & 1:",
+        "        return lam[lo + i]",
+        "    return constraint_value(i, p, y, yo)",
+        "",
+        "",
+        "@nb.njit(**HOT_PATH)",
+        "def probe_stage(p, mode, u, code, y, yo, lam, lo, c, probe):",
+        '    """probe[i] lowered to c for each guard i <= 0 at the stage state y[yo:]."""',
+        f"    for i in range({n + 1}):",
+        "        if c < probe[i] and guard_value(p, mode, u, code, y, yo, lam, lo, i) <= 0.0:",
+        "            probe[i] = c",
+    ]
+
+
+def _int_array(values: list[int]) -> str:
+    return f"np.array({values!r}, dtype=np.int64)"
+
+
+def render(derived: DerivedSystem) -> str:
+    """The whole module's source (see the module docstring)."""
+    system = derived.system
+    d, n = derived.ndof, derived.nconstraints
+    maneuvers = list(derived.maneuvers.values())
+    after = [int(m.description.armed_after == "touchdown") for m in maneuvers]
+    final = [-1 if m.final_mode is None else m.final_mode for m in maneuvers]
+    head = [
+        f'"""Compiled simulator of the system {system.name!r}.',
+        "",
+        "GENERATED by biped_opt.systems.codegen from the system's description: do not edit.",
+        '"""',
+        "",
+        "import math",
+        "",
+        "import numba as nb",
+        "import numpy as np",
+        "",
+        "from biped_opt._jit import HOT_PATH",
+        "",
+        f"NDOF = {d}",
+        f"NSTATE = {2 * d}",
+        f"NCON = {n}",
+        f"NGUARDS = {n + 1}",
+        f"NPARAM = {len(system.p)}",
+        f"NINPUT = {len(system.u)}",
+        f"TERM_AFTER_TOUCHDOWN = {_int_array(after)}",
+        f"FINAL_MODE = {_int_array(final)}",
+        f"INITIAL_MODE = {_int_array([m.mode for m in maneuvers])}",
+        "",
+    ]
+    parts = [
+        head,
+        _vector_field(derived),
+        _impact(derived),
+        _scalar_function("constraint_values", "a(q) into out[:n].",
+                         "p, y, yo, out", derived, list(derived.constraints), "out",
+                         inputs=False),
+        _scalar_function("constraint_rates", "Da(q) q' into out[:n].",
+                         "p, y, yo, out", derived, list(derived.jacobian * sp.Matrix(system.dq))
+                         if n else [], "out", inputs=False),
+        _per_maneuver("terminal_value", "The terminal guard of maneuver ``code``.",
+                      "code, p, u, y, yo", derived, lambda m: m.terminal, inputs=True,
+                      returns=True),
+        _per_maneuver("outcome_value", "The outcome of maneuver ``code`` at the state y.",
+                      "code, p, y, yo", derived, lambda m: m.outcome, inputs=False,
+                      returns=True),
+        _initial(derived),
+        _guards(derived),
+    ]
+    text = "\n\n\n".join("\n".join(part) for part in parts) + "\n"
+    step = _dop853_gen.render(n=2 * d, imports="", rhs="vector_field", probe="probe_stage",
+                              nlam=max(n, 1), registers=False)
+    step = step[step.index("\nSTRIDE = ") + 1:]
+    body = KERNEL_BODY.read_text()
+    body = body[body.index("\n# --- kernel ---\n") + 1:]
+    return text + "\n\n" + step + "\n\n" + body
+
+
+def source_key(derived: DerivedSystem) -> str:
+    """Content key of a system's compiled module: its source and the generator's version."""
+    text = render(derived)
+    return hashlib.sha256(f"{FORMAT}\n{text}".encode()).hexdigest()[:16]

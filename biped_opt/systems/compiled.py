@@ -1,0 +1,236 @@
+"""Compile a system description into its simulator, cached on disk by content, and run it.
+
+The first use of a system writes the module :func:`biped_opt.systems.codegen.render` makes into
+the cache directory, named by a hash of its source, and imports it; Numba then compiles it on
+the first call and keeps the machine code next to it (``__pycache__``), so a second process loads
+instead of compiling. Parameter values are runtime data (an array argument): changing one never
+changes the source, so it never recompiles.
+
+The cache lives in ``$BIPED_OPT_CACHE`` if set, else ``$XDG_CACHE_HOME/biped_opt`` (by default
+``~/.cache/biped_opt``), under ``systems/``; deleting that directory is always safe.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import os
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from biped_opt.errors import InvalidInputError, InvalidParameterError
+from biped_opt.hybrid.simulate import DEFAULT_OPTIONS, SimulatorOptions
+from biped_opt.systems.codegen import FORMAT, render
+from biped_opt.systems.derive import DerivedSystem, derive
+from biped_opt.systems.description import System
+from biped_opt.systems.files import load_system
+
+__all__ = ["CompiledSystem", "SystemTrajectory", "cache_dir", "compile_system", "STATUS_NAMES"]
+
+Array = npt.NDArray[np.float64]
+
+#: the kernel's status codes (as in :class:`biped_opt.hybrid.trajectory.Status`)
+STATUS_NAMES = ("OK", "HORIZON", "MAX_EVENTS", "INCONSISTENT", "APEX_IN_CONTACT",
+                "STEP_FAILURE")
+_LOCK = threading.Lock()
+_LOADED: dict[str, ModuleType] = {}
+
+
+def cache_dir() -> Path:
+    """Where compiled systems live (see the module docstring)."""
+    root = os.environ.get("BIPED_OPT_CACHE")
+    if root:
+        return Path(root) / "systems"
+    xdg = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(xdg) / "biped_opt" / "systems"
+
+
+def _module_for(derived: DerivedSystem) -> ModuleType:
+    import hashlib
+
+    text = render(derived)
+    key = hashlib.sha256(f"{FORMAT}\n{text}".encode()).hexdigest()[:16]
+    name = f"{derived.system.name}_{key}"
+    with _LOCK:
+        if name in _LOADED:
+            return _LOADED[name]
+        folder = cache_dir()
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / f"{name}.py"
+        if not path.exists() or path.read_text() != text:
+            # written whole, then renamed: a concurrent process never imports half a file
+            with tempfile.NamedTemporaryFile("w", dir=folder, suffix=".tmp", delete=False) as fh:
+                fh.write(text)
+            os.replace(fh.name, path)
+        spec = importlib.util.spec_from_file_location(f"biped_opt_systems_{name}", path)
+        assert spec is not None and spec.loader is not None
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module
+        spec.loader.exec_module(module)
+        _LOADED[name] = module
+        return module
+
+
+@dataclass(frozen=True)
+class SystemTrajectory:
+    """One simulated maneuver of a compiled system."""
+
+    system: str
+    maneuver: str
+    s: float
+    inputs: tuple[float, ...]
+    status: str
+    t_final: float
+    outcome: float
+    y_final: Array
+    modes: tuple[int, ...]  #: the contact modes in order, from the initial one
+    event_times: tuple[float, ...]  #: times of the contact events
+    events: Array  #: rows [t, kind, touchdown, liftoff, mode_before, mode_after, y-, y+]
+    samples: Array  #: rows [t, y, mode, lambda]
+    nfev: int
+    nsteps: int
+
+    @property
+    def success(self) -> bool:
+        return self.status == "OK"
+
+
+class CompiledSystem:
+    """A system ready to simulate: derived, generated, imported (compiled on first call)."""
+
+    def __init__(self, system: System | str, **parameters: float) -> None:
+        self.system = load_system(system)
+        self.derived = derive(self.system)
+        self.module = _module_for(self.derived)
+        self.maneuvers = tuple(self.derived.maneuvers)
+        self.inputs = self.system.u.names()
+        self.set_parameters(**parameters)
+
+    @property
+    def name(self) -> str:
+        return self.system.name
+
+    def set_parameters(self, **parameters: float) -> None:
+        """Parameter values (defaults overridden); runtime data, no recompilation."""
+        values = dict(self.system.defaults)
+        for key, value in parameters.items():
+            if key not in values:
+                raise InvalidParameterError(
+                    f"{self.system.where()}: unknown parameter {key!r} "
+                    f"(parameters: {', '.join(values) or 'none'})")
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not math.isfinite(value):
+                raise InvalidParameterError(
+                    f"{self.system.where()}: parameter {key!r} must be a finite number, "
+                    f"got {value!r}")
+            values[key] = float(value)
+        self.parameters = values
+        self._p = np.array([values[k] for k in self.system.p.names()], dtype=np.float64)
+
+    def _code(self, maneuver: str) -> int:
+        try:
+            return self.maneuvers.index(maneuver)
+        except ValueError:
+            raise InvalidInputError(
+                f"{self.system.where()}: unknown maneuver {maneuver!r} "
+                f"(maneuvers: {', '.join(self.maneuvers) or 'none'})") from None
+
+    def _inputs(self, inputs: Any) -> Array:
+        u = np.zeros(max(len(self.inputs), 1))
+        if inputs is None:
+            return u
+        if isinstance(inputs, dict):
+            for key, value in inputs.items():
+                if key not in self.inputs:
+                    raise InvalidInputError(
+                        f"{self.system.where()}: unknown input {key!r} "
+                        f"(inputs: {', '.join(self.inputs) or 'none'})")
+                u[self.inputs.index(key)] = value
+        else:
+            values = np.asarray(inputs, dtype=np.float64).ravel()
+            if values.size > len(self.inputs):
+                raise InvalidInputError(
+                    f"{self.system.where()}: {values.size} inputs given, the system has "
+                    f"{len(self.inputs)} ({', '.join(self.inputs) or 'none'})")
+            u[: values.size] = values
+        if not np.all(np.isfinite(u)):
+            raise InvalidInputError(f"{self.system.where()}: inputs must be finite, got {u}")
+        return u
+
+    def _cfg(self, options: SimulatorOptions, sample_dt: float) -> Array:
+        return np.array([options.t_end, options.max_events, options.rtol, options.atol,
+                         options.h_max, sample_dt], dtype=np.float64)
+
+    def simulate(self, maneuver: str, s: float, inputs: Any = None, *,
+                 options: SimulatorOptions = DEFAULT_OPTIONS,
+                 sample_dt: float | None = None) -> SystemTrajectory:
+        """One maneuver at s (inputs by name in a dict, or a vector in the declared order)."""
+        code = self._code(maneuver)
+        s = float(s)
+        if not math.isfinite(s):
+            raise InvalidInputError(f"{self.system.where()}: s must be finite, got {s}")
+        u = self._inputs(inputs)
+        m = self.module
+        dt = float(sample_dt) if sample_dt else 0.0
+        capacity = 0
+        if dt > 0:
+            capacity = int(options.t_end / dt) + 4 * (options.max_events + 2)
+        samples = np.zeros((capacity, m.SAMPLE_WIDTH))
+        events = np.zeros((options.max_events + 1, m.EVENT_WIDTH))
+        y_out = np.zeros(m.NSTATE)
+        status, t_f, mode_f, n_ev, n_s, nfev, nsteps, _nrej = m.simulate_maneuver(
+            self._p, code, s, u, self._cfg(options, dt), samples, events, y_out)
+        contact = events[:n_ev]
+        modes = (int(m.INITIAL_MODE[code]), *(int(r[5]) for r in contact))
+        return SystemTrajectory(
+            system=self.name, maneuver=maneuver, s=s,
+            inputs=tuple(float(v) for v in u[: len(self.inputs)]),
+            status=STATUS_NAMES[int(status)], t_final=float(t_f),
+            outcome=float(m.outcome_value(code, self._p, y_out, 0)), y_final=y_out,
+            modes=modes, event_times=tuple(float(r[0]) for r in contact),
+            events=events[: n_ev + (int(status) == 0)].copy(),
+            samples=samples[: min(n_s, capacity)].copy(), nfev=int(nfev), nsteps=int(nsteps))
+
+    def simulate_batch(self, maneuver: str, s: npt.ArrayLike, inputs: npt.ArrayLike | None = None,
+                       *, options: SimulatorOptions = DEFAULT_OPTIONS) -> dict[str, Array]:
+        """Many s (and input vectors, one row each or one for all) in parallel compiled threads:
+        arrays ``outcome``, ``t_final``, ``status``, ``mode_final``, ``n_events``, ``y_final``."""
+        code = self._code(maneuver)
+        ss = np.atleast_1d(np.asarray(s, dtype=np.float64))
+        if not np.all(np.isfinite(ss)):
+            raise InvalidInputError(f"{self.system.where()}: s must be finite")
+        width = max(len(self.inputs), 1)
+        if inputs is None:
+            us = np.zeros((ss.size, width))
+        else:
+            rows = np.atleast_2d(np.asarray(inputs, dtype=np.float64))
+            us = np.zeros((ss.size, width))
+            us[:, : rows.shape[1]] = rows if rows.shape[0] == ss.size else rows[0]
+        m = self.module
+        events = np.zeros((ss.size, options.max_events + 1, m.EVENT_WIDTH))
+        y_out = np.zeros((ss.size, m.NSTATE))
+        outcome = np.zeros(ss.size)
+        info = np.zeros((ss.size, 8))
+        m.simulate_batch_kernel(self._p, code, ss, us, self._cfg(options, 0.0), events, y_out,
+                                outcome, info)
+        return {"outcome": outcome, "t_final": info[:, 1], "status": info[:, 0].astype(int),
+                "mode_final": info[:, 2].astype(int), "n_events": info[:, 3].astype(int),
+                "y_final": y_out, "events": events}
+
+
+def compile_system(system: System | str, **parameters: float) -> CompiledSystem:
+    """:class:`CompiledSystem` of a System, a library name or a system file; reports how long
+    the first compile took through ``compile_seconds``."""
+    start = time.perf_counter()
+    compiled = CompiledSystem(system, **parameters)
+    compiled.compile_seconds = time.perf_counter() - start  # type: ignore[attr-defined]
+    return compiled
