@@ -11,8 +11,8 @@ from pathlib import Path
 
 from biped_opt.errors import InvalidInputError
 
-__all__ = ["finite_float", "input_file", "int_at_least", "int_in_range", "new_directory",
-           "output_directory", "output_file", "positive_float"]
+__all__ = ["assignment", "finite_float", "input_file", "int_at_least", "int_in_range",
+           "new_directory", "output_directory", "output_file", "positive_float"]
 
 
 def finite_float(name: str) -> Callable[[str], float]:
@@ -153,3 +153,17 @@ def input_file(option: str, path: Path) -> Path:
     if not os.access(path, os.R_OK):
         raise InvalidInputError(f"{option}: {str(path)!r} is not readable")
     return path
+
+
+def assignment(option: str) -> Callable[[str], tuple[str, float]]:
+    """NAME=VALUE with a finite number; the error names the option."""
+    number = finite_float(option)
+
+    def convert(text: str) -> tuple[str, float]:
+        name, sep, value = text.partition("=")
+        if not sep or not name.strip():
+            raise argparse.ArgumentTypeError(f"{option} must look like NAME=VALUE, got {text!r}")
+        return name.strip(), number(value)
+
+    convert.__name__ = option
+    return convert

@@ -20,6 +20,7 @@ from biped_opt.errors import BipedOptError
 #: modules under biped_opt.cli that provide sub-commands, in help order
 COMMAND_MODULES = (
     "simulate_cmd",
+    "systems_cmd",
     "demo_cmd",
     "bench_cmd",
     "optimise_cmd",

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from biped_opt import strict_json
-from biped_opt.cli.args import finite_float
+from biped_opt.cli.args import assignment, finite_float
 from biped_opt.errors import InvalidInputError
 from biped_opt.hybrid import simulate
 from biped_opt.hybrid.trajectory import Trajectory
@@ -23,10 +23,21 @@ def add_maneuver_argument(parser: argparse.ArgumentParser) -> None:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("simulate", help="simulate one maneuver at fixed inputs")
+    p = sub.add_parser(
+        "simulate", help="simulate one maneuver at fixed inputs",
+        description="The biped's maneuvers (--theta0, --u1, --u2, --u12), or any system's with "
+                    "--system NAME|FILE.py (--s, --input NAME=VALUE, --param NAME=VALUE).")
     add_maneuver_argument(p)
-    p.add_argument("--theta0", required=True, type=finite_float("--theta0"),
-                   help="initial body pitch [rad]")
+    p.add_argument("--theta0", type=finite_float("--theta0"),
+                   help="initial body pitch [rad] (the biped)")
+    p.add_argument("--system", metavar="NAME|FILE.py",
+                   help="a library system (biped, walker, walkerN[_decoupled], rocking_bar) or "
+                        "a system file; see `biped-opt systems`")
+    p.add_argument("--s", type=finite_float("--s"), help="the maneuver's parameter (--system)")
+    p.add_argument("--input", action="append", default=[], metavar="NAME=VALUE",
+                   type=assignment("--input"), help="an input of the system (repeatable)")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   type=assignment("--param"), help="a parameter of the system (repeatable)")
     p.add_argument("--u1", type=finite_float("--u1"), default=0.0,
                    help="left leg force in left single stance (default 0)")
     p.add_argument("--u2", type=finite_float("--u2"), default=0.0,
@@ -68,6 +79,14 @@ def parse_maneuver_arg(text: str) -> Maneuver:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.system is not None:
+        return run_system(args)
+    for option in ("s", "input", "param"):
+        if getattr(args, option) not in (None, []):
+            raise InvalidInputError(f"--{option}: only with --system (the biped takes --theta0, "
+                                    "--u1, --u2, --u12)")
+    if args.theta0 is None:
+        raise InvalidInputError("--theta0 is required (or --system with --s)")
     maneuver = parse_maneuver_arg(args.maneuver)
     try:
         check_theta0(maneuver, args.theta0)
@@ -84,3 +103,53 @@ def run(args: argparse.Namespace) -> int:
         print("modes      " + " -> ".join(f"{m.name}@{t:.12g}" for t, m in tr.modes))
         print(f"work       nfev = {tr.nfev}, steps = {tr.nsteps}")
     return 0 if tr.success else 1
+
+
+def run_system(args: argparse.Namespace) -> int:
+    """``simulate --system``: any system's maneuver through its compiled simulator."""
+    from biped_opt.systems.compiled import compile_system
+
+    if args.theta0 is not None or any(getattr(args, n) for n in ("u1", "u2", "u12")):
+        raise InvalidInputError("--theta0/--u1/--u2/--u12: the biped's options; with --system "
+                                "give --s and --input NAME=VALUE")
+    if args.s is None:
+        raise InvalidInputError("--s is required with --system")
+    compiled = compile_system(args.system, **dict(args.param))
+    tr = compiled.simulate(args.maneuver, args.s, dict(args.input))
+    names = compiled.system.coordinate_names
+    d = len(names)
+    if args.json:
+        print(strict_json.dumps({
+            "system": tr.system, "maneuver": tr.maneuver, "s": tr.s,
+            "inputs": dict(zip(compiled.inputs, tr.inputs)),
+            "parameters": compiled.parameters, "status": tr.status.lower(),
+            "outcome": tr.outcome, "t_final": tr.t_final,
+            "modes": [_mode_names(compiled, m) for m in tr.modes],
+            "event_times": list(tr.event_times),
+            "events": [{"t": float(r[0]), "touchdown": _mode_names(compiled, int(r[2])),
+                        "liftoff": _mode_names(compiled, int(r[3])),
+                        "mode_after": _mode_names(compiled, int(r[5]))}
+                       for r in tr.events if r[1] == 1],
+            "state": {"q": dict(zip(names, tr.y_final[:d])),
+                      "qdot": dict(zip(names, tr.y_final[d:]))},
+            "nfev": tr.nfev, "nsteps": tr.nsteps}))
+    else:
+        print(f"system     {tr.system}  maneuver {tr.maneuver}  s = {tr.s:+.12g}")
+        print(f"status     {tr.status}")
+        print(f"outcome    {tr.outcome:+.15g}")
+        print(f"t_final    {tr.t_final:.15g}")
+        modes = [_mode_names(compiled, m) for m in tr.modes]
+        times = [0.0, *tr.event_times]
+        print("modes      " + " -> ".join(
+            f"{{{', '.join(m)}}}@{t:.12g}" for m, t in zip(modes, times)))
+        for r in (r for r in tr.events if r[1] == 1):
+            what = [f"{kind} {{{', '.join(_mode_names(compiled, int(r[k])))}}}"
+                    for kind, k in (("touchdown", 2), ("liftoff", 3)) if r[k]]
+            print(f"event      t = {r[0]:.12g}: {'; '.join(what)}")
+        print(f"work       nfev = {tr.nfev}, steps = {tr.nsteps}")
+    return 0 if tr.success else 1
+
+
+def _mode_names(compiled, mode: int) -> list[str]:
+    names = list(compiled.system.constraints)
+    return [names[j] for j in range(len(names)) if mode >> j & 1]

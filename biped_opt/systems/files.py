@@ -9,15 +9,19 @@ wrong; later messages about the system name the file too.
 
 from __future__ import annotations
 
+import re
 import runpy
 import traceback
 from pathlib import Path
 
 from biped_opt.errors import quoted
 from biped_opt.systems.description import System, SystemDescriptionError
-from biped_opt.systems.library import LIBRARY
+from biped_opt.systems.library import LIBRARY, walker
 
-__all__ = ["load_system"]
+__all__ = ["load_system", "WALKER"]
+
+#: library names of walkers with n legs and an input law: walker4, walker3_decoupled
+WALKER = re.compile(r"^walker(?P<n>[1-9][0-9]?)(?:_(?P<law>coupled|decoupled))?$")
 
 
 def load_system(spec: str | Path | System) -> System:
@@ -27,11 +31,14 @@ def load_system(spec: str | Path | System) -> System:
     text = str(spec)
     if text in LIBRARY:
         return LIBRARY[text]()
+    match = WALKER.match(text)
+    if match:
+        return walker(int(match["n"]), match["law"] or "coupled")
     path = Path(text)
     if path.suffix != ".py":
         raise SystemDescriptionError(
             f"unknown system {quoted(text)}: neither a library system "
-            f"({', '.join(LIBRARY)}) nor a .py file")
+            f"({', '.join(LIBRARY)}, walkerN[_coupled|_decoupled]) nor a .py file")
     if not path.is_file():
         raise SystemDescriptionError(f"{path}: no such system file")
     try:

@@ -30,8 +30,8 @@ CASES: list[tuple[list[str], str]] = [
     (["--theta0", "0"], "invalid choice: '0'"),
     (["node", "bogus"], "argument name: invalid choice: 'bogus'"),
     # -- simulate ------------------------------------------------------------------------
-    (["simulate"], "the following arguments are required: --maneuver, --theta0"),
-    (["simulate", "--maneuver", "touchdown"], "required: --theta0"),
+    (["simulate"], "the following arguments are required: --maneuver"),
+    (["simulate", "--maneuver", "touchdown"], "--theta0 is required"),
     (["simulate", "--maneuver", "jump", "--theta0", "0"], f"{MANEUVERS} 'jump'"),
     (["simulate", "--maneuver", "", "--theta0", "0"], "--maneuver"),
     (["simulate", "--maneuver", LONG, "--theta0", "0"], "(100000 characters)"),

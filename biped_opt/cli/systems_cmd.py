@@ -1,0 +1,55 @@
+"""``biped-opt systems``: the library's systems (or a file's) with their d, n, inputs, maneuvers."""
+
+from __future__ import annotations
+
+import argparse
+
+from biped_opt import strict_json
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("systems", help="list the library's systems (d, n, inputs, maneuvers)",
+                       description="The systems that `simulate --system` takes by name, or the "
+                                   "ones given (names or files), with their coordinates, "
+                                   "constraints, inputs, parameters and maneuvers.")
+    p.add_argument("names", nargs="*", metavar="NAME|FILE.py",
+                   help="systems to describe (default: the library)")
+    p.add_argument("--json", action="store_true", help="print a JSON list")
+    p.set_defaults(func=run)
+
+
+def describe(spec: str) -> dict:
+    from biped_opt.systems import derive, load_system
+
+    system = load_system(spec)
+    derived = derive(system)  # checks the description, so a broken file says so here
+    return {
+        "name": spec if spec != system.name and not spec.endswith(".py") else system.name,
+        "d": derived.ndof, "n": derived.nconstraints,
+        "coordinates": list(system.coordinate_names),
+        "constraints": list(system.constraints),
+        "inputs": list(system.u.names()),
+        "parameters": dict(system.defaults),
+        "maneuvers": {name: {"s": str(system.s), "s_range": list(m.s_range),
+                             "description": m.description}
+                      for name, m in system.maneuvers.items()},
+    }
+
+
+def run(args: argparse.Namespace) -> int:
+    from biped_opt.systems import LIBRARY
+
+    names = args.names or [*LIBRARY, "walker2_decoupled"]
+    rows = [describe(name) for name in names]
+    if args.json:
+        print(strict_json.dumps(rows))
+        return 0
+    print(f"{'system':<18} {'d':>2} {'n':>2}  {'inputs':<22} maneuvers (s range)")
+    for r in rows:
+        maneuvers = ", ".join(f"{k} ({m['s']} in [{m['s_range'][0]:g}, {m['s_range'][1]:g}])"
+                              for k, m in r["maneuvers"].items())
+        print(f"{r['name']:<18} {r['d']:>2} {r['n']:>2}  {', '.join(r['inputs']):<22} "
+              f"{maneuvers}")
+    print("\nwalkerN[_coupled|_decoupled] gives the walker with N legs (walker: 3, coupled); "
+          "a path to a .py file gives your own system (README: Your own system).")
+    return 0
