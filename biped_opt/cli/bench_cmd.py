@@ -80,6 +80,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="one timing round, short sweeps, relaxation on a subset")
     p.add_argument("--no-compile", action="store_true",
                    help="skip the cold/cached compile measurement (two fresh interpreters)")
+    p.add_argument("--system", action="append", choices=SYSTEM_CHOICES, metavar="NAME",
+                   help="instead: the generated simulators of these systems (biped, walker3, "
+                        "rocking_bar; repeatable; 'all' for the three) side by side, against "
+                        "their SciPy comparators, with cold and cached compile times")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 
@@ -123,6 +127,8 @@ def format_table(r: dict) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.system:
+        return run_systems(args)
     bench_run = load_bench()
     kwargs = {} if args.seed is None else {"seed": args.seed}
     result = bench_run.run_benchmark(
@@ -132,4 +138,21 @@ def run(args: argparse.Namespace) -> int:
         print(strict_json.dumps(result))
     else:
         print(format_table(result))
+    return 0
+
+
+SYSTEM_CHOICES = ("biped", "walker3", "rocking_bar", "all")
+
+
+def run_systems(args: argparse.Namespace) -> int:
+    """``bench --system``: bench/systems_bench.py on the chosen systems."""
+    load_bench()
+    systems_bench = importlib.import_module("bench.systems_bench")
+    names = [n for n in SYSTEM_CHOICES[:-1] if n in args.system or "all" in args.system]
+    kwargs = {} if args.seed is None else {"seed": args.seed}
+    result = systems_bench.run_systems_benchmark(
+        names, n_cases=min(args.cases, 40) if args.quick else args.cases,
+        rounds=1 if args.quick else 3, reference_cases=5 if args.quick else 20,
+        compile_cost=not args.no_compile, **kwargs)
+    print(strict_json.dumps(result) if args.json else systems_bench.format_systems_table(result))
     return 0

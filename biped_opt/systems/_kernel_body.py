@@ -195,23 +195,30 @@ def simulate_kernel(p, code, y0, mode0, u, cfg, samples, events, y_out):
     term = NCON  # index of the terminal guard
 
     n = NSTATE
-    W = np.zeros(WORKSPACE)
-    F = np.zeros((7, n))
-    y = np.zeros(n)
-    f = np.zeros(n)
-    y_new = np.zeros(n)
-    f_new = np.zeros(n)
-    tmp = np.zeros(n)
-    tmp2 = np.zeros(n)
-    rates = np.zeros(NLAM)
-    lam = np.zeros(NLAM)
-    lam_new = np.zeros(NLAM)
-    lam_tmp = np.zeros(NLAM)
-    gv = np.zeros(NGUARDS)
-    gv_new = np.zeros(NGUARDS)
-    probe = np.zeros(NGUARDS)
-    armed = np.zeros(NGUARDS, dtype=np.bool_)
-    flips = np.zeros(NGUARDS, dtype=np.bool_)
+    # one allocation carved into views (a dozen small arrays cost more than a step)
+    buf = np.zeros(WORKSPACE + 13 * n + 4 * NLAM + 3 * NGUARDS)
+    W = buf[:WORKSPACE]
+    o = WORKSPACE
+    F = buf[o:o + 7 * n].reshape((7, n))
+    o += 7 * n
+    y = buf[o:o + n]
+    f = buf[o + n:o + 2 * n]
+    y_new = buf[o + 2 * n:o + 3 * n]
+    f_new = buf[o + 3 * n:o + 4 * n]
+    tmp = buf[o + 4 * n:o + 5 * n]
+    tmp2 = buf[o + 5 * n:o + 6 * n]
+    o += 6 * n
+    rates = buf[o:o + NLAM]
+    lam = buf[o + NLAM:o + 2 * NLAM]
+    lam_new = buf[o + 2 * NLAM:o + 3 * NLAM]
+    lam_tmp = buf[o + 3 * NLAM:o + 4 * NLAM]
+    o += 4 * NLAM
+    gv = buf[o:o + NGUARDS]
+    gv_new = buf[o + NGUARDS:o + 2 * NGUARDS]
+    probe = buf[o + 2 * NGUARDS:o + 3 * NGUARDS]
+    flags = np.zeros(2 * NGUARDS, dtype=np.bool_)
+    armed = flags[:NGUARDS]
+    flips = flags[NGUARDS:]
     for k in range(n):
         y[k] = y0[k]
 
@@ -435,10 +442,14 @@ def simulate_kernel(p, code, y0, mode0, u, cfg, samples, events, y_out):
 
 @nb.njit(**HOT_PATH)
 def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out):
-    """:func:`simulate_kernel` from maneuver ``code``'s initial state at s."""
+    """:func:`simulate_kernel` from maneuver ``code``'s initial state at s; its tuple, then the
+    maneuver's outcome at the final state (one compiled call per trajectory)."""
     y0 = np.zeros(NSTATE)
     initial_state(code, s, p, y0)
-    return simulate_kernel(p, code, y0, INITIAL_MODE[code], u, cfg, samples, events, y_out)
+    status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej = simulate_kernel(
+        p, code, y0, INITIAL_MODE[code], u, cfg, samples, events, y_out)
+    outcome = outcome_value(code, p, y_out, 0)
+    return status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej, outcome
 
 
 @nb.njit(**HOT_PATH, parallel=True)
@@ -447,10 +458,10 @@ def simulate_batch_kernel(p, code, ss, us, cfg, events, y_out, outcome, info):
     receives the maneuver's outcome at the final state."""
     no_samples = np.empty((0, SAMPLE_WIDTH))
     for k in nb.prange(ss.shape[0]):
-        status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej = simulate_maneuver(
+        status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej, value = simulate_maneuver(
             p, code, ss[k], us[k], cfg, no_samples, events[k], y_out[k]
         )
-        outcome[k] = outcome_value(code, p, y_out[k], 0)
+        outcome[k] = value
         info[k, 0] = status
         info[k, 1] = t_f
         info[k, 2] = mode_f

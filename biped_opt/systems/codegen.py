@@ -97,10 +97,18 @@ def _sum(terms: list[str]) -> str:
     return " + ".join(terms) if terms else "0.0"
 
 
-def _cholesky(em: _Emitter, m: list[list[str]], tag: str) -> list[list[str]]:
+class _Inverse(list):
+    """The names of 1 / m_ii of a structurally diagonal matrix: solving is multiplying."""
+
+
+def _cholesky(em: _Emitter, m: list[list[str]], tag: str) -> list[list[str]] | _Inverse:
     """Unrolled Cholesky factor L (lower) of the symmetric matrix named by ``m``: entries that
-    are structurally zero stay "0.0", and so do those of L that no fill-in reaches."""
+    are structurally zero stay "0.0", and so do those of L that no fill-in reaches. A diagonal
+    matrix (the biped's, the walker's, the bar's mass matrix) gets its inverse instead: one
+    division per entry once, then products."""
     k = len(m)
+    if all(_is_zero(m[i][j]) for i in range(k) for j in range(k) if i != j):
+        return _Inverse(em.assign(f"{tag}v", f"1.0 / {m[i][i]}") for i in range(k))
     L = [["0.0"] * k for _ in range(k)]
     for j in range(k):
         diag = _sum([m[j][j], *(f"-({_mul(L[j][r], L[j][r])})" for r in range(j)
@@ -115,8 +123,10 @@ def _cholesky(em: _Emitter, m: list[list[str]], tag: str) -> list[list[str]]:
     return L
 
 
-def _solve(em: _Emitter, L: list[list[str]], b: list[str], tag: str) -> list[str]:
+def _solve(em: _Emitter, L: list[list[str]] | _Inverse, b: list[str], tag: str) -> list[str]:
     """x with L L^T x = b (forward then back substitution, zeros skipped)."""
+    if isinstance(L, _Inverse):
+        return [em.assign(tag, _mul(b[i], L[i])) for i in range(len(L))]
     k = len(L)
     z = []
     for i in range(k):

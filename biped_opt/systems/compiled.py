@@ -113,6 +113,9 @@ class CompiledSystem:
         self.module = _module_for(self.derived)
         self.maneuvers = tuple(self.derived.maneuvers)
         self.inputs = self.system.u.names()
+        self._initial_modes = [int(v) for v in self.module.INITIAL_MODE]
+        self._no_samples = np.empty((0, self.module.SAMPLE_WIDTH))
+        self._cfgs: dict[tuple[SimulatorOptions, float], Array] = {}
         self.set_parameters(**parameters)
 
     @property
@@ -167,8 +170,13 @@ class CompiledSystem:
         return u
 
     def _cfg(self, options: SimulatorOptions, sample_dt: float) -> Array:
-        return np.array([options.t_end, options.max_events, options.rtol, options.atol,
-                         options.h_max, sample_dt], dtype=np.float64)
+        key = (options, sample_dt)
+        cfg = self._cfgs.get(key)
+        if cfg is None:
+            cfg = self._cfgs[key] = np.array(
+                [options.t_end, options.max_events, options.rtol, options.atol, options.h_max,
+                 sample_dt], dtype=np.float64)
+        return cfg
 
     def simulate(self, maneuver: str, s: float, inputs: Any = None, *,
                  options: SimulatorOptions = DEFAULT_OPTIONS,
@@ -184,21 +192,19 @@ class CompiledSystem:
         capacity = 0
         if dt > 0:
             capacity = int(options.t_end / dt) + 4 * (options.max_events + 2)
-        samples = np.zeros((capacity, m.SAMPLE_WIDTH))
-        events = np.zeros((options.max_events + 1, m.EVENT_WIDTH))
-        y_out = np.zeros(m.NSTATE)
-        status, t_f, mode_f, n_ev, n_s, nfev, nsteps, _nrej = m.simulate_maneuver(
+        samples = np.zeros((capacity, m.SAMPLE_WIDTH)) if capacity else self._no_samples
+        events = np.empty((options.max_events + 1, m.EVENT_WIDTH))
+        y_out = np.empty(m.NSTATE)
+        status, t_f, _mode_f, n_ev, n_s, nfev, nsteps, _nrej, outcome = m.simulate_maneuver(
             self._p, code, s, u, self._cfg(options, dt), samples, events, y_out)
-        contact = events[:n_ev]
-        modes = (int(m.INITIAL_MODE[code]), *(int(r[5]) for r in contact))
+        kept = events[: n_ev + (status == 0)]
         return SystemTrajectory(
             system=self.name, maneuver=maneuver, s=s,
-            inputs=tuple(float(v) for v in u[: len(self.inputs)]),
-            status=STATUS_NAMES[int(status)], t_final=float(t_f),
-            outcome=float(m.outcome_value(code, self._p, y_out, 0)), y_final=y_out,
-            modes=modes, event_times=tuple(float(r[0]) for r in contact),
-            events=events[: n_ev + (int(status) == 0)].copy(),
-            samples=samples[: min(n_s, capacity)].copy(), nfev=int(nfev), nsteps=int(nsteps))
+            inputs=tuple(u[: len(self.inputs)].tolist()),
+            status=STATUS_NAMES[status], t_final=t_f, outcome=outcome, y_final=y_out,
+            modes=(self._initial_modes[code], *kept[:n_ev, 5].astype(int).tolist()),
+            event_times=tuple(kept[:n_ev, 0].tolist()), events=kept,
+            samples=samples[: min(n_s, capacity)], nfev=nfev, nsteps=nsteps)
 
     def simulate_batch(self, maneuver: str, s: npt.ArrayLike, inputs: npt.ArrayLike | None = None,
                        *, options: SimulatorOptions = DEFAULT_OPTIONS) -> dict[str, Array]:

@@ -62,3 +62,10 @@ def test_cases_must_be_at_least_two(capsys: pytest.CaptureFixture[str]) -> None:
         main(["bench", "--cases", "1"])
     assert exc.value.code == 2
     assert "--cases must be at least 2" in capsys.readouterr().err
+
+
+def test_bench_systems_prints_the_side_by_side_table(capsys) -> None:
+    assert main(["bench", "--system", "rocking_bar", "--quick", "--no-compile", "--cases", "4",
+                 "--json"]) == 0
+    row = json.loads(capsys.readouterr().out)["systems"]["rocking_bar"]
+    assert row["max_abs_error"] < 1e-9 and row["speedup_vs_reference"] > 1.0

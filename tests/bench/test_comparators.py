@@ -154,3 +154,47 @@ def test_compile_cost_plumbing(monkeypatch: pytest.MonkeyPatch) -> None:
     out = bench_run._compile_cost()
     assert out["cold"] == pytest.approx(0.75) and out["cached"] == pytest.approx(0.75)
     assert out["cold_first_call"] == pytest.approx(0.25)
+
+
+# -- the comparators of the generated simulators (bench/system_reference.py) -------------------
+system_reference = importlib.import_module("bench.system_reference")
+rocking_bar_model = importlib.import_module("bench.rocking_bar_model")
+walker_model = importlib.import_module("bench.walker_model")
+
+
+def test_rocking_bar_comparator_reproduces_systems_md():
+    """SYSTEMS.md Sec. 2's numbers come from independent implementations; this one must
+    reproduce them to their 10 digits."""
+    small = system_reference.simulate(rocking_bar_model, "drop", 1e-6, (0.0,))
+    assert small.outcome == pytest.approx(-0.1988749738, abs=1e-9)
+    assert small.touchdowns == (1, 2, 1)
+    zero = system_reference.simulate(rocking_bar_model, "drop", 0.0, (0.0,))
+    assert zero.touchdowns == (3,) and abs(zero.outcome) < 1e-12
+    assert zero.t_final == pytest.approx(1.5 * math.sqrt(2.0), abs=1e-9)
+    assert system_reference.simulate(rocking_bar_model, "drop", 0.2, (0.0,)).outcome == \
+        pytest.approx(2.42070065442, abs=1e-9)
+
+
+def test_walker_comparator_with_two_legs_is_the_biped_comparator():
+    """The n-leg walker model with n = 2 against the biped's (both written from the
+    specifications, separately): same outcomes to 1e-9."""
+    two = walker_model.Walker(2, "coupled")
+    for case in random_cases(3, seed=11):
+        maneuver, th, u = case
+        got = system_reference.simulate(two, maneuver, th, u).outcome
+        assert got == pytest.approx(reference.simulate(maneuver, th, u).outcome, abs=1e-9)
+
+
+@pytest.mark.parametrize("law", ["coupled", "decoupled"])
+def test_generated_walker_agrees_with_its_comparator(law):
+    from biped_opt.systems import walker
+    from biped_opt.systems.compiled import compile_system
+
+    generated = compile_system(walker(3, law))
+    model = walker_model.Walker(3, law)
+    for maneuver, u in (("touchdown", (2.0, 1.0, 0.5, 0.0)), ("liftoff", (1.5, 3.0, 2.0, 0.1))):
+        for th in (-0.1, -1e-4, 0.0, 0.05, 0.2):
+            ref = system_reference.simulate(model, maneuver, th, u)
+            tr = generated.simulate(maneuver, th, u)
+            assert tr.modes == ref.modes
+            assert tr.outcome == pytest.approx(ref.outcome, abs=1e-9)
