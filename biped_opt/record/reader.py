@@ -1,9 +1,10 @@
 """Reading biped_opt MCAP recordings back, including files a killed recorder left unfinished.
 
-:func:`read_raw` first tries the indexed reader (a finished file, every chunk's CRC checked); if
-the file has no valid summary - its writer was killed before ``finish()`` - or a chunk is damaged,
-it falls back to a scan that keeps every complete, intact chunk, skips and counts damaged ones,
-and reports how much it recovered (MCAP.md: crash safety). A file that is not MCAP, or holds
+:func:`read_raw` first tries the indexed reader (a finished file whose summary passes its CRC,
+every chunk's CRC checked); if the file has no usable summary - its writer was killed before
+``finish()``, or the summary is damaged - or a chunk is damaged, it falls back to a scan that keeps
+every complete, intact chunk, skips and counts damaged ones, and reports how much it recovered
+(MCAP.md: crash safety). A file that is not MCAP, or holds
 nothing recoverable, is an error.
 :func:`read_recording` decodes what :func:`read_raw` returns.
 """
@@ -12,9 +13,10 @@ from __future__ import annotations
 
 import io
 import struct
+import zlib
 from collections import defaultdict
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -25,7 +27,7 @@ from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, Footer, Message, Metadata, Schema
+from mcap.records import Channel, Chunk, ChunkIndex, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
 from biped_opt.record.writer import RecordError
@@ -118,9 +120,9 @@ class RawMessage(NamedTuple):
 class RawRecording:
     """A recording's channels and still-serialized messages in log-time order.
 
-    ``complete`` is False for a file read by recovery: unfinished (its writer was killed) or
-    with damaged chunks; ``bytes_read`` is then how far into the file the last complete record
-    reached.
+    ``complete`` is False for a file read by recovery: unfinished (its writer was killed), or
+    with a damaged chunk or summary; ``bytes_read`` is then how far into the file the last
+    complete record reached.
     """
 
     path: Path
@@ -131,7 +133,7 @@ class RawRecording:
     note: str
     file_size: int
     bytes_read: int
-    #: chunks skipped because their CRC or decompression failed (recovery only)
+    #: chunks skipped because their framing, size, CRC or decompression failed (recovery only)
     damaged_chunks: int = 0
 
     @property
@@ -161,114 +163,316 @@ def _raw_channel(schema: Schema | None, channel: Channel) -> RawChannel:
 
 def read_raw(path: str | Path, topics: Iterable[str] | None = None) -> RawRecording:
     """Channels and serialized messages of a recording (only ``topics`` when given), sorted by
-    log time. A finished file is read through its index with every chunk's CRC checked; an
-    unfinished or damaged one is recovered record by record (:func:`_recover`). A file that is
-    not MCAP, or holds nothing recoverable, is a :class:`RecordError`."""
+    log time. A finished file whose summary passes its CRC is read through its index, every
+    chunk's CRC checked; any other file is recovered record by record (:func:`_recover`). A file
+    that is not MCAP, or holds nothing recoverable, is a :class:`RecordError`."""
     path = Path(path)
     if path.is_dir():
         raise RecordError(f"{path}: is a directory, not a recording")
-    if not path.is_file():
+    if not path.exists():
         raise RecordError(f"no such recording: {path}")
-    wanted = None if topics is None else set(topics)
     try:
-        with open(path, "rb") as stream:
-            head = stream.read(len(MAGIC))
+        data = path.read_bytes()  # once: every later read is bounded by what the file holds
     except OSError as exc:
         raise RecordError(f"{path}: cannot read: {exc.strerror}") from None
-    if head != MAGIC:
+    if not data.startswith(MAGIC):
         raise RecordError(f"{path}: not an MCAP file (it does not start with the MCAP magic)")
-    try:
-        return _read_raw_indexed(path, wanted)
-    except (*_DAMAGED, OSError):  # (a file shorter than a footer: seeking before its start)
-        return _recover(path, wanted)
+    wanted = None if topics is None else set(topics)
+    summary, why = _read_summary(data)
+    if summary is not None and not why:
+        try:
+            return _read_raw_indexed(path, data, wanted)
+        except (*_DAMAGED, MemoryError):  # (mcap sizes a chunk's buffer by its zstd header)
+            why = "a finished file whose index could not read every chunk"
+    return _recover(path, data, wanted, summary, why)
 
 
-def _read_raw_indexed(path: Path, wanted: set[str] | None) -> RawRecording:
-    size = path.stat().st_size
-    with open(path, "rb") as stream:
-        reader = make_reader(stream, validate_crcs=True)
-        summary = reader.get_summary()
-        if summary is None:
-            raise McapError("no summary")
-        channels = {
-            ch.topic: _raw_channel(summary.schemas.get(ch.schema_id), ch)
-            for ch in summary.channels.values() if wanted is None or ch.topic in wanted
-        }
-        out = [
-            RawMessage(channel.topic, message.log_time, message.publish_time, message.data)
-            for _schema, channel, message in reader.iter_messages(
-                topics=None if wanted is None else sorted(wanted), log_time_order=True)
-        ]
-        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+def _read_raw_indexed(path: Path, data: bytes, wanted: set[str] | None) -> RawRecording:
+    reader = make_reader(io.BytesIO(data), validate_crcs=True)
+    summary = reader.get_summary()
+    if summary is None:
+        raise McapError("no summary")
+    channels = {
+        ch.topic: _raw_channel(summary.schemas.get(ch.schema_id), ch)
+        for ch in summary.channels.values() if wanted is None or ch.topic in wanted
+    }
+    out = [
+        RawMessage(channel.topic, message.log_time, message.publish_time, message.data)
+        for _schema, channel, message in reader.iter_messages(
+            topics=None if wanted is None else sorted(wanted), log_time_order=True)
+    ]
+    metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
     return RawRecording(path=path, channels=channels, messages=tuple(out), metadata=metadata,
-                        complete=True, note="indexed", file_size=size, bytes_read=size)
+                        complete=True, note="indexed", file_size=len(data),
+                        bytes_read=len(data))
 
 
-# -- recovery --------------------------------------------------------------------------------
+# -- the record structure --------------------------------------------------------------------
 
 MAGIC = b"\x89MCAP0\r\n"
 #: opcode (1 byte) and content length (8 bytes) in front of every record
 _PREFIX = struct.Struct("<BQ")
-#: what parsing a damaged record can raise: all of it means "this record is unusable"
-#: (lz4 reports a bad frame as RuntimeError)
+#: a footer's content: summary_start, summary_offset_start, summary_crc
+_FOOTER = struct.Struct("<QQI")
+#: a chunk's fixed fields: message start/end time, uncompressed size and CRC, compression length
+_CHUNK_HEAD = struct.Struct("<QQQII")
+_U64 = struct.Struct("<Q")
+_CHUNK_OPCODE = bytes([Opcode.CHUNK])
+#: a data end record's content: the CRC of the data section before it (0: not computed)
+_DATA_CRC = struct.Struct("<I")
+#: what reading a damaged record can raise: all of it means "this record is unusable" (lz4
+#: reports a bad frame as RuntimeError; mcap's own decompression of a chunk whose size field
+#: is damaged overflows)
 _DAMAGED = (McapError, EOFError, ValueError, KeyError, AssertionError, struct.error,
-            UnicodeDecodeError, zstandard.ZstdError, RuntimeError)
+            UnicodeDecodeError, zstandard.ZstdError, RuntimeError, OverflowError)
 
 
-def _recover(path: Path, wanted: set[str] | None) -> RawRecording:
-    """Every complete record of a file whose summary cannot be used: the writer was killed
-    (the file ends inside a record), or a chunk is damaged.
+class _Framing(ValueError):
+    """A chunk's own lengths disagree with its record length: either may be the damaged one, so
+    where the next record starts is unknown."""
 
-    The scan walks the top-level records by their length prefixes and stops at the first one
-    that does not fit in the file; each complete chunk is decompressed and checked against its
-    CRC, and a chunk that fails is skipped and counted, the scan going on after it. Messages of a
-    channel whose definition was lost with a damaged chunk cannot be decoded and are counted
-    too."""
-    data = path.read_bytes()
+
+def _record_at(data: bytes, pos: int, stop: int) -> tuple[int, int, int] | None:
+    """(opcode, body start, end) of the record at ``pos`` if it lies wholly before ``stop``."""
+    if pos + _PREFIX.size > stop:
+        return None
+    opcode, length = _PREFIX.unpack_from(data, pos)
+    body = pos + _PREFIX.size
+    return (opcode, body, body + length) if length <= stop - body else None
+
+
+def _stream(data: bytes, start: int, end: int) -> ReadDataStream:
+    return ReadDataStream(io.BytesIO(data[start:end]))
+
+
+@dataclass(frozen=True)
+class _Summary:
+    """What the CRC-checked summary of a finished file says about its data section."""
+
+    start: int  #: where the summary section begins: the data section ends before it
+    schemas: dict[int, Schema]
+    channels: dict[int, Channel]
+    chunk_starts: tuple[int, ...]  #: offsets of the chunk records, ascending
+
+
+def _read_summary(data: bytes) -> tuple[_Summary | None, str]:
+    """The summary of a finished file if it passes its CRC (else None), and why the file cannot
+    be read through it ("" when it can: the data section also passes its CRC, if it has one).
+    Outside chunks these CRCs are the only way to detect a damaged byte, so a summary that fails
+    is not used at all."""
+    footer = len(data) - len(MAGIC) - _PREFIX.size - _FOOTER.size
+    if (footer < len(MAGIC) or not data.endswith(MAGIC)
+            or _record_at(data, footer, len(data) - len(MAGIC))
+            != (Opcode.FOOTER, footer + _PREFIX.size, footer + _PREFIX.size + _FOOTER.size)):
+        return None, "an unfinished file (its writer was killed)"
+    start, _offsets, crc = _FOOTER.unpack_from(data, footer + _PREFIX.size)
+    damaged = None, "a finished file whose summary is damaged"
+    if start == 0:
+        return None, "a finished file without a summary"
+    if not len(MAGIC) <= start <= footer or (
+            crc and zlib.crc32(data[start:footer + _PREFIX.size + 2 * _U64.size]) != crc):
+        return damaged
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    starts: list[int] = []
+    pos = start
+    while pos < footer:
+        record = _record_at(data, pos, footer)
+        if record is None:
+            return damaged
+        opcode, body, pos = record
+        try:
+            if opcode == Opcode.SCHEMA:
+                schema = Schema.read(_stream(data, body, pos))
+                schemas[schema.id] = schema
+            elif opcode == Opcode.CHANNEL:
+                channel = Channel.read(_stream(data, body, pos))
+                channels[channel.id] = channel
+            elif opcode == Opcode.CHUNK_INDEX:
+                starts.append(ChunkIndex.read(_stream(data, body, pos)).chunk_start_offset)
+        except _DAMAGED:
+            return damaged
+    summary = _Summary(start, schemas, channels, tuple(sorted(starts)))
+    data_end = start - _PREFIX.size - _DATA_CRC.size
+    if _record_at(data, data_end, start) != (Opcode.DATA_END, data_end + _PREFIX.size, start):
+        return summary, "a finished file whose data section does not end where its summary says"
+    (data_crc,) = _DATA_CRC.unpack_from(data, data_end + _PREFIX.size)
+    if data_crc and zlib.crc32(data[:data_end]) != data_crc:
+        return summary, "a finished file whose data section fails its CRC"
+    return summary, ""
+
+
+def _decompress(compression: str, data: bytes, size: int) -> bytes:
+    """A chunk's records, decompressed without trusting any size field for an allocation."""
+    if compression == "zstd":
+        out = zstandard.ZstdDecompressor().decompressobj().decompress(data)
+    elif compression == "lz4":
+        import lz4.frame  # (optional: only files written with lz4 need it)
+
+        declared = lz4.frame.get_frame_info(data)["content_size"]
+        if declared not in (0, size):
+            raise ValueError(f"lz4 frame of {declared} bytes in a chunk of {size}")
+        out = lz4.frame.decompress(data)
+    elif compression == "":
+        out = data
+    else:
+        raise McapError(f"unsupported chunk compression {compression!r}")
+    if len(out) != size:
+        raise ValueError(f"chunk decompressed to {len(out)} bytes, its header says {size}")
+    return out
+
+
+def _chunk(data: bytes, body: int, end: int) -> Chunk:
+    """The chunk record whose body is data[body:end], its records still compressed.
+    :class:`_Framing` if its own lengths do not add up to the record's."""
+    try:
+        start, stop, size, crc, name_length = _CHUNK_HEAD.unpack_from(data, body)
+        records_at = body + _CHUNK_HEAD.size + name_length + _U64.size
+        (records_length,) = _U64.unpack_from(data, records_at - _U64.size)
+    except struct.error:
+        raise _Framing("chunk fields run past the record") from None
+    if records_at + records_length != end:
+        raise _Framing("chunk fields disagree with the record length")
+    return Chunk(compression=str(data[body + _CHUNK_HEAD.size:records_at - _U64.size], "utf-8"),
+                 data=data[records_at:end], message_start_time=start, message_end_time=stop,
+                 uncompressed_crc=crc, uncompressed_size=size)
+
+
+def _chunk_records(data: bytes, body: int, end: int) -> list[Any]:
+    """The schemas, channels and messages of a chunk record, after checking its framing
+    (:class:`_Framing`), its size and its CRC (a ``_DAMAGED`` error)."""
+    chunk = _chunk(data, body, end)
+    records = _decompress(chunk.compression, chunk.data, chunk.uncompressed_size)
+    return breakup_chunk(replace(chunk, compression="", data=records), validate_crc=True)
+
+
+def _resync(data: bytes, pos: int, stop: int, anchors: tuple[int, ...]) -> int:
+    """Where to go on after the record at ``pos``, whose length cannot be trusted: the next chunk
+    of an intact summary's index, else the next offset holding a chunk record whose own lengths
+    add up to its record length (chance can hardly do that; its CRC is still checked), else
+    ``stop``."""
+    if anchors:
+        return next((a for a in anchors if a > pos), stop)
+    at = pos
+    while (at := data.find(_CHUNK_OPCODE, at + 1, stop)) != -1:
+        record = _record_at(data, at, stop)
+        if record is not None:
+            try:
+                _chunk(data, record[1], record[2])
+            except _Framing:
+                continue
+            return at
+    return stop
+
+
+#: readers of the records that a file written without chunks holds in its data section
+_TOP_LEVEL = {
+    Opcode.SCHEMA: lambda stream, _length: Schema.read(stream),
+    Opcode.CHANNEL: lambda stream, _length: Channel.read(stream),
+    Opcode.MESSAGE: Message.read,
+}
+
+
+# -- recovery --------------------------------------------------------------------------------
+
+@dataclass
+class _Scan:
+    """What a record-by-record scan of a data section found."""
+
+    chunked: list[Any] = field(default_factory=list)  #: records from intact chunks, in order
+    #: schemas, channels and messages standing outside chunks: such records are only trusted in
+    #: a file without chunks (a writer that chunks puts them all in chunks, so between chunks
+    #: they can only be records whose opcode was damaged)
+    loose: list[Any] = field(default_factory=list)
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    chunks: int = 0  #: chunk records seen, intact or not
+    corrupt: int = 0  #: chunks skipped: framing, size, CRC or decompression failed
+    skipped: int = 0  #: records outside chunks that did not parse
+    good: int = len(MAGIC)  #: the end of the last record read
+
+
+def _scan(data: bytes, summary: _Summary | None) -> _Scan:
+    """Walk the data section by the records' length prefixes (see :func:`_recover`)."""
+    stop = summary.start if summary is not None else len(data)
+    anchors = summary.chunk_starts if summary is not None else ()
+    found = _Scan()
+    pos = len(MAGIC)
+    while pos < stop:
+        record = _record_at(data, pos, stop)
+        in_chunk = pos in anchors or data[pos] == Opcode.CHUNK
+        found.chunks += in_chunk
+        try:
+            if record is None:
+                raise _Framing("the record does not fit in the data section")
+            opcode, body, end = record
+            if opcode == Opcode.DATA_END:
+                found.good = end
+                break
+            if opcode == Opcode.CHUNK:
+                found.chunked += _chunk_records(data, body, end)
+            elif in_chunk:  # the index says a chunk starts here: its opcode is damaged
+                raise _Framing("not a chunk where the index has one")
+            elif opcode == Opcode.METADATA:
+                item = Metadata.read(_stream(data, body, end))
+                found.metadata[item.name] = dict(item.metadata)
+            elif opcode in _TOP_LEVEL:
+                found.loose.append(_TOP_LEVEL[opcode](_stream(data, body, end), end - body))
+        except _DAMAGED as exc:
+            if in_chunk and not isinstance(exc, _Framing):
+                found.corrupt += 1
+                pos = end  # only the chunk's content is damaged: the next record follows it
+                continue
+            # the damaged length may be this record's own: the next record's start is unknown
+            resume = _resync(data, pos, stop, anchors)
+            if record is not None or resume < stop:  # (else: where an unfinished file ends)
+                found.corrupt += in_chunk
+                found.skipped += not in_chunk
+            pos = resume
+            continue
+        pos = found.good = end
+    return found
+
+
+def _recover(path: Path, data: bytes, wanted: set[str] | None, summary: _Summary | None,
+             why: str) -> RawRecording:
+    """Every intact record of the data section of a file that cannot be read through its index:
+    its writer was killed (the file ends inside a record), its summary is damaged, or a chunk is.
+
+    The scan walks the data section's records by their length prefixes. A complete chunk is kept
+    if its framing, size and CRC check, else skipped and counted. A record that does not fit (the
+    one the writer was writing when it stopped), a chunk whose lengths disagree, or a record
+    outside a chunk that does not parse leave the next record's start unknown: the scan resumes
+    at the next chunk (:func:`_resync`), or ends if there is none.
+    An intact summary also supplies the definitions of channels whose chunk was lost; messages of
+    a channel whose definition was lost all the same cannot be decoded and are counted."""
+    found = _scan(data, summary)
+    records = found.chunked
+    ignored = len(found.loose) if found.chunks else 0
+    if not found.chunks:
+        records = found.loose
     schemas: dict[int, Schema] = {}
     by_id: dict[int, Channel] = {}
-    raw: list[Message] = []
-    metadata: dict[str, dict[str, str]] = {}
-    corrupt = 0
-    finished = False
-    pos = good = len(MAGIC)
-    while pos + _PREFIX.size <= len(data):
-        opcode, length = _PREFIX.unpack_from(data, pos)
-        end = pos + _PREFIX.size + length
-        if end > len(data):
-            break  # the record the writer was writing when it stopped
-        body = ReadDataStream(io.BytesIO(data[pos + _PREFIX.size:end]))
-        try:
-            if opcode == Opcode.CHUNK:
-                records = breakup_chunk(Chunk.read(body), validate_crc=True)
-            elif opcode in _TOP_LEVEL:
-                records = [_TOP_LEVEL[opcode](body, length)]
-            else:  # indexes, statistics, attachments: not needed to recover the messages
-                records = []
-        except _DAMAGED:
-            if opcode != Opcode.CHUNK:
-                break  # a damaged record outside a chunk: its length may be wrong too
-            corrupt += 1
-            records = []
-        for record in records:
-            if isinstance(record, Schema):
-                schemas[record.id] = record
-            elif isinstance(record, Channel):
-                by_id[record.id] = record
-            elif isinstance(record, Message):
-                raw.append(record)
-            elif isinstance(record, Metadata):
-                metadata[record.name] = dict(record.metadata)
-        pos = good = end
-        if opcode == Opcode.FOOTER:
-            finished = True
-            break
+    for item in records:  # the first definition of an id stands (later ones must repeat it)
+        if isinstance(item, Schema):
+            schemas.setdefault(item.id, item)
+        elif isinstance(item, Channel):
+            by_id.setdefault(item.id, item)
+    if summary is not None:  # intact: it repeats the definitions a lost chunk held
+        for schema_id, schema in summary.schemas.items():
+            schemas.setdefault(schema_id, schema)
+        for channel_id, channel in summary.channels.items():
+            by_id.setdefault(channel_id, channel)
+    raw = [m for m in records if isinstance(m, Message)]
     decodable = [m for m in raw if m.channel_id in by_id]
     orphans = len(raw) - len(decodable)
-    losses = "".join([f"; {corrupt} damaged chunks (CRC or decompression failed) skipped"
-                      if corrupt else "",
-                      f"; {orphans} messages of channels defined in a damaged chunk dropped"
-                      if orphans else ""])
+    losses = "".join([
+        f"; {found.corrupt} damaged chunks (framing, size, CRC or decompression failed) skipped"
+        if found.corrupt else "",
+        f"; {found.skipped} damaged records outside chunks skipped" if found.skipped else "",
+        f"; {ignored} message, schema or channel records between chunks ignored as damaged"
+        if ignored else "",
+        f"; {orphans} messages of channels defined in a damaged chunk dropped" if orphans else "",
+    ])
     if not decodable:
         raise RecordError(f"{path}: nothing recoverable: no complete message in its "
                           f"{len(data)} bytes{losses}")
@@ -279,20 +483,9 @@ def _recover(path: Path, wanted: set[str] | None) -> RawRecording:
         ch.topic: _raw_channel(schemas.get(ch.schema_id), ch)
         for ch in by_id.values() if wanted is None or ch.topic in wanted
     }
-    how = ("a finished file with damaged chunks" if finished
-           else "an unfinished file (its writer was killed)")
-    note = (f"recovered {len(out)} messages from the complete chunks of {how}: {good} of "
-            f"{len(data)} bytes ({good / max(len(data), 1):.1%}) were readable{losses}")
-    return RawRecording(path=path, channels=channels, messages=tuple(out), metadata=metadata,
-                        complete=False, note=note, file_size=len(data), bytes_read=good,
-                        damaged_chunks=corrupt)
-
-
-#: readers of the records that may stand outside chunks
-_TOP_LEVEL = {
-    Opcode.SCHEMA: lambda stream, _length: Schema.read(stream),
-    Opcode.CHANNEL: lambda stream, _length: Channel.read(stream),
-    Opcode.MESSAGE: Message.read,
-    Opcode.METADATA: lambda stream, _length: Metadata.read(stream),
-    Opcode.FOOTER: lambda stream, _length: Footer.read(stream),
-}
+    note = (f"recovered {len(out)} messages from the complete chunks of {why}: {found.good} of "
+            f"{len(data)} bytes ({found.good / max(len(data), 1):.1%}) were readable{losses}")
+    return RawRecording(path=path, channels=channels, messages=tuple(out),
+                        metadata=found.metadata, complete=False, note=note,
+                        file_size=len(data), bytes_read=found.good,
+                        damaged_chunks=found.corrupt)
