@@ -333,9 +333,10 @@ def _chunk(data: bytes, body: int, end: int) -> Chunk:
         raise _Framing("chunk fields run past the record") from None
     if records_at + records_length != end:
         raise _Framing("chunk fields disagree with the record length")
-    return Chunk(compression=str(data[body + _CHUNK_HEAD.size:records_at - _U64.size], "utf-8"),
-                 data=data[records_at:end], message_start_time=start, message_end_time=stop,
-                 uncompressed_crc=crc, uncompressed_size=size)
+    # (a damaged name is no framing error: it fails later as an unsupported compression)
+    name = str(data[body + _CHUNK_HEAD.size:records_at - _U64.size], "utf-8", "replace")
+    return Chunk(compression=name, data=data[records_at:end], message_start_time=start,
+                 message_end_time=stop, uncompressed_crc=crc, uncompressed_size=size)
 
 
 def _chunk_records(data: bytes, body: int, end: int) -> list[Any]:
@@ -346,14 +347,13 @@ def _chunk_records(data: bytes, body: int, end: int) -> list[Any]:
     return breakup_chunk(replace(chunk, compression="", data=records), validate_crc=True)
 
 
-def _resync(data: bytes, pos: int, stop: int, anchors: tuple[int, ...]) -> int:
-    """Where to go on after the record at ``pos``, whose length cannot be trusted: the next chunk
-    of an intact summary's index, else the next offset holding a chunk record whose own lengths
-    add up to its record length (chance can hardly do that; its CRC is still checked), else
-    ``stop``."""
+def _resync(data: bytes, after: int, stop: int, anchors: tuple[int, ...]) -> int:
+    """The first chunk record past ``after``: from an intact summary's index, else the first
+    offset holding a record framed exactly as a chunk (chance can hardly do that; its CRC is
+    still checked); ``stop`` if there is none."""
     if anchors:
-        return next((a for a in anchors if a > pos), stop)
-    at = pos
+        return next((a for a in anchors if a > after), stop)
+    at = after
     while (at := data.find(_CHUNK_OPCODE, at + 1, stop)) != -1:
         record = _record_at(data, at, stop)
         if record is not None:
@@ -397,6 +397,8 @@ def _scan(data: bytes, summary: _Summary | None) -> _Scan:
     anchors = summary.chunk_starts if summary is not None else ()
     found = _Scan()
     pos = len(MAGIC)
+    trusted = len(MAGIC) - 1  #: the last byte of the last chunk whose framing checked
+    resumed = -1  #: where the last resync went: each goes further, so the scan ends
     while pos < stop:
         record = _record_at(data, pos, stop)
         in_chunk = pos in anchors or data[pos] == Opcode.CHUNK
@@ -410,6 +412,7 @@ def _scan(data: bytes, summary: _Summary | None) -> _Scan:
                 break
             if opcode == Opcode.CHUNK:
                 found.chunked += _chunk_records(data, body, end)
+                trusted = end - 1
             elif in_chunk:  # the index says a chunk starts here: its opcode is damaged
                 raise _Framing("not a chunk where the index has one")
             elif opcode == Opcode.METADATA:
@@ -421,15 +424,18 @@ def _scan(data: bytes, summary: _Summary | None) -> _Scan:
             if in_chunk and not isinstance(exc, _Framing):
                 found.corrupt += 1
                 pos = end  # only the chunk's content is damaged: the next record follows it
+                trusted = end - 1
                 continue
-            # the damaged length may be this record's own: the next record's start is unknown
-            resume = _resync(data, pos, stop, anchors)
+            # the damaged length may be this record's own or that of any record read since the
+            # last chunk (nothing checks those): resume at the first chunk after that
+            resume = _resync(data, max(trusted, resumed, pos if in_chunk else -1), stop, anchors)
             if record is not None or resume < stop:  # (else: where an unfinished file ends)
                 found.corrupt += in_chunk
                 found.skipped += not in_chunk
-            pos = resume
+            pos = resumed = resume
             continue
-        pos = found.good = end
+        pos = end
+        found.good = max(found.good, end)
     return found
 
 
