@@ -172,10 +172,9 @@ def _initial_step(p, mode, u, y, f, rtol, atol, h_max, tmp, ftmp, lam):
     return min(100.0 * h0, h1, h_max)
 
 
-@nb.njit(**HOT_PATH)
+@nb.njit(**HOT_PATH, inline="always")
 def _all_guards(p, mode, u, code, y, lam, out):
-    for i in range(NGUARDS):
-        out[i] = guard_value(p, mode, u, code, y, 0, lam, 0, i)
+    guard_values(p, mode, u, code, y, 0, lam, 0, out)
 
 
 @nb.njit(**HOT_PATH)

@@ -48,6 +48,16 @@ class _Printer(PythonCodePrinter):
     def _print_Half(self, expr: sp.Rational) -> str:
         return "0.5"
 
+    def _print_Pow(self, expr: sp.Pow, rational: bool = False) -> str:
+        # small integer powers as products (exact, and no call to pow); others as usual
+        base, exp = expr.as_base_exp()
+        if exp.is_Integer and 2 <= int(exp) <= 4:
+            factor = self.parenthesize(base, sp.printing.precedence.PRECEDENCE["Mul"])
+            return "*".join([factor] * int(exp))
+        if exp.is_Integer and int(exp) == -1:
+            return f"1.0/{self.parenthesize(base, sp.printing.precedence.PRECEDENCE['Pow'])}"
+        return super()._print_Pow(expr, rational)
+
 
 class _Emitter:
     """Lines of one function body with fresh scalar names and structural zeros folded."""
@@ -183,9 +193,52 @@ def _schur(br: _Emitter, L: list[list[str]], Da: list[list[str]], active: list[i
     return cols, _cholesky(br, S, "k")
 
 
-def _vector_field(derived: DerivedSystem) -> list[str]:
+def _mode_factors(em: _Emitter, n: int, masks: set[int]) -> dict[int, str]:
+    """0.0/1.0 factors "mode == J" for the modes in ``masks`` and "constraint j active"."""
+    out = {}
+    for mask in sorted(masks):
+        out[mask] = em.assign("o", f"1.0 * (mode == {mask})")
+    return out
+
+
+def _mode_mixed(em: _Emitter, derived: DerivedSystem) -> list[str]:
+    """f_J(q, q', u) of the current mode without a branch: per entry, each distinct expression
+    (over the modes) times the 0/1 factor of the modes that have it. Exact: 1.0 * e + 0.0 * e'
+    is e for finite values (the inputs are checked finite on entry)."""
     d, n = derived.ndof, derived.nconstraints
-    out = ["@nb.njit(**HOT_PATH)",
+    variants: list[dict[sp.Expr, list[int]]] = []
+    for i in range(d):
+        by_expr: dict[sp.Expr, list[int]] = {}
+        for mask in range(1 << n):
+            by_expr.setdefault(derived.forces[mask][i], []).append(mask)
+        variants.append(by_expr)
+    flat = [e for by_expr in variants for e in by_expr]
+    names = em.exprs(flat, "f")
+    needed = {m for by_expr in variants if len(by_expr) > 1 for ms in by_expr.values()
+              for m in ms}
+    factor = _mode_factors(em, n, needed)
+    out, k = [], 0
+    for by_expr in variants:
+        if len(by_expr) == 1:
+            out.append(names[k])
+            k += 1
+            continue
+        terms = []
+        for masks in by_expr.values():
+            weight = " + ".join(factor[m] for m in masks)
+            terms.append(_mul(names[k], f"({weight})" if len(masks) > 1 else weight))
+            k += 1
+        out.append(em.assign("f", _sum(terms)))
+    return out
+
+
+def _vector_field(derived: DerivedSystem) -> list[str]:
+    """Eq. (1a) for the current mode, branch-free: the forces mixed by 0/1 mode factors, and
+    the reactions from the Schur complement of *all* constraints with the inactive ones' rows
+    and columns replaced by the identity (their reactions come out 0). Without branches Numba
+    can drop the reference counting around an inlined call (see model/biped.py)."""
+    d, n = derived.ndof, derived.nconstraints
+    out = ["@nb.njit(**HOT_PATH, inline=\"always\")",
            "def vector_field(p, mode, y, yo, u, out, off, lam, lo):",
            '    """(q\', q\'\') of mode ``mode`` at y[yo:yo + 2d] to out[off:off + 2d], the',
            '    reactions to lam[lo:lo + n] (0 for inactive constraints), Eq. (1a)."""']
@@ -195,32 +248,34 @@ def _vector_field(derived: DerivedSystem) -> list[str]:
     rate = em.exprs(list(derived.jacobian_rate), "r") if n else []
     for i in range(d):
         em.line(f"out[off + {i}] = y[yo + {d + i}]")
-    out += em.lines
-    for keyword, mask in _mode_branches(n):
-        out.append(f"    {keyword} mode == {mask}:")
-        br = _Emitter("        ")
-        br.count = em.count + 1000 * (mask + 1)
-        f = br.exprs(list(derived.forces[mask]), "f")
-        x = _solve(br, L, f, "x")
-        active = [j for j in range(n) if mask >> j & 1]
-        acc = x
-        lams = {}
-        if active:
-            cols, Ls = _schur(br, L, Da, active)
-            rhs = [br.assign("b", "-(" + _sum([*(_mul(Da[a][i], x[i]) for i in range(d)),
-                                               rate[a]]) + ")")
-                   for a in active]
-            lam = _solve(br, Ls, rhs, "l")
-            lams = dict(zip(active, lam))
-            acc = [br.assign("q", _sum([x[i], *(_mul(cols[b][i], lam[b])
-                                                for b in range(len(active)))]))
-                   for i in range(d)]
-        for i in range(d):
-            br.line(f"out[off + {d + i}] = {acc[i]}")
+    f = _mode_mixed(em, derived)
+    x = _solve(em, L, f, "x")
+    acc = x
+    if n:
+        on = [em.assign("n", f"float(mode >> {j} & 1)") for j in range(n)]
+        off = [em.assign("n", f"1.0 - {on[j]}") for j in range(n)]
+        cols, _ = _schur_columns(em, L, Da, list(range(n)))
+        S = [[em.assign("s", _sum([_mul(Da[a][i], cols[b][i]) for i in range(d)]))
+              for b in range(n)] for a in range(n)]
+        masked = [[em.assign("s", _sum([_mul(_mul(on[a], on[b]), S[a][b]),
+                                        off[a] if a == b else "0.0"]))
+                   for b in range(n)] for a in range(n)]
+        rhs = [em.assign("b", _mul(on[a], "(-(" + _sum(
+            [*(_mul(Da[a][i], x[i]) for i in range(d)), rate[a]]) + "))")) for a in range(n)]
+        lam = _solve(em, _cholesky(em, masked, "k"), rhs, "l")
+        acc = [em.assign("q", _sum([x[i], *(_mul(cols[j][i], lam[j]) for j in range(n))]))
+               for i in range(d)]
         for j in range(n):
-            br.line(f"lam[lo + {j}] = {lams.get(j, '0.0')}")
-        out += br.lines
-    return out
+            em.line(f"lam[lo + {j}] = {lam[j]} + 0.0")
+    for i in range(d):
+        em.line(f"out[off + {d + i}] = {acc[i]}")
+    return out + em.lines
+
+
+def _schur_columns(em: _Emitter, L, Da, active):
+    """M^-1 Da_j^T for the constraints in ``active``."""
+    d = len(L)
+    return [_solve(em, L, [Da[j][i] for i in range(d)], "y") for j in active], None
 
 
 def _impact(derived: DerivedSystem) -> list[str]:
@@ -324,15 +379,37 @@ def _guards(derived: DerivedSystem) -> list[str]:
         "    if mode >> i & 1:",
         "        return lam[lo + i]",
         "    return constraint_value(i, p, y, yo)",
-        "",
-        "",
-        "@nb.njit(**HOT_PATH)",
-        "def probe_stage(p, mode, u, code, y, yo, lam, lo, c, probe):",
-        '    """probe[i] lowered to c for each guard i <= 0 at the stage state y[yo:]."""',
-        f"    for i in range({n + 1}):",
-        "        if c < probe[i] and guard_value(p, mode, u, code, y, yo, lam, lo, i) <= 0.0:",
-        "            probe[i] = c",
-    ]
+    ] + ["", ""] + _probe(derived) + ["", ""] + _probe(derived, values=True)
+
+
+def _probe(derived: DerivedSystem, *, values: bool = False) -> list[str]:
+    """The stage probe of the DOP853 step, inlined into each of its 12 stages: straight-line
+    code (the guards of every mode and every maneuver's terminal guard, mixed by 0/1 factors),
+    because a call per guard and stage cost more than the vector field itself. ``values``: the
+    same guards written to ``out`` (what the kernel reads after each step)."""
+    n = derived.nconstraints
+    if values:
+        out = ["@nb.njit(**HOT_PATH, inline=\"always\")",
+               "def guard_values(p, mode, u, code, y, yo, lam, lo, out):",
+               '    """Every guard at the state y[yo:] with known reactions lam[lo:]."""']
+    else:
+        out = ["@nb.njit(**HOT_PATH, inline=\"always\")",
+               "def probe_stage(p, mode, u, code, y, yo, lam, lo, c, probe):",
+               '    """probe[i] lowered to c for each guard i <= 0 at the stage state y[yo:]."""']
+    em = _Emitter()
+    _bindings(derived, em, velocities=True, inputs=True)
+    a = em.exprs(list(derived.constraints), "a") if n else []
+    terms = em.exprs([m.terminal for m in derived.maneuvers.values()], "t")
+    for j in range(n):
+        on = em.assign("n", f"float(mode >> {j} & 1)")
+        g = em.assign("g", f"{on} * lam[lo + {j}] + (1.0 - {on}) * {a[j]}")
+        em.line(f"out[{j}] = {g}" if values
+                else f"probe[{j}] = min(probe[{j}], c + 2.0 * ({g} > 0.0))")
+    mixed = _sum([_mul(t, f"(code == {k})") for k, t in enumerate(terms)])
+    g = em.assign("g", mixed)
+    em.line(f"out[{n}] = {g}" if values
+            else f"probe[{n}] = min(probe[{n}], c + 2.0 * ({g} > 0.0))")
+    return out + em.lines
 
 
 def _int_array(values: list[int]) -> str:

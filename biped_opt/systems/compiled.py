@@ -80,9 +80,10 @@ def _module_for(derived: DerivedSystem) -> ModuleType:
         return module
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class SystemTrajectory:
-    """One simulated maneuver of a compiled system."""
+    """One simulated maneuver of a compiled system (a plain record: a frozen dataclass's
+    construction alone cost 2.5 us, an eighth of a trajectory)."""
 
     system: str
     maneuver: str
@@ -148,6 +149,9 @@ class CompiledSystem:
                 f"(maneuvers: {', '.join(self.maneuvers) or 'none'})") from None
 
     def _inputs(self, inputs: Any) -> Array:
+        if isinstance(inputs, (tuple, list)) and len(inputs) == len(self.inputs) > 0 and all(
+                type(v) is float and math.isfinite(v) for v in inputs):
+            return np.array(inputs)  # the common case, checked in pure Python (cheaper)
         u = np.zeros(max(len(self.inputs), 1))
         if inputs is None:
             return u

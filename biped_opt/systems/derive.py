@@ -85,9 +85,43 @@ def mode_mask(system: System, names: frozenset[str] | set[str] | tuple[str, ...]
     return mask
 
 
+def _normaliser(system: System) -> Callable[[Any], Any]:
+    """A function that rewrites a user's expression into the system's own symbols: a symbol is
+    matched by name whatever its assumptions (``sp.Symbol("m")`` is the parameter m), and
+    ``sympy.physics.mechanics`` output is accepted as is: a dynamic symbol q(t) named like a
+    coordinate becomes q, its time derivative the velocity q_dot (second derivatives are not a
+    state and stay, to be reported as unknown)."""
+    by_name = {str(sym): sym for sym in (*system.q, *system.dq, *system.p, *system.u, system.s)}
+    coords = dict(zip((str(c) for c in system.q), zip(system.q, system.dq)))
+
+    def normalise(expr: Any) -> Any:
+        expr = sp.sympify(expr)
+        if isinstance(expr, sp.MatrixBase):
+            return expr.applyfunc(normalise)
+        subs: dict[Any, Any] = {}
+        for d in expr.atoms(sp.Derivative):
+            f = d.expr
+            name = getattr(getattr(f, "func", None), "__name__", None)
+            if name in coords and len(d.variables) == 1 and len(f.args) == 1:
+                subs[d] = coords[name][1]
+        expr = expr.subs(subs) if subs else expr
+        subs = {}
+        for f in expr.atoms(sp.core.function.AppliedUndef):
+            name = f.func.__name__
+            if name in coords and len(f.args) == 1:
+                subs[f] = coords[name][0]
+        for sym in expr.free_symbols:
+            if isinstance(sym, sp.Symbol) and str(sym) in by_name and sym != by_name[str(sym)]:
+                subs[sym] = by_name[str(sym)]
+        return expr.subs(subs) if subs else expr
+
+    return normalise
+
+
 def derive(system: System) -> DerivedSystem:
     """Check ``system`` and derive Da, (d/dt Da) q' and the forces of every mode."""
     where = system.where()
+    normalise = _normaliser(system)
     d = len(system.q)
     q, dq = sp.Matrix(system.q), sp.Matrix(system.dq)
     params, inputs = set(system.p), set(system.u)
@@ -104,7 +138,7 @@ def derive(system: System) -> DerivedSystem:
         if value is None:
             raise SystemDescriptionError(f"{where}: {item}: not given")
         try:
-            m = sp.Matrix(value)
+            m = normalise(sp.Matrix(value))
         except (TypeError, ValueError, sp.SympifyError) as exc:
             raise SystemDescriptionError(f"{where}: {item}: not a matrix ({exc})") from None
         if shape[1] == 1 and m.shape == (1, shape[0]):
@@ -122,9 +156,10 @@ def derive(system: System) -> DerivedSystem:
 
     names = list(system.constraints)
     n = len(names)
-    for name, expr in system.constraints.items():
+    constraints = {k: normalise(v) for k, v in system.constraints.items()}
+    for name, expr in constraints.items():
         check_symbols(f"constraint {name!r}", expr, config, "a coordinate or a parameter")
-    a = sp.Matrix([sp.sympify(system.constraints[k]) for k in names]) if n else sp.zeros(0, 1)
+    a = sp.Matrix([constraints[k] for k in names]) if n else sp.zeros(0, 1)
     da = a.jacobian(q) if n else sp.zeros(0, d)
     rate = ((da * dq).jacobian(q) * dq) if n else sp.zeros(0, 1)
 
@@ -142,7 +177,7 @@ def derive(system: System) -> DerivedSystem:
                       "a coordinate, velocity, parameter or input")
         forces.append(f)
 
-    gamma = sp.sympify(system.restitution)
+    gamma = normalise(system.restitution)
     check_symbols("restitution", gamma, params, "a parameter")
 
     maneuvers = {}
@@ -150,17 +185,18 @@ def derive(system: System) -> DerivedSystem:
         item = f"maneuver {name!r}"
         coords = list(system.q) + list(system.dq)
         initial = []
-        unknown = [k for k in m.initial if k not in coords]
+        unknown = [k for k in m.initial if normalise(k) not in coords]
         if unknown:
             raise SystemDescriptionError(
                 f"{where}: {item}: initial: {unknown[0]!s} is not a coordinate or velocity")
+        initial_given = {normalise(k): v for k, v in m.initial.items()}
         for c in coords:
-            expr = sp.sympify(m.initial.get(c, 0))
+            expr = normalise(initial_given.get(c, 0))
             check_symbols(f"{item}: initial {c}", expr, params | {system.s},
                           f"a parameter or {system.s}")
             initial.append(expr)
-        terminal = sp.sympify(m.terminal)
-        outcome = sp.sympify(m.outcome)
+        terminal = normalise(m.terminal)
+        outcome = normalise(m.outcome)
         check_symbols(f"{item}: terminal", terminal, config | set(system.dq) | inputs,
                       "a coordinate, velocity, parameter or input")
         check_symbols(f"{item}: outcome", outcome, config | set(system.dq),

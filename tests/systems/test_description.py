@@ -242,3 +242,43 @@ def test_an_unknown_system_is_named(tmp_path):
         load_system("quadruped")
     with pytest.raises(SystemDescriptionError, match="no such system file"):
         load_system(str(tmp_path / "none.py"))
+
+
+def test_sympy_physics_mechanics_output_is_usable():
+    """The rocking bar's mass matrix and forces from sympy.physics.mechanics (Lagrange's method
+    on dynamic symbols x(t), z(t), th(t) and plain symbols without assumptions) describe the
+    same system as the library's: equal derived quantities."""
+    from sympy.physics.mechanics import (
+        LagrangesMethod,
+        Lagrangian,
+        Point,
+        ReferenceFrame,
+        RigidBody,
+        dynamicsymbols,
+        inertia,
+    )
+
+    x, z, th = dynamicsymbols("x z th")
+    m, w, g = sp.symbols("m w g")
+    frame = ReferenceFrame("N")
+    body = frame.orientnew("B", "Axis", (th, frame.z))
+    origin = Point("O")
+    centre = origin.locatenew("P", x * frame.x + z * frame.y)
+    centre.set_vel(frame, centre.pos_from(origin).dt(frame))
+    bar = RigidBody("bar", centre, body, m, (inertia(body, 0, 0, m * (2 * w) ** 2 / 12), centre))
+    bar.potential_energy = m * g * z
+    method = LagrangesMethod(Lagrangian(frame, bar), [x, z, th])
+    method.form_lagranges_equations()
+
+    s = System("rocking_bar", ["x", "z", "th"], parameters={"m": 1.0, "w": 0.5, "g": 1.0},
+               s="th0")
+    s.mass_matrix = method.mass_matrix
+    s.forces = lambda J: method.forcing
+    s.constraint("left", z - w * sp.sin(th))
+    s.constraint("right", z + w * sp.sin(th))
+    s.maneuver("drop", initial={z: 1, th: s.s}, terminal=sp.diff(z), outcome=sp.diff(th))
+    mine, lib = derive(s), derive(rocking_bar())
+    assert mine.mass_matrix == lib.mass_matrix
+    assert mine.jacobian == lib.jacobian and mine.jacobian_rate == lib.jacobian_rate
+    assert mine.forces[0] == lib.forces[3] == sp.Matrix([0, -lib.system.p.m * lib.system.p.g, 0])
+    assert mine.maneuvers["drop"].outcome == lib.system.dq[2]

@@ -188,3 +188,21 @@ def test_bad_calls_name_what_is_wrong(bar):
         compile_system("rocking_bar", k=1.0)
     with pytest.raises(InvalidParameterError, match="parameter 'm' must be a finite number"):
         compile_system("rocking_bar", m=math.inf)
+
+
+def test_the_generated_biped_has_the_kink_and_the_jump(generated_biped):
+    """The touchdown kink's one-sided slopes and the liftoff jump's one-sided limits at th0 = 0
+    (MODEL.md Sec. 6) from the generated simulator equal the hand-written simulator's: limits to
+    1e-12; slopes to 1e-10, because the extrapolation divides the outcomes' ~1e-14 differences
+    by steps down to 6e-4 with weights of order 10 (measured: 6e-12)."""
+    for maneuver, u, field, tol in (("touchdown", (2.0, 0.5, 0.0), "derivative", 1e-10),
+                                    ("liftoff", (1.5, 3.0, 0.0), "limit", 1e-12)):
+        def gen(th, maneuver=maneuver, u=u):
+            return generated_biped.simulate(maneuver, th, u).outcome
+
+        def ref(th, maneuver=maneuver, u=u):
+            return simulate(maneuver, th, u).outcome
+
+        for side in (-1, 1):
+            a, b = one_sided(gen, 0.0, side), one_sided(ref, 0.0, side)
+            assert getattr(a, field) == pytest.approx(getattr(b, field), abs=tol)
