@@ -53,7 +53,8 @@ class _Printer(PythonCodePrinter):
         base, exp = expr.as_base_exp()
         if exp.is_Integer and 2 <= int(exp) <= 4:
             factor = self.parenthesize(base, sp.printing.precedence.PRECEDENCE["Mul"])
-            return "*".join([factor] * int(exp))
+            # parenthesised: the product may be printed as a divisor (3/w**2 -> 3/(w*w))
+            return "(" + "*".join([factor] * int(exp)) + ")"
         if exp.is_Integer and int(exp) == -1:
             return f"1.0/{self.parenthesize(base, sp.printing.precedence.PRECEDENCE['Pow'])}"
         return super()._print_Pow(expr, rational)
