@@ -83,6 +83,13 @@ def _guard_at(p, mode, u, code, y, i, dy, lam):
 
 @nb.njit(**HOT_PATH)
 def _guard_on_dense(p, mode, u, code, F, y, x, i, tmp, dy, lam):
+    """Guard i on the interpolant at x: one component when the guard is one (a height in the
+    air, a velocity as terminal guard: see ``guard_component``), else the whole state."""
+    k, sign = guard_component(mode, code, i)
+    if k >= 0:
+        xm = 1.0 - x
+        return sign * (y[k] + x * (F[0, k] + xm * (F[1, k] + x * (F[2, k] + xm * (
+            F[3, k] + x * (F[4, k] + xm * (F[5, k] + x * F[6, k])))))))
     _dense_eval(F, y, x, tmp)
     return _guard_at(p, mode, u, code, tmp, i, dy, lam)
 

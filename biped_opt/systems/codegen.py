@@ -380,7 +380,35 @@ def _guards(derived: DerivedSystem) -> list[str]:
         "    if mode >> i & 1:",
         "        return lam[lo + i]",
         "    return constraint_value(i, p, y, yo)",
-    ] + ["", ""] + _probe(derived) + ["", ""] + _probe(derived, values=True)
+    ] + ["", ""] + _probe(derived) + ["", ""] + _probe(derived, values=True) + [
+        "", ""] + _components(derived)
+
+
+def _as_component(derived: DerivedSystem, expr: sp.Expr) -> tuple[int, float] | None:
+    """(k, sign) when ``expr`` is +-y[k], a single coordinate or velocity, else None."""
+    state = [*derived.system.q, *derived.system.dq]
+    for sign, candidate in ((1.0, expr), (-1.0, -expr)):
+        if candidate in state:
+            return state.index(candidate), sign
+    return None
+
+
+def _components(derived: DerivedSystem) -> list[str]:
+    """``guard_component(mode, code, i)``: (k, sign) when guard i in this mode and maneuver is
+    sign * y[k] (event roots then interpolate one component), else (-1, 1.0)."""
+    n = derived.nconstraints
+    out = ["@nb.njit(**HOT_PATH)", "def guard_component(mode, code, i):",
+           '    """(k, sign) of a guard that is one state component, else (-1, 1.0)."""']
+    for j in range(n):
+        one = _as_component(derived, derived.constraints[j])
+        if one is not None:
+            out += [f"    if i == {j} and not mode >> {j} & 1:",
+                    f"        return {one[0]}, {one[1]!r}"]
+    for code, m in enumerate(derived.maneuvers.values()):
+        one = _as_component(derived, m.terminal)
+        if one is not None:
+            out += [f"    if i == {n} and code == {code}:", f"        return {one[0]}, {one[1]!r}"]
+    return out + ["    return -1, 1.0"]
 
 
 def _probe(derived: DerivedSystem, *, values: bool = False) -> list[str]:
