@@ -11,7 +11,9 @@ can only arise where one of them changes, so the analysis
    coarse grid's interval can hold several); a bracket that ends in a band thinner than
    :data:`MERGE_TOL` (the simultaneous events around th0 = 0 have a label of their own) is
    widened over it, and changes closer than MERGE_TOL are one point, put at 0 when the band
-   holds 0. So the bracket holds the point on any grid, two angles included;
+   holds 0. A bound reached or left is bisected again on the sign of the cost's slope at the
+   bound (:func:`_bound_bracket`): the optimiser's own verdict flickers near it. So the bracket
+   holds the point on any grid, two angles included;
 3. measures one-sided limits, first and second derivatives of each quantity there
    (:func:`biped_opt.nonsmooth.one_sided`) and classifies: **jump** (limits differ), **kink**
    (continuous, first derivatives differ), **second-derivative** (C^1, second derivatives differ;
@@ -44,6 +46,7 @@ from biped_opt.hybrid.simulate import DEFAULT_OPTIONS, check_inputs
 from biped_opt.maneuvers import spec
 from biped_opt.model.params import BipedParams
 from biped_opt.nonsmooth import OneSided, locate_switch, one_sided
+from biped_opt.optimal.derivatives import outcome_sensitivity
 from biped_opt.optimal.problems import OptimalControlProblem
 from biped_opt.optimal.solve import OptimalResult, branch_label, optimal_policy
 from biped_opt.optimal.sweep import Progress, _bar, sweep_fixed, sweep_grid, sweep_optimal
@@ -234,9 +237,47 @@ def _across_band(ev: _Evaluator, lo: float, hi: float, la: Hashable, lb: Hashabl
     return lo, hi, la, lb
 
 
-def _switches(ev: _Evaluator, grid: npt.NDArray[np.float64], limit: float, progress: Progress
-              ) -> list[tuple[float, float, Hashable, Hashable]]:
-    """Located label changes as (lo, hi, label_left, label_right), merged across bands."""
+#: (lo, hi, label_left, label_right) -> a better bracket [lo, hi] of that change
+Relocate = Callable[[float, float, Hashable, Hashable], tuple[float, float]]
+
+
+def _bound_bracket(problem: OptimalControlProblem, limit: float, lo: float, hi: float,
+                   la: Hashable, lb: Hashable) -> tuple[float, float]:
+    """Bracket of a decision reaching or leaving a bound, from the sign of d c / d u there.
+
+    The optimiser decides "on the bound" from a differenced cost slope whose noise (~2e-10)
+    flickers its verdict over ~2e-8 in th0 around the true point (measured at touchdown's u1
+    bound: brackets from 2 and 41 angles lay 9e-9 apart, each 1e-10 wide, so one missed it).
+    The slope at the bound, from the exact sensitivity d th_f / d u, is smooth in th0 and
+    vanishes where the free optimum meets the bound (Karush-Kuhn-Tucker), to ~1e-11 in th0:
+    its sign is bisected over the flicker zone instead. ``la``, ``lb`` are the (branch, acting
+    decision, bound) labels of the two sides; other changes keep [lo, hi].
+    """
+    (branch_a, active_a, bound_a), (branch_b, active_b, bound_b) = la, lb  # type: ignore[misc]
+    if (branch_a != branch_b or active_a != active_b or active_a is None
+            or bound_a == bound_b or None not in (bound_a, bound_b)):
+        return lo, hi
+    lower, upper = problem.bound(active_a)
+    end, outward = (upper, 1.0) if "upper" in (bound_a, bound_b) else (lower, -1.0)
+    u = problem.inputs({active_a: end})
+
+    def held(th: float) -> bool:
+        s = outcome_sensitivity(problem.maneuver, th, u, params=problem.params,
+                                options=problem.options)
+        slope = (problem.outcome_slope(s.outcome) * s.d_input(active_a)
+                 + 2.0 * problem.alpha(active_a) * end)
+        return outward * slope <= 0.0  # the cost falls (or is flat) towards the bound
+
+    a, b = max(lo - MERGE_TOL, -limit), min(hi + MERGE_TOL, limit)
+    if held(a) == held(b):  # the slope does not confirm the change nearby: keep the optimiser's
+        return lo, hi
+    return locate_switch(held, a, b, tol=LOCATE_TOL)
+
+
+def _switches(ev: _Evaluator, grid: npt.NDArray[np.float64], limit: float, progress: Progress,
+              relocate: Relocate | None = None) -> list[tuple[float, float, Hashable, Hashable]]:
+    """Located label changes as (lo, hi, label_left, label_right), merged across bands, each
+    bracket then improved by ``relocate`` when given."""
     labels = [ev.label(x) for x in grid]
     raw = []
     pairs = [k for k in range(grid.size - 1) if labels[k] != labels[k + 1]]
@@ -259,6 +300,8 @@ def _switches(ev: _Evaluator, grid: npt.NDArray[np.float64], limit: float, progr
             merged[-1] = (plo, hi, pla, lb)
         else:
             merged.append((lo, hi, la, lb))
+    if relocate is not None:
+        merged = [(*relocate(lo, hi, la, lb), la, lb) for lo, hi, la, lb in merged]
     return merged
 
 
@@ -322,8 +365,9 @@ def _analyse(
     limit: float,
     optimal: bool,
     progress: Progress,
+    relocate: Relocate | None = None,
 ) -> list[NonsmoothPoint]:
-    switches = _switches(ev, grid, limit, progress)
+    switches = _switches(ev, grid, limit, progress, relocate)
     points: list[NonsmoothPoint] = []
     xs = [0.0 if lo <= 0.0 <= hi else 0.5 * (lo + hi) for lo, hi, _, _ in switches]
     for i, (lo, hi, _, _) in enumerate(switches):
@@ -447,8 +491,12 @@ def find_nonsmooth_optimal(
         ev.cache[float(r.theta0)] = _optimal_sample(r)
     quantities = ["outcome", *(f"policy:{d}" for d in problem.decisions), "value"]
     bar = _bar(progress, 1, f"{problem.name} locating")
-    points = _analyse(ev, sweep.theta0, quantities, spec(problem.maneuver).theta0_limit, True,
-                      bar)
+    limit = spec(problem.maneuver).theta0_limit
+
+    def relocate(lo: float, hi: float, la: Hashable, lb: Hashable) -> tuple[float, float]:
+        return _bound_bracket(problem, limit, lo, hi, la, lb)
+
+    points = _analyse(ev, sweep.theta0, quantities, limit, True, bar, relocate)
     return NonsmoothReport(
         subject=problem.name,
         optimal=True,
