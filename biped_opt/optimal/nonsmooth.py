@@ -277,7 +277,13 @@ def _bound_bracket(problem: OptimalControlProblem, limit: float, lo: float, hi: 
 def _switches(ev: _Evaluator, grid: npt.NDArray[np.float64], limit: float, progress: Progress,
               relocate: Relocate | None = None) -> list[tuple[float, float, Hashable, Hashable]]:
     """Located label changes as (lo, hi, label_left, label_right), merged across bands, each
-    bracket then improved by ``relocate`` when given."""
+    bracket then improved by ``relocate`` when given.
+
+    Probes MERGE_TOL beyond both ends of the grid see a change at an end, or the band at 0 when
+    it holds the whole range (whose labels are then all alike); the caller keeps only the points
+    that lie in the range."""
+    grid = np.unique(np.concatenate(
+        ([max(grid[0] - MERGE_TOL, -limit)], grid, [min(grid[-1] + MERGE_TOL, limit)])))
     labels = [ev.label(x) for x in grid]
     raw = []
     pairs = [k for k in range(grid.size - 1) if labels[k] != labels[k + 1]]
@@ -372,6 +378,8 @@ def _analyse(
     xs = [0.0 if lo <= 0.0 <= hi else 0.5 * (lo + hi) for lo, hi, _, _ in switches]
     for i, (lo, hi, _, _) in enumerate(switches):
         x = xs[i]
+        if not grid[0] <= x <= grid[-1]:
+            continue  # seen from a probe beyond the range, but outside it
         left_gap = x - (xs[i - 1] if i > 0 else -limit)
         right_gap = (xs[i + 1] if i + 1 < len(xs) else limit) - x
         # stay inside the smooth pieces on each side, and beyond the bracket/band
