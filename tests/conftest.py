@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import fcntl
 import itertools
 import os
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -33,11 +35,34 @@ os.environ.pop("CYCLONEDDS_URI", None)
 os.environ.setdefault("BIPED_OPT_CACHE", str(Path(__file__).resolve().parents[1] / ".cache"))
 
 _DOMAIN_COUNTER = itertools.count()
+#: the 232 usable domain ids in blocks: each test run holds one block (an flock, released when
+#: the process ends, even killed), so two suites running at once on a machine never share a
+#: domain (one node test once saw the other run's simulator)
+_BLOCKS, _BLOCK_SIZE = 8, 29
+
+
+def _claim_block() -> tuple[int, int | None]:
+    start = os.getpid() % _BLOCKS
+    for k in range(_BLOCKS):
+        block = (start + k) % _BLOCKS
+        path = Path(tempfile.gettempdir()) / f"biped_opt_test_domains_{block}.lock"
+        fd = os.open(path, os.O_CREAT | os.O_RDWR, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            continue
+        return block, fd  # the descriptor stays open: the lock lives as long as this process
+    return start, None  # more than 8 runs at once: share a block, as ids were shared before
+
+
+_DOMAIN_BLOCK, _DOMAIN_LOCK = _claim_block()
 
 
 def unique_domain_id() -> int:
-    """A DDS domain id in 1..232 unlikely to collide with other test processes on the machine."""
-    return 1 + (os.getpid() * 37 + next(_DOMAIN_COUNTER) * 11) % 232
+    """A DDS domain id in 1..232 that no other test run on this machine uses now (the run's
+    block of 29 ids, taken in turn)."""
+    return 1 + _DOMAIN_BLOCK * _BLOCK_SIZE + next(_DOMAIN_COUNTER) % _BLOCK_SIZE
 
 
 @pytest.fixture()
