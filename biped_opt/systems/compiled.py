@@ -34,7 +34,8 @@ from biped_opt.systems.derive import DerivedSystem, derive
 from biped_opt.systems.description import System
 from biped_opt.systems.files import load_system
 
-__all__ = ["CompiledSystem", "SystemTrajectory", "cache_dir", "compile_system", "STATUS_NAMES"]
+__all__ = ["CompiledSystem", "SystemTrajectory", "cache_dir", "compile_system", "simulate",
+           "simulate_batch", "STATUS_NAMES"]
 
 Array = npt.NDArray[np.float64]
 
@@ -244,3 +245,39 @@ def compile_system(system: System | str, **parameters: float) -> CompiledSystem:
     compiled = CompiledSystem(system, **parameters)
     compiled.compile_seconds = time.perf_counter() - start  # type: ignore[attr-defined]
     return compiled
+
+
+_COMPILED: dict[tuple[int, str], CompiledSystem] = {}
+
+
+def _compiled(system: System | str) -> CompiledSystem:
+    """One CompiledSystem per System object or name/path in this process."""
+    key = (id(system), "") if isinstance(system, System) else (0, str(system))
+    with _LOCK:
+        found = _COMPILED.get(key)
+    if found is None or (isinstance(system, System) and found.system is not system):
+        found = CompiledSystem(system)
+        with _LOCK:
+            _COMPILED[key] = found
+    return found
+
+
+def simulate(system: System | str, maneuver: str, s: float, inputs: Any = None, *,
+             parameters: dict[str, float] | None = None,
+             options: SimulatorOptions = DEFAULT_OPTIONS,
+             sample_dt: float | None = None) -> SystemTrajectory:
+    """``maneuver`` of ``system`` (a System, a library name or a system file) at s: the
+    compiled system is made once per process and its parameters set for this call."""
+    compiled = _compiled(system)
+    compiled.set_parameters(**(parameters or {}))
+    return compiled.simulate(maneuver, s, inputs, options=options, sample_dt=sample_dt)
+
+
+def simulate_batch(system: System | str, maneuver: str, s: npt.ArrayLike,
+                   inputs: npt.ArrayLike | None = None, *,
+                   parameters: dict[str, float] | None = None,
+                   options: SimulatorOptions = DEFAULT_OPTIONS) -> dict[str, Array]:
+    """:meth:`CompiledSystem.simulate_batch` of ``system`` (see :func:`simulate`)."""
+    compiled = _compiled(system)
+    compiled.set_parameters(**(parameters or {}))
+    return compiled.simulate_batch(maneuver, s, inputs, options=options)

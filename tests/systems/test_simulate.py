@@ -206,3 +206,19 @@ def test_the_generated_biped_has_the_kink_and_the_jump(generated_biped):
         for side in (-1, 1):
             a, b = one_sided(gen, 0.0, side), one_sided(ref, 0.0, side)
             assert getattr(a, field) == pytest.approx(getattr(b, field), abs=tol)
+
+
+def test_module_level_simulate_for_any_system(bar):
+    """simulate(system, maneuver, s, inputs, parameters=...) and simulate_batch: the same numbers
+    as the compiled system's methods, parameters per call, one compiled system per process."""
+    from biped_opt.systems.compiled import simulate as simulate_system
+    from biped_opt.systems.compiled import simulate_batch as simulate_system_batch
+
+    one = simulate_system("rocking_bar", "drop", 0.2)
+    assert one.outcome == bar.simulate("drop", 0.2).outcome
+    soft = simulate_system("rocking_bar", "drop", 0.2, parameters={"gamma": 0.2})
+    assert soft.outcome != one.outcome
+    again = simulate_system("rocking_bar", "drop", 0.2)  # defaults again: no parameter lingers
+    assert again.outcome == one.outcome
+    batch = simulate_system_batch("rocking_bar", "drop", [0.2, -0.2])
+    np.testing.assert_array_equal(batch["outcome"], [one.outcome, -one.outcome])
