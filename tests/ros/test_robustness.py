@@ -321,3 +321,19 @@ def test_logger_throttles_by_call_site_and_counts_what_it_held_back(context, cap
     assert len(lines) == 3, lines
     assert lines[0].endswith("flood") and lines[1].endswith("flood")
     assert lines[2].endswith("flood (49 more like this held back since the last one)")
+
+
+def test_shutdown_right_after_spin_starts_never_hangs(context):
+    """A spin thread that has not yet made its WaitSet when shutdown() wakes it: the wake must
+    not be lost (it once was: the thread then waited forever). 200 start/stop pairs, each
+    bounded by 5 s."""
+    node = dds.Node("quick", context=context)
+    for _ in range(200):
+        executor = dds.MultiThreadedExecutor(num_threads=2, context=context)
+        executor.add_node(node)
+        thread = threading.Thread(target=executor.spin, daemon=True)
+        thread.start()
+        assert executor.shutdown(timeout_sec=5.0)
+        thread.join(5.0)
+        assert not thread.is_alive()
+        executor.remove_node(node)

@@ -111,6 +111,11 @@ class Executor:
             self._waitset = WaitSet(participant)
             self._guard = self.context.new_guard()
             self._waitset.attach(self._guard)
+            # a wake (shutdown, a finished future) that came before this guard existed found
+            # nothing to set and was lost: the first wait returns at once, so the spin loop
+            # looks at its flags again (without this, shutdown right after spin started could
+            # leave the spinning thread waiting forever)
+            self._guard.set(True)
         wanted = {id(e.condition): e.condition for e in entities if e.condition is not None}
         for key in list(self._attached):
             if key not in wanted:
@@ -138,6 +143,8 @@ class Executor:
         with self._lock:
             entities = [e for node in self._nodes for e in node._waitables()]
         self._sync_waitset(entities)
+        if self._shutdown:
+            return
         timers = [e for e in entities if hasattr(e, "time_until_next_call")]
         wait_ns = None if timeout_sec is None or timeout_sec < 0 else int(timeout_sec * 1e9)
         for timer in timers:
