@@ -21,15 +21,20 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy.integrate import solve_ivp
 
+# the same integration and event settings as the biped's comparator
+from bench.solve_ivp_reference import (
+    _RATE_STEP,
+    ATOL,
+    MAX_STEP,
+    REARM_TOL,
+    RTOL,
+    SIMULTANEOUS_TOL,
+)
+
 __all__ = ["ReferenceError", "ReferenceResult", "simulate", "RTOL", "ATOL"]
 
-RTOL = 1e-11
-ATOL = 1e-12
-MAX_STEP = 0.05
-SIMULTANEOUS_TOL = 1e-9
-REARM_TOL = 1e-10
+#: an impacted constraint moving apart faster than this leaves the mode (restitution)
 SEPARATION_TOL = 1e-12
-_RATE_STEP = 1e-7
 
 
 class ReferenceError(RuntimeError):

@@ -169,10 +169,6 @@ def _bindings(derived: DerivedSystem, em: _Emitter, *, velocities: bool, inputs:
     return {}
 
 
-def _mode_branches(n: int) -> list[tuple[str, int]]:
-    return [("if" if mask == 0 else "elif", mask) for mask in range(1 << n)]
-
-
 def _factors(derived: DerivedSystem, em: _Emitter
              ) -> tuple[list[list[str]], list[list[str]]]:
     """Cholesky factor L of M(q) and the entries of Da(q), as scalars of the function body."""
@@ -188,7 +184,7 @@ def _schur(br: _Emitter, L: list[list[str]], Da: list[list[str]], active: list[i
     """Columns M^-1 Da_j^T of the active constraints and the Cholesky factor of
     Da_J M^-1 Da_J^T."""
     d = len(L)
-    cols = [_solve(br, L, [Da[j][i] for i in range(d)], "y") for j in active]
+    cols = _columns(br, L, Da, active)
     S = [[br.assign("s", _sum([_mul(Da[ja][i], cols[b][i]) for i in range(d)]))
           for b in range(len(active))] for ja in active]
     return cols, _cholesky(br, S, "k")
@@ -255,7 +251,7 @@ def _vector_field(derived: DerivedSystem) -> list[str]:
     if n:
         on = [em.assign("n", f"float(mode >> {j} & 1)") for j in range(n)]
         off = [em.assign("n", f"1.0 - {on[j]}") for j in range(n)]
-        cols, _ = _schur_columns(em, L, Da, list(range(n)))
+        cols = _columns(em, L, Da, list(range(n)))
         S = [[em.assign("s", _sum([_mul(Da[a][i], cols[b][i]) for i in range(d)]))
               for b in range(n)] for a in range(n)]
         masked = [[em.assign("s", _sum([_mul(_mul(on[a], on[b]), S[a][b]),
@@ -273,10 +269,11 @@ def _vector_field(derived: DerivedSystem) -> list[str]:
     return out + em.lines
 
 
-def _schur_columns(em: _Emitter, L, Da, active):
+def _columns(em: _Emitter, L: list[list[str]], Da: list[list[str]], active: list[int]
+             ) -> list[list[str]]:
     """M^-1 Da_j^T for the constraints in ``active``."""
     d = len(L)
-    return [_solve(em, L, [Da[j][i] for i in range(d)], "y") for j in active], None
+    return [_solve(em, L, [Da[j][i] for i in range(d)], "y") for j in active]
 
 
 def _impact(derived: DerivedSystem) -> list[str]:
@@ -319,7 +316,7 @@ def _scalar_function(name: str, doc: str, args: str, derived: DerivedSystem,
 
 
 def _per_maneuver(name: str, doc: str, args: str, derived: DerivedSystem,
-                  pick, *, inputs: bool, returns: bool) -> list[str]:
+                  pick, *, inputs: bool) -> list[str]:
     out = ["@nb.njit(**HOT_PATH)", f"def {name}({args}):", f'    """{doc}"""']
     em = _Emitter()
     _bindings(derived, em, velocities=True, inputs=inputs)
@@ -480,18 +477,13 @@ def render(derived: DerivedSystem) -> str:
         head,
         _vector_field(derived),
         _impact(derived),
-        _scalar_function("constraint_values", "a(q) into out[:n].",
-                         "p, y, yo, out", derived, list(derived.constraints), "out",
-                         inputs=False),
         _scalar_function("constraint_rates", "Da(q) q' into out[:n].",
                          "p, y, yo, out", derived, list(derived.jacobian * sp.Matrix(system.dq))
                          if n else [], "out", inputs=False),
         _per_maneuver("terminal_value", "The terminal guard of maneuver ``code``.",
-                      "code, p, u, y, yo", derived, lambda m: m.terminal, inputs=True,
-                      returns=True),
+                      "code, p, u, y, yo", derived, lambda m: m.terminal, inputs=True),
         _per_maneuver("outcome_value", "The outcome of maneuver ``code`` at the state y.",
-                      "code, p, y, yo", derived, lambda m: m.outcome, inputs=False,
-                      returns=True),
+                      "code, p, y, yo", derived, lambda m: m.outcome, inputs=False),
         _initial(derived),
         _guards(derived),
     ]
@@ -504,7 +496,7 @@ def render(derived: DerivedSystem) -> str:
     return text + "\n\n" + step + "\n\n" + body
 
 
-def source_key(derived: DerivedSystem) -> str:
-    """Content key of a system's compiled module: its source and the generator's version."""
-    text = render(derived)
+def source_key(text: str) -> str:
+    """Content key of a system's compiled module (the text :func:`render` made) with the
+    generator's version: the name of its cached file."""
     return hashlib.sha256(f"{FORMAT}\n{text}".encode()).hexdigest()[:16]

@@ -18,7 +18,6 @@ import os
 import sys
 import tempfile
 import threading
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
@@ -29,7 +28,7 @@ import numpy.typing as npt
 
 from biped_opt.errors import InvalidInputError, InvalidParameterError
 from biped_opt.hybrid.simulate import DEFAULT_OPTIONS, SimulatorOptions
-from biped_opt.systems.codegen import FORMAT, render
+from biped_opt.systems.codegen import render, source_key
 from biped_opt.systems.derive import DerivedSystem, derive
 from biped_opt.systems.description import System
 from biped_opt.systems.files import load_system
@@ -56,10 +55,8 @@ def cache_dir() -> Path:
 
 
 def _module_for(derived: DerivedSystem) -> ModuleType:
-    import hashlib
-
     text = render(derived)
-    key = hashlib.sha256(f"{FORMAT}\n{text}".encode()).hexdigest()[:16]
+    key = source_key(text)
     name = f"{derived.system.name}_{key}"
     with _LOCK:
         if name in _LOADED:
@@ -239,12 +236,8 @@ class CompiledSystem:
 
 
 def compile_system(system: System | str, **parameters: float) -> CompiledSystem:
-    """:class:`CompiledSystem` of a System, a library name or a system file; reports how long
-    the first compile took through ``compile_seconds``."""
-    start = time.perf_counter()
-    compiled = CompiledSystem(system, **parameters)
-    compiled.compile_seconds = time.perf_counter() - start  # type: ignore[attr-defined]
-    return compiled
+    """:class:`CompiledSystem` of a System, a library name or a system file."""
+    return CompiledSystem(system, **parameters)
 
 
 _COMPILED: dict[tuple[int, str], CompiledSystem] = {}
