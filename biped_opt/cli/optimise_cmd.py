@@ -14,6 +14,7 @@ import math
 from biped_opt import strict_json
 from biped_opt.cli.args import finite_float
 from biped_opt.cli.simulate_cmd import add_maneuver_argument, parse_maneuver_arg
+from biped_opt.cli.system_cmds import add_system_arguments, run_optimise, uses_system
 from biped_opt.errors import InvalidInputError, InvalidParameterError
 from biped_opt.hybrid.simulate import INPUT_NAMES
 from biped_opt.maneuvers import Maneuver, check_theta0
@@ -110,8 +111,8 @@ def problem_from_args(args: argparse.Namespace) -> OptimalControlProblem:
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("optimise", help="optimal policy, value and one-sided derivatives at th0")
     add_problem_arguments(p)
-    p.add_argument("--theta0", required=True, type=finite_float("--theta0"),
-                   help="initial body pitch [rad]")
+    p.add_argument("--theta0", type=finite_float("--theta0"), help="initial body pitch [rad]")
+    add_system_arguments(p, point=True)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 
@@ -178,6 +179,10 @@ def result_json(result: OptimalResult, derivatives: dict | None) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
+    if uses_system(args):
+        return run_optimise(args)
+    if args.theta0 is None:
+        raise InvalidInputError("--theta0 is required (or --system with --s)")
     problem = problem_from_args(args)
     try:
         check_theta0(problem.maneuver, args.theta0)

@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 
 from biped_opt import strict_json
-from biped_opt.cli.args import assignment, finite_float
+from biped_opt.cli.args import finite_float
+from biped_opt.cli.system_cmds import add_system_arguments
 from biped_opt.errors import InvalidInputError
 from biped_opt.hybrid import simulate
 from biped_opt.hybrid.trajectory import Trajectory
@@ -15,10 +16,9 @@ from biped_opt.maneuvers import Maneuver, check_theta0, parse_maneuver
 def add_maneuver_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--maneuver",
-        required=True,
         type=str,
         metavar="{" + ",".join(m.value for m in Maneuver) + "}",
-        help="which maneuver of the paper (Sec. IV)",
+        help="which maneuver of the paper (Sec. IV), or of --system",
     )
 
 
@@ -30,14 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_maneuver_argument(p)
     p.add_argument("--theta0", type=finite_float("--theta0"),
                    help="initial body pitch [rad] (the biped)")
-    p.add_argument("--system", metavar="NAME|FILE.py",
-                   help="a library system (biped, walker, walkerN[_decoupled], rocking_bar) or "
-                        "a system file; see `biped-opt systems`")
-    p.add_argument("--s", type=finite_float("--s"), help="the maneuver's parameter (--system)")
-    p.add_argument("--input", action="append", default=[], metavar="NAME=VALUE",
-                   type=assignment("--input"), help="an input of the system (repeatable)")
-    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
-                   type=assignment("--param"), help="a parameter of the system (repeatable)")
+    add_system_arguments(p, point=True, problem=False)
     p.add_argument("--u1", type=finite_float("--u1"), default=0.0,
                    help="left leg force in left single stance (default 0)")
     p.add_argument("--u2", type=finite_float("--u2"), default=0.0,
@@ -70,8 +63,10 @@ def trajectory_json(tr: Trajectory) -> dict:
     }
 
 
-def parse_maneuver_arg(text: str) -> Maneuver:
+def parse_maneuver_arg(text: str | None) -> Maneuver:
     """--maneuver as a Maneuver; the error names the argument."""
+    if text is None:
+        raise InvalidInputError("--maneuver is required")
     try:
         return parse_maneuver(text)
     except InvalidInputError as exc:
@@ -85,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
         if getattr(args, option) not in (None, []):
             raise InvalidInputError(f"--{option}: only with --system (the biped takes --theta0, "
                                     "--u1, --u2, --u12)")
+    parse_maneuver_arg(args.maneuver)
     if args.theta0 is None:
         raise InvalidInputError("--theta0 is required (or --system with --s)")
     maneuver = parse_maneuver_arg(args.maneuver)
@@ -114,6 +110,8 @@ def run_system(args: argparse.Namespace) -> int:
                                 "give --s and --input NAME=VALUE")
     if args.s is None:
         raise InvalidInputError("--s is required with --system")
+    if args.maneuver is None:
+        raise InvalidInputError("--maneuver is required")
     compiled = compile_system(args.system, **dict(args.param))
     tr = compiled.simulate(args.maneuver, args.s, dict(args.input))
     names = compiled.system.coordinate_names

@@ -10,6 +10,7 @@ from biped_opt import strict_json
 from biped_opt.cli.args import finite_float, int_at_least, output_file
 from biped_opt.cli.optimise_cmd import add_problem_arguments, problem_from_args
 from biped_opt.cli.simulate_cmd import parse_maneuver_arg
+from biped_opt.cli.system_cmds import add_system_arguments, run_sweep, uses_system
 from biped_opt.errors import InvalidInputError
 from biped_opt.fixed_sweep import FIXED_INPUTS
 from biped_opt.maneuvers import check_theta0
@@ -56,12 +57,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     for name in ("u1", "u2", "u12"):
         p.add_argument(f"--{name}", type=finite_float(f"--{name}"), default=None,
                        help=f"fixed-input sweep: {name} (default: the paper's figure input)")
+    add_system_arguments(p, sweep=True)
     p.add_argument("--out", default=None, metavar="F.json",
                    help="write the sweep as JSON to this file (default: a table on stdout)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    if uses_system(args):
+        return run_sweep(args)
     maneuver = parse_maneuver_arg(args.maneuver).value
     optimal = args.optimal or args.variant
     if optimal:
@@ -88,14 +92,20 @@ def run(args: argparse.Namespace) -> int:
         lines = [f"{th:>14.9g} {result.outcome[k]:>18.12g}  {result.branch[k]}"
                  for k, th in enumerate(result.theta0)]
         ok = bool(result.success.all())
+    return print_sweep(args, result.as_dict(), header, lines, ok)
+
+
+def print_sweep(args: argparse.Namespace, data: dict, header: str, lines: list[str],
+                ok: bool) -> int:
+    """The sweep as JSON to --out, else as a table on stdout; the exit status."""
     if args.out:
         output_file("--out", Path(args.out), overwrite=True)
         try:
             with open(args.out, "w", encoding="utf-8") as fh:
-                fh.write(strict_json.dumps(result.as_dict()))
+                fh.write(strict_json.dumps(data))
         except OSError as exc:
             raise InvalidInputError(f"--out: cannot write {args.out!r}: {exc.strerror}") from None
-        print(f"wrote {result.theta0.size} points to {args.out}")
+        print(f"wrote {len(lines)} points to {args.out}")
     else:
         print(header)
         print("\n".join(lines))

@@ -155,12 +155,14 @@ class NonsmoothReport:
     grid_size: int
     points: tuple[NonsmoothPoint, ...]
     nsim: int = field(default=0)
+    parameter: str = "theta0"  #: the name of the swept parameter (a system's s)
 
     def as_dict(self) -> dict:
         return {
             "subject": self.subject,
             "optimal": self.optimal,
             "theta0_range": list(self.theta0_range),
+            "parameter": self.parameter,
             "grid_size": self.grid_size,
             "points": [p.as_dict() for p in self.points],
         }
@@ -170,7 +172,8 @@ class NonsmoothReport:
 
     def table(self) -> str:
         """A plain-text table, one line per point."""
-        lines = [f"{'theta0':>16} {'quantity':<10} {'kind':<17} {'left':>14} {'right':>14}  cause"]
+        lines = [f"{self.parameter:>16} {'quantity':<10} {'kind':<17} {'left':>14} "
+                 f"{'right':>14}  cause"]
         for p in self.points:
             q = p.quantity if p.input is None else f"{p.quantity}:{p.input}"
             lines.append(
@@ -182,7 +185,7 @@ class NonsmoothReport:
 
 # --- evaluation samples ----------------------------------------------------------------------
 @dataclass(frozen=True)
-class _Sample:
+class Sample:
     label: Hashable
     values: dict[str, float]  # "outcome", "value", "policy:u1"...
     branch: str
@@ -191,14 +194,14 @@ class _Sample:
     result: OptimalResult | None = None
 
 
-class _Evaluator:
-    """th0 -> _Sample with a cache (bisection and one-sided ladders revisit points)."""
+class Evaluator:
+    """th0 -> Sample with a cache (bisection and one-sided ladders revisit points)."""
 
-    def __init__(self, fn: Callable[[float], _Sample]) -> None:
+    def __init__(self, fn: Callable[[float], Sample]) -> None:
         self.fn = fn
-        self.cache: dict[float, _Sample] = {}
+        self.cache: dict[float, Sample] = {}
 
-    def __call__(self, th: float) -> _Sample:
+    def __call__(self, th: float) -> Sample:
         th = float(th)
         if th not in self.cache:
             self.cache[th] = self.fn(th)
@@ -208,15 +211,15 @@ class _Evaluator:
         return self(th).label
 
 
-def _optimal_sample(r: OptimalResult) -> _Sample:
+def _optimal_sample(r: OptimalResult) -> Sample:
     values = {"outcome": r.outcome, "value": r.value}
     values.update({f"policy:{d}": v for d, v in r.policy.items()})
-    return _Sample(label=(r.branch, r.active, r.bound), values=values, branch=r.branch,
+    return Sample(label=(r.branch, r.active, r.bound), values=values, branch=r.branch,
                    active=r.active, bound=r.bound, result=r)
 
 
 # --- the engine -------------------------------------------------------------------------------
-def _across_band(ev: _Evaluator, lo: float, hi: float, la: Hashable, lb: Hashable,
+def _across_band(ev: Evaluator, lo: float, hi: float, la: Hashable, lb: Hashable,
                  limit: float) -> tuple[float, float, Hashable, Hashable]:
     """Widen the bracket [lo, hi] of a change la | lb over a thin band on either side.
 
@@ -274,7 +277,7 @@ def _bound_bracket(problem: OptimalControlProblem, limit: float, lo: float, hi: 
     return locate_switch(held, a, b, tol=LOCATE_TOL)
 
 
-def _switches(ev: _Evaluator, grid: npt.NDArray[np.float64], limit: float, progress: Progress,
+def _switches(ev: Evaluator, grid: npt.NDArray[np.float64], limit: float, progress: Progress,
               relocate: Relocate | None = None) -> list[tuple[float, float, Hashable, Hashable]]:
     """Located label changes as (lo, hi, label_left, label_right), merged across bands, each
     bracket then improved by ``relocate`` when given.
@@ -328,7 +331,7 @@ def _classify(
     return None
 
 
-def _cause(sl: _Sample, sr: _Sample, optimal: bool, policy_jumps: bool) -> str:
+def _cause(sl: Sample, sr: Sample, optimal: bool, policy_jumps: bool) -> str:
     causes = []
     if sl.branch != sr.branch:
         # the optimum changes branch although both branches exist on both sides: the global
@@ -364,15 +367,20 @@ def _cause(sl: _Sample, sr: _Sample, optimal: bool, policy_jumps: bool) -> str:
     return "; ".join(causes) if causes else "change of label without a mode change"
 
 
-def _analyse(
-    ev: _Evaluator,
+def analyse_switches(
+    ev: Evaluator,
     grid: npt.NDArray[np.float64],
     quantities: list[str],
     limit: float,
     optimal: bool,
     progress: Progress,
     relocate: Relocate | None = None,
+    cause: Callable[[Sample, Sample, bool, bool], str] | None = None,
 ) -> list[NonsmoothPoint]:
+    """Locate the label changes of ``ev`` along ``grid`` and classify each quantity there
+    (the engine of both the biped's and any system's tables; ``cause`` names why a point is
+    there from the samples on its two sides, by default :func:`_cause`)."""
+    cause = cause or _cause
     switches = _switches(ev, grid, limit, progress, relocate)
     points: list[NonsmoothPoint] = []
     xs = [0.0 if lo <= 0.0 <= hi else 0.5 * (lo + hi) for lo, hi, _, _ in switches]
@@ -397,7 +405,7 @@ def _analyse(
         )
         sl = ev(x - h / 16)
         sr = ev(x + h / 16)
-        cause = _cause(sl, sr, optimal, policy_jumps)
+        why = cause(sl, sr, optimal, policy_jumps)
         for q in quantities:
             left, right = sides[q]
             found = _classify(q, left, right, ev(x).values[q])
@@ -413,7 +421,7 @@ def _analyse(
                     kind=kind,
                     left=a,
                     right=b,
-                    cause=cause,
+                    cause=why,
                     limits=(left.limit, right.limit),
                     derivatives=(left.derivative, right.derivative),
                     second_derivatives=(left.second_derivative, right.second_derivative),
@@ -447,20 +455,20 @@ def find_nonsmooth_fixed(
     sweep = sweep_fixed(name, grid, u, params=params, options=options, progress=progress)
     nsim = [0]
 
-    def sample(th: float) -> _Sample:
+    def sample(th: float) -> Sample:
         tr = simulate(name, th, u, params=params, options=options)
         nsim[0] += 1
         label = branch_label(tr.mode_sequence, tr.success, tr.status.name)
-        return _Sample(label=label, values={"outcome": tr.outcome}, branch=label)
+        return Sample(label=label, values={"outcome": tr.outcome}, branch=label)
 
-    ev = _Evaluator(sample)
+    ev = Evaluator(sample)
     for k, th in enumerate(sweep.theta0):
-        ev.cache[float(th)] = _Sample(
+        ev.cache[float(th)] = Sample(
             label=sweep.branch[k], values={"outcome": float(sweep.outcome[k])},
             branch=sweep.branch[k],
         )
     bar = _bar(progress, 1, f"{name} locating")
-    points = _analyse(ev, sweep.theta0, ["outcome"], s.theta0_limit, False, bar)
+    points = analyse_switches(ev, sweep.theta0, ["outcome"], s.theta0_limit, False, bar)
     return NonsmoothReport(
         subject=name,
         optimal=False,
@@ -489,12 +497,12 @@ def find_nonsmooth_optimal(
     sweep = sweep_optimal(problem, grid, progress=progress)
     nsim = [0]
 
-    def sample(th: float) -> _Sample:
+    def sample(th: float) -> Sample:
         r = optimal_policy(problem, th)
         nsim[0] += r.nsim
         return _optimal_sample(r)
 
-    ev = _Evaluator(sample)
+    ev = Evaluator(sample)
     for r in sweep.results:
         ev.cache[float(r.theta0)] = _optimal_sample(r)
     quantities = ["outcome", *(f"policy:{d}" for d in problem.decisions), "value"]
@@ -504,7 +512,7 @@ def find_nonsmooth_optimal(
     def relocate(lo: float, hi: float, la: Hashable, lb: Hashable) -> tuple[float, float]:
         return _bound_bracket(problem, limit, lo, hi, la, lb)
 
-    points = _analyse(ev, sweep.theta0, quantities, limit, True, bar, relocate)
+    points = analyse_switches(ev, sweep.theta0, quantities, limit, True, bar, relocate)
     return NonsmoothReport(
         subject=problem.name,
         optimal=True,

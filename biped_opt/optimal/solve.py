@@ -267,6 +267,63 @@ def _inward_slope(
     return float(inward * coeffs[1])
 
 
+def refine_minimum(
+    run: Callable[[float], tuple[float, str, object]],
+    us: Array,
+    costs: Array,
+    labels: Sequence[str],
+    k: int,
+    bounds: tuple[float, float],
+    xatol: float,
+) -> tuple[float, float, int, tuple[float, float]]:
+    """Refine the grid local minimum k of a one-decision cost ``run(u) -> (cost, label, ...)``
+    sampled at ``us``: (decision, cost, Brent iterations, the bracket searched).
+
+    The bracket is the neighbouring grid points on the same branch, else the located switch;
+    bounded Brent inside it, a Newton polish, the bounds themselves (Brent never evaluates an
+    interval's ends), and near a bound the Karush-Kuhn-Tucker test on the inward slope
+    (comparing cost values cannot decide it: the cost is flat there).
+    """
+    lo_b, hi_b = bounds
+    n = us.size
+
+    def label_of(u: float) -> str:
+        return run(u)[1]
+
+    if k == 0:
+        a = us[0]
+    elif labels[k - 1] == labels[k]:
+        a = us[k - 1]
+    else:
+        a = locate_switch(label_of, float(us[k]), float(us[k - 1]), tol=SWITCH_TOL)[0]
+    if k == n - 1:
+        b = us[-1]
+    elif labels[k + 1] == labels[k]:
+        b = us[k + 1]
+    else:
+        b = locate_switch(label_of, float(us[k]), float(us[k + 1]), tol=SWITCH_TOL)[0]
+    best_u, best_c, nit = float(us[k]), float(costs[k]), 0
+    step = POLISH_STEP * (hi_b - lo_b)
+    if b > a:
+        res = minimize_scalar(lambda u: run(u)[0], bounds=(a, b), method="bounded",
+                              options={"xatol": xatol})
+        nit = int(res.nit)
+        if res.fun <= best_c:
+            best_u, best_c = float(res.x), float(res.fun)
+        best_u, best_c = _polish(run, best_u, best_c, labels[k], a, b, step)
+    for end in (a, b):
+        if end in (lo_b, hi_b) and end != us[k]:
+            c_end = run(end)[0]
+            if c_end <= best_c:
+                best_u, best_c = float(end), c_end
+    for end, inward in ((lo_b, 1.0), (hi_b, -1.0)):
+        if a <= end <= b and abs(best_u - end) <= BOUND_ZONE * step:
+            slope = _inward_slope(run, end, inward, step, labels[k])
+            if slope is not None and slope >= 0.0:
+                best_u, best_c = float(end), run(end)[0]
+    return best_u, best_c, nit, (float(a), float(b))
+
+
 def _refine(
     problem: OptimalControlProblem,
     th0: float,
@@ -288,9 +345,6 @@ def _refine(
         x[j] = u
         return x
 
-    def label_of(u: float) -> str:
-        return run(at(u))[1]
-
     n = us.size
     finite = np.isfinite(costs)
     minima = [
@@ -302,48 +356,12 @@ def _refine(
     candidates: list[Candidate] = []
     seen: set[tuple[float, float]] = set()
     for k in minima:
-        # bracket: the neighbouring grid points on the same branch, else the located switch
-        if k == 0:
-            a = us[0]
-        elif labels[k - 1] == labels[k]:
-            a = us[k - 1]
-        else:
-            a = locate_switch(label_of, float(us[k]), float(us[k - 1]), tol=SWITCH_TOL)[0]
-        if k == n - 1:
-            b = us[-1]
-        elif labels[k + 1] == labels[k]:
-            b = us[k + 1]
-        else:
-            b = locate_switch(label_of, float(us[k]), float(us[k + 1]), tol=SWITCH_TOL)[0]
-        key = (float(a), float(b))
+        best_u, best_c, nit, key = refine_minimum(lambda u: run(at(u)), us, costs, labels, k,
+                                                  (lo_b, hi_b), xatol)
+        count.nit += nit
         if key in seen:
             continue
         seen.add(key)
-        best_u, best_c = float(us[k]), float(costs[k])
-        if b > a:
-            res = minimize_scalar(
-                lambda u: run(at(u))[0], bounds=(a, b), method="bounded",
-                options={"xatol": xatol},
-            )
-            count.nit += int(res.nit)
-            if res.fun <= best_c:
-                best_u, best_c = float(res.x), float(res.fun)
-            best_u, best_c = _polish(lambda u: run(at(u)), best_u, best_c, labels[k], a, b,
-                                     POLISH_STEP * (hi_b - lo_b))
-        # bounded Brent never evaluates the interval's ends: a bound can be the optimum
-        for end in (a, b):
-            if end in (lo_b, hi_b) and end != us[k]:
-                c_end = run(at(end))[0]
-                if c_end <= best_c:
-                    best_u, best_c = float(end), c_end
-        # near a bound, decide "on the bound or not" from the cost's slope into the interval
-        # (Karush-Kuhn-Tucker): comparing cost values cannot, the cost being flat there
-        step = POLISH_STEP * (hi_b - lo_b)
-        for end, inward in ((lo_b, 1.0), (hi_b, -1.0)):
-            if a <= end <= b and abs(best_u - end) <= BOUND_ZONE * step:
-                slope = _inward_slope(lambda u: run(at(u)), end, inward, step, labels[k])
-                if slope is not None and slope >= 0.0:
-                    best_u, best_c = float(end), run(at(end))[0]
         candidates.append(Candidate(branch=labels[k], decision=best_u, value=best_c))
     if not candidates:
         return math.nan, []

@@ -138,6 +138,10 @@ class CompiledSystem:
         self.parameters = values
         self._p = np.array([values[k] for k in self.system.p.names()], dtype=np.float64)
 
+    def initial_mode(self, maneuver: str) -> int:
+        """The contact mode (bit mask) ``maneuver`` starts in."""
+        return self._initial_modes[self._code(maneuver)]
+
     def _code(self, maneuver: str) -> int:
         try:
             return self.maneuvers.index(maneuver)

@@ -144,6 +144,8 @@ class System:
         self.restitution: Any = restitution
         self.constraints: dict[str, Any] = {}
         self.maneuvers: dict[str, ManeuverDescription] = {}
+        #: optimal-control problems by name (see :mod:`biped_opt.systems.problems`)
+        self.problems: dict[str, dict[str, Any]] = {}
         self.source: str | None = None  #: the file a system was loaded from, for messages
 
     # -- building ---------------------------------------------------------------------------
@@ -181,6 +183,25 @@ class System:
             outcome=outcome, armed_after=armed_after,
             final_mode=None if final_mode is None else frozenset(final_mode),
             s_range=(lo, hi), description=description, extra=dict(extra))
+        return self
+
+    def problem(self, name: str, *, maneuver: str, decisions: Mapping[str, Sequence[float]],
+                weights: Mapping[str, float] | None = None,
+                fixed: Mapping[str, float] | None = None, target: float = 0.0,
+                outcome_weight: float = 1.0,
+                final_state: Mapping[str, Sequence[float]] | None = None) -> System:
+        """Declare an optimal-control problem on this system: minimise
+        outcome_weight (outcome - target)^2 + sum W (y_k(t_f) - r_k)^2 + sum alpha_i u_i^2 over
+        ``decisions`` (input -> (lower, upper)); ``weights`` are the alpha_i, ``fixed`` the other
+        inputs, ``final_state`` maps coordinates or velocities to (W, r). Checked when used
+        (:func:`biped_opt.systems.problems.get_problem`)."""
+        _check_name("problem name", name, self.name)
+        if name in self.problems:
+            raise SystemDescriptionError(f"{self.name}: problem {name!r} is given twice")
+        self.problems[name] = {
+            "maneuver": maneuver, "decisions": dict(decisions), "weights": dict(weights or {}),
+            "fixed": dict(fixed or {}), "target": target, "outcome_weight": outcome_weight,
+            "final_state": dict(final_state or {})}
         return self
 
     def where(self) -> str:

@@ -30,7 +30,7 @@ CASES: list[tuple[list[str], str]] = [
     (["--theta0", "0"], "invalid choice: '0'"),
     (["node", "bogus"], "argument name: invalid choice: 'bogus'"),
     # -- simulate ------------------------------------------------------------------------
-    (["simulate"], "the following arguments are required: --maneuver"),
+    (["simulate"], "--maneuver is required"),
     (["simulate", "--maneuver", "touchdown"], "--theta0 is required"),
     (["simulate", "--maneuver", "jump", "--theta0", "0"], f"{MANEUVERS} 'jump'"),
     (["simulate", "--maneuver", "", "--theta0", "0"], "--maneuver"),
@@ -55,7 +55,7 @@ CASES: list[tuple[list[str], str]] = [
     (["simulate", "--maneuver", "touchdown", "--theta0", "0", "extra"],
      "unrecognized arguments: extra"),
     # -- optimise ------------------------------------------------------------------------
-    (["optimise", "--maneuver", "touchdown"], "required: --theta0"),
+    (["optimise", "--maneuver", "touchdown"], "--theta0 is required"),
     (["optimise", "--maneuver", "hop", "--theta0", "0"], f"{MANEUVERS} 'hop'"),
     (["optimise", "--maneuver", "touchdown", "--theta0", "nan"], "--theta0 must be finite"),
     (["optimise", "--maneuver", "touchdown", "--theta0", "2"], "--theta0:"),

@@ -28,4 +28,6 @@ def rocking_bar() -> System:
     s.maneuver("drop", initial={z: 1, th: s.s}, terminal=s.dq[1], outcome=s.dq[2],
                armed_after="touchdown", final_mode=(), s_range=(-0.3, 0.3),
                description="drop from rest at z = 1 to the first apex after the first impact")
+    s.problem("drop", maneuver="drop", decisions={"u_th": (-0.5, 0.5)}, weights={"u_th": 0.01},
+              target=0.05)  # a spin to reach: the simultaneous impact's 0 is not a shortcut
     return s

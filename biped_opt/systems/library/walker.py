@@ -86,4 +86,22 @@ def walker(n: int = 3, law: str = "coupled", *, name: str | None = None,
     s.maneuver("liftoff", initial=stance, mode=feet, terminal=dz, outcome=th, final_mode=(),
                s_range=(-0.3, 0.3),
                description="push off from rest on all feet to the body's apex in the air")
+    _problems(s, feet, [str(v) for v in u])
     return s
+
+
+def _problems(s: System, feet: list[str], u: list[str]) -> None:
+    """MODEL.md Sec. 5's problems for n legs (for n = 2 exactly the paper's Eqs. (14), (15)
+    and the liftoff variant): leg weights spaced geometrically between the paper's two."""
+    n = len(feet)
+    legs, body = u[:n], u[n]
+
+    def spaced(a: float, b: float) -> list[float]:
+        return [a] if n == 1 else [a * (b / a) ** (i / (n - 1)) for i in range(n)]
+
+    s.problem("touchdown", maneuver="touchdown", decisions={k: (-0.5, 1.5) for k in legs},
+              weights=dict(zip(legs, spaced(3e-4, 3e-3))), target=-0.1)
+    s.problem("liftoff", maneuver="liftoff", decisions={body: (-0.5, 0.5)},
+              weights={body: 0.01}, fixed=dict(zip(legs, spaced(1.5, 3.0))), target=0.01)
+    s.problem("liftoff_variant", maneuver="liftoff", decisions={k: (0.0, 3.0) for k in legs},
+              weights=dict(zip(legs, spaced(1e-5, 2e-5))), target=-0.02)
