@@ -79,6 +79,9 @@ _STEP = 3e-4
 _RATE_TOL = 1e-9
 #: states that agree to this (relative) are the same branch point
 _SAME_STATE = 1e-9
+#: guards that reach zero within this time of each other reach it together (the simulator
+#: locates event times to ~1e-13)
+_TIE = 1e-12
 #: flips in one instant before the resolution is declared a Zeno cascade
 _MAX_FLIPS_PER_CONSTRAINT = 8
 _STENCIL = ((2.0, -1.0), (1.0, 8.0), (-1.0, -8.0), (-2.0, 1.0))
@@ -406,33 +409,44 @@ class _Branch:
         st.flips.append(i)
 
     def resolve(self, st: _State) -> bool:
-        """Flip the guards at zero at st.t one at a time in the order the direction selects;
-        True when the terminal guard is the one reached."""
+        """Flip the guards at zero at st.t one at a time; True when the terminal guard is the
+        one reached.
+
+        The order: a reaction that the last flip made negative lifts at once; then the guards
+        within ``zero_length_tol`` of zero and moving toward it, by the time they need to reach
+        it at their current rate (a point near a simultaneous event has its own order), and
+        among those that reach it together (within _TIE of each other) by the first-order time
+        shifts along the direction. Without a direction such a tie is an error.
+        """
         mdl = self.model
         tol = self.vopts.zero_length_tol
         flips = 0
         for _ in range(_MAX_FLIPS_PER_CONSTRAINT * (mdl.ncon + 1)):
             f = mdl.extended_field(st.mode, st.y)
-            keys: dict[int, float] = {}
+            due: dict[int, float] = {}  # time to reach zero
+            shift: dict[int, float] = {}  # first-order time shift along the direction
             for i in mdl.enabled(st.touched):
                 g = mdl.guard(st.mode, st.y, i)
                 if g < -tol and i != mdl.terminal and st.mode >> i & 1:
-                    keys[i] = -math.inf  # a reaction the last flip made negative: lifts at once
+                    due[i], shift[i] = -math.inf, 0.0
                 elif abs(g) <= tol:
                     dg = mdl.guard_gradient(st.mode, st.y, i)
                     rate = float(dg @ f)
                     if rate < -_RATE_TOL:
-                        keys[i] = 0.0 if self.v is None else -float(dg @ (st.z @ self.v)) / rate
-            if not keys:
+                        due[i] = max(g, 0.0) / -rate
+                        shift[i] = 0.0 if self.v is None else -float(dg @ (st.z @ self.v)) / rate
+            if not due:
                 return False
-            if len(keys) > 1 or flips:
+            if len(due) > 1 or flips:
                 st.simultaneous = True
-                if self.v is None:
-                    raise SimulationError(
-                        f"{self.where}: events are simultaneous at t = {st.t:.12g} (guards "
-                        f"{sorted(keys)} at zero): the outcome is not differentiable there in "
-                        f"general; give a direction to select a branch")
-            first = min(keys, key=lambda i: (keys[i], i))  # ties: the lower index
+            soonest = min(due.values())
+            tied = [i for i in due if due[i] <= soonest + _TIE]
+            if len(tied) > 1 and soonest > -math.inf and self.v is None:
+                raise SimulationError(
+                    f"{self.where}: events are simultaneous at t = {st.t:.12g} (guards "
+                    f"{tied} at zero): the outcome is not differentiable there in general; "
+                    f"give a direction to select a branch")
+            first = min(tied, key=lambda i: (shift[i], i))  # then the lower index
             if first == mdl.terminal:
                 return True
             self.flip(st, first)

@@ -118,12 +118,17 @@ def test_walker3_touchdown_slopes_at_the_triple_touchdown(name, left, right):
     assert hi == pytest.approx(one_sided(f, 0.0, 1, h0=1e-3).derivative, abs=FD_TOL)
 
 
-@pytest.mark.parametrize(("maneuver", "u"), [("touchdown", (2.0, 0.5, 0.0)),
-                                             ("liftoff", (1.5, 3.0, 0.0))])
-def test_walker2_is_the_biped(maneuver, u):
+@pytest.mark.parametrize(("maneuver", "u", "jump"), [
+    ("touchdown", (2.0, 0.5, 0.0), False),
+    ("liftoff", (1.5, 3.0, 0.0), True),
+    ("liftoff", (1.5, -3.0, 0.0), True),  # th0 < 0: the right foot's reaction drops below 0
+    ("liftoff", (0.0, 0.0, 0.0), False),
+])
+def test_walker2_is_the_biped(maneuver, u, jump):
     """walker2_coupled is the biped: its branches' gradients (s and inputs) and limits at the
-    simultaneous events of th0 = 0 (the touchdown kink, the liftoff jump) and at th0 = 0.1 agree
-    with the biped's own hand-written derivatives. Same method, same formulas, two variational
+    simultaneous events of th0 = 0 (the touchdown kink, the liftoff jump, and the liftoff where
+    u2 < 0 makes the second foot lift at once from one side) and at th0 = 0.1 agree with the
+    biped's own hand-written derivatives. Same method, same formulas, two variational
     integrations at rtol 1e-11: 1e-9."""
     w = compile_system("walker2_coupled")
     for s in (0.0, 0.1):
@@ -137,7 +142,9 @@ def test_walker2_is_the_biped(maneuver, u):
         r = biped_derivatives.outcome_sensitivity(maneuver, 0.0, u, direction=v)
         np.testing.assert_allclose(g.gradient, r.gradient, rtol=0, atol=1e-9)
         assert g.outcome == pytest.approx(r.outcome, abs=1e-10)
-        assert g.continued == r.continued == (maneuver == "liftoff")
+        assert g.continued == r.continued
+        if side > 0:
+            assert g.continued == jump
 
 
 def test_gradient_of_outcome_final_state_and_time(walker3):
@@ -242,6 +249,17 @@ def test_three_simultaneous_touchdowns_have_six_linear_pieces():
         pieces.append(g.gradient)
     gaps = [np.max(np.abs(a - b)) for a, b in itertools.combinations(pieces, 2)]
     assert min(gaps) > 1e-2
+
+
+def test_near_a_simultaneous_event_the_gradient_is_the_local_one(walker3):
+    """At th0 = 1e-9 the feet land 1e-9 apart: no direction is needed, the gradient is the one
+    of th0 > 0 (to O(1e-9)), from either direction."""
+    near = outcome_gradient(walker3, "touchdown", 1e-9, U3)
+    left = outcome_gradient(walker3, "touchdown", 1e-9, U3, direction=(-1.0, 0, 0, 0, 0))
+    right = outcome_gradient(walker3, "touchdown", 0.0, U3, direction=(1.0, 0, 0, 0, 0))
+    np.testing.assert_allclose(near.gradient, right.gradient, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(left.gradient, right.gradient, rtol=0, atol=1e-7)
+    assert near.flips == left.flips == right.flips == (0, 1, 2)
 
 
 def test_errors(walker3):
