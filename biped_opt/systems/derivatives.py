@@ -21,17 +21,19 @@ written for a generated system:
   and d o/dp = Do dx_f/dp.
 
 Where several guards are at zero at once (a simultaneous event) the derivative depends on the
-direction v of the perturbation: a perturbed trajectory meets the guards at times
-t + eps tau_i + o(eps) with the first-order time shifts tau_i = -Dg_i Z v / (Dg_i F), so the
-guards flip one at a time in the order of tau, each with its own saltation matrix, and after
-each flip the guards that are still at zero and moving toward it in the new mode are ordered
-again (the rocking bar's ends flip left, right, left in one instant; n simultaneous events give
-up to n! orders). A guard that a flip leaves below zero (a reaction that the new mode's force
-coupling made negative) flips at once. When the branch so resolved ends in the state and mode
-the simulator reached, the simulated trajectory goes on; otherwise the outcome jumps there and
-the branch's limiting trajectory is integrated on from the event (with the variational
-equation, events located by SciPy). The result, Z v with Z the branch's sensitivity, is the
-Bouligand derivative: linear on each branch, piecewise linear and positively homogeneous in v.
+direction v of the perturbation: a perturbed trajectory meets the guards at times t + eps tau_i
++ o(eps) with the first-order time shifts tau_i = -Dg_i Z v / (Dg_i F), so the guards flip one
+at a time in the order of tau, each with its own saltation matrix, and after each flip the
+guards that are still at zero and moving toward it in the new mode are ordered again (the
+rocking bar's ends flip left, right, left in one instant; n simultaneous events give up to n!
+orders). Guards near zero but not at it (a point close to a simultaneous event) flip first in
+the order in which they reach zero; tau only breaks ties. A guard that a flip leaves below zero
+(a reaction that the new mode's force coupling made negative) flips at once. When the branch so
+resolved ends in the state and mode the simulator reached, the simulated trajectory goes on;
+otherwise the outcome jumps there and the branch's limiting trajectory is integrated on from the
+event (with the variational equation, events located by SciPy). The result, Z v with Z the
+branch's sensitivity, is the Bouligand derivative: linear on each branch, piecewise linear and
+positively homogeneous in v.
 
 Guard, reset and initial-state derivatives: Da (touchdown guards), d x0/ds, Dh and Do are
 symbolic (SymPy, from the system's description); D lambda_j (liftoff guards) and D_q of the
@@ -88,7 +90,7 @@ _STENCIL = ((2.0, -1.0), (1.0, 8.0), (-1.0, -8.0), (-2.0, 1.0))
 
 
 # --- results ------------------------------------------------------------------------------------
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class OutcomeGradient:
     """First-order sensitivities of one maneuver on one branch, with respect to the parameters
     ``names`` = (s, *inputs) of the system.
@@ -110,15 +112,16 @@ class OutcomeGradient:
     gradient: Array = field(repr=False)
     y_final: Array = field(repr=False)
     state_gradient: Array = field(repr=False)
-    t_final: float = 0.0
-    time_gradient: Array = field(repr=False, default_factory=lambda: np.zeros(0))
+    t_final: float
+    time_gradient: Array = field(repr=False)
     #: the branch's contact modes in order (bit masks), zero-length ones included
-    modes: tuple[int, ...] = ()
-    #: the constraints whose guards flipped, in order (one per mode change of ``modes``)
-    flips: tuple[int, ...] = ()
-    simultaneous: bool = False  #: an instant had more than one flip (a nonsmooth point)
-    continued: bool = False  #: the branch left the simulated trajectory (the outcome jumps)
-    nfev: int = 0  #: right-hand-side evaluations of the variational equation
+    modes: tuple[int, ...]
+    #: the constraints whose guards flipped, in order (``modes[k + 1]`` follows flip k)
+    flips: tuple[int, ...]
+    #: an instant had more than one flip: a nonsmooth point, or within zero_length_tol of one
+    simultaneous: bool
+    continued: bool  #: the branch left the simulated trajectory (the outcome jumps)
+    nfev: int  #: right-hand-side evaluations of the variational equation
 
     def d(self, name: str) -> float:
         """d outcome / d ``name`` (s or an input) on this branch."""
@@ -484,8 +487,9 @@ def outcome_gradient(
 ) -> OutcomeGradient:
     """Gradient of ``maneuver``'s outcome, final state and final time w.r.t. (s, *inputs).
 
-    ``inputs`` as for :meth:`CompiledSystem.simulate`. Without ``direction`` the point must
-    have no simultaneous event (else SimulationError says so); with it (a vector over
+    ``inputs`` as for :meth:`CompiledSystem.simulate`. Without ``direction`` no two guards may
+    reach zero together (else SimulationError says so; events a little apart are fine, each
+    in its order); with it (a vector over
     (s, *inputs)) the result is the gradient of the branch the direction selects, which at a
     simultaneous event is the linear piece of the Bouligand derivative for that direction.
     Raises SimulationError when the maneuver does not reach its terminal event.
