@@ -134,9 +134,10 @@ def _curves(s: npt.ArrayLike, series: Mapping[str, npt.ArrayLike], what: str
     return grid, out
 
 
-def _belongs(point: Any, label: str, only_series: bool) -> bool:
+def _belongs(point: Any, label: str) -> bool:
+    """Whether a point is on the curve ``label`` (a point naming no curve is on every one)."""
     owner = _get(point, "series", "input")
-    return owner == label if owner is not None else not only_series
+    return owner is None or owner == label
 
 
 def _draw_curve(ax, s: Array, y: Array, breaks: Sequence[float], **style: Any) -> None:
@@ -166,7 +167,7 @@ def _draw_points(ax, s: Array, curves: Mapping[str, Array], points: Sequence[Any
         base = _base_kind(kind)
         style = KIND_STYLES.get(base, KIND_STYLES["second-derivative"])
         ax.axvline(x, color="0.75", lw=0.7, ls=style["ls"], zorder=0)
-        owners = [label for label in curves if _belongs(p, label, False)]
+        owners = [label for label in curves if _belongs(p, label)]
         for label in owners:
             y = curves[label]
             if base == "jump":
@@ -191,7 +192,7 @@ def _panel(ax, s: Array, curves: Mapping[str, Array], points: Sequence[Any],
            causes: bool = True, legend: str = "best") -> None:
     for i, (label, y) in enumerate(curves.items()):
         breaks = [_point(p)[0] for p in points
-                  if _base_kind(_point(p)[1]) == "jump" and _belongs(p, label, False)]
+                  if _base_kind(_point(p)[1]) == "jump" and _belongs(p, label)]
         _draw_curve(ax, s, y, breaks, color=SERIES_COLOURS[i % len(SERIES_COLOURS)], lw=1.3,
                     label=label)
     _draw_points(ax, s, curves, points, causes)
