@@ -1,4 +1,5 @@
-"""``biped-opt figures``: the paper's Figs. 2-4 as PNG, with captions and the nonsmooth table."""
+"""``biped-opt figures``: the paper's Figs. 2-4 as PNG, with captions and the nonsmooth table, and
+the control experiment (coupled vs decoupled walker, rocking bar) in one more PNG."""
 
 from __future__ import annotations
 
@@ -21,13 +22,18 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     output_directory("--out", args.out)
-    from biped_opt.plots.reproduce import reproduce  # matplotlib only when drawing
+    # matplotlib only when drawing
+    from biped_opt.plots.reproduce import reproduce
+    from biped_opt.plots.systems import CONTROL_EXPERIMENT_CAPTION, control_experiment_figure
 
     result = reproduce(args.out, fixed_num=args.fixed_num, optimal_num=args.optimal_num,
                        progress=args.progress)
+    experiment = control_experiment_figure(args.out / "control_experiment.png")
+    with result.captions.open("a") as fh:
+        fh.write(f"\n{CONTROL_EXPERIMENT_CAPTION}\n")
     print(result.table())
     print()
-    for path in (*result.figures, result.captions):
+    for path in (*result.figures, experiment, result.captions):
         print(f"wrote {path}")
     print(f"reproduction took {result.seconds:.1f} s")
     return 0

@@ -1,4 +1,5 @@
-"""Figures reproducing the paper's plots (matplotlib, Agg). Never imported by the core."""
+"""Figures reproducing the paper's plots, and the same figures for any system (matplotlib, Agg).
+Never imported by the core."""
 
 from biped_opt.plots.figures import (
     FixedSweepData,
@@ -8,8 +9,28 @@ from biped_opt.plots.figures import (
     figure3,
     figure4,
 )
+from biped_opt.plots.systems import (
+    ControlExperiment,
+    Mark,
+    ModeBands,
+    control_experiment_data,
+    control_experiment_figure,
+    mode_bands,
+    modes_figure,
+    outcome_figure,
+    policy_value_figure,
+)
 
 __all__ = [
+    "ControlExperiment",
+    "Mark",
+    "ModeBands",
+    "control_experiment_data",
+    "control_experiment_figure",
+    "mode_bands",
+    "modes_figure",
+    "outcome_figure",
+    "policy_value_figure",
     "FixedSweepData",
     "NonsmoothMark",
     "OptimalSweepData",

@@ -1,0 +1,487 @@
+"""Figures for any system, and the control experiment of the paper's claim (SYSTEMS.md Secs. 2-3).
+
+The drawing functions take data (arrays and simple records), never a solver, so any analysis
+can feed them; each writes one PNG and returns its path:
+
+- :func:`outcome_figure`: outcomes or costs over s, each curve broken at its jumps (never a
+  vertical segment joining two branches), nonsmooth points marked per kind;
+- :func:`modes_figure`: contact mode over time and s (Fig. 3 of [1]_ for any system), from
+  :func:`mode_bands`;
+- :func:`policy_value_figure`: an optimal policy (one curve per input) and value over s;
+- :func:`control_experiment_figure`: the paper's point in one picture. The two-leg walker under
+  the coupled input law (the paper's biped) and under the decoupled law (each leg's input acts
+  whenever its foot is down, Pace & Burden 2017): same mechanics, only the coupling differs; the
+  coupled touchdown outcome is kinked and its liftoff outcome jumps at th0 = 0, the decoupled ones
+  are C^1 there. Beside them the rocking bar, whose coupling is inertial: its outcome jumps
+  without any input at all. Its data comes from :func:`control_experiment_data`.
+
+A nonsmooth point ("point" below) is any record with attributes or keys ``s`` (or ``theta0``)
+and ``kind`` ("kink", "jump", ...), and optionally ``cause``, ``left``/``right`` (one-sided
+limits for a jump, slopes for a kink), ``at`` (the value at s), ``series`` (or ``input``: the
+curve it belongs to; none: every curve) and ``quantity`` ("policy"/"value": the panel it belongs
+to). :class:`Mark` is such a record, and so is
+:class:`biped_opt.optimal.nonsmooth.NonsmoothPoint`.
+
+.. [1] B. Banjanin and S. A. Burden, "Nonsmooth optimal value and policy functions in mechanical
+   systems subject to unilateral constraints", IEEE Control Systems Letters 4(2), 2020.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import numpy.typing as npt  # noqa: E402
+
+from biped_opt.errors import InvalidInputError  # noqa: E402
+from biped_opt.fixed_sweep import theta_grid  # noqa: E402
+from biped_opt.model.modes import ContactMode  # noqa: E402
+from biped_opt.nonsmooth import OneSided, one_sided  # noqa: E402
+from biped_opt.plots.figures import MODE_COLOURS, _finish  # noqa: E402
+from biped_opt.systems.compiled import CompiledSystem  # noqa: E402
+from biped_opt.systems.nonsmooth import find_nonsmooth  # noqa: E402
+
+__all__ = [
+    "Mark",
+    "ModeBands",
+    "ControlExperiment",
+    "outcome_figure",
+    "mode_bands",
+    "mode_name",
+    "modes_figure",
+    "policy_value_figure",
+    "system_marks",
+    "grid_one_sided",
+    "control_experiment_data",
+    "control_experiment_figure",
+    "CONTROL_EXPERIMENT_CAPTION",
+]
+
+Array = npt.NDArray[np.float64]
+
+#: how each kind of nonsmooth point is drawn: marker and its colour (never a curve's colour),
+#: and the style of the faint vertical line at its s (faint: a jump must not look joined)
+KIND_STYLES = {
+    "jump": {"marker": "o", "colour": "#762a83", "ls": ":"},
+    "kink": {"marker": "D", "colour": "#e08214", "ls": "--"},
+    "second-derivative": {"marker": "s", "colour": "0.35", "ls": "-."},
+}
+#: curve colours in series order (coupled first, decoupled second in the control experiment)
+SERIES_COLOURS = ("#b2182b", "#2166ac", "#1b7837", "#4d4d4d", "#8c510a", "#01665e")
+
+
+@dataclass(frozen=True)
+class Mark:
+    """A nonsmooth point of one curve (see the module docstring for what the fields mean)."""
+
+    s: float
+    kind: str
+    cause: str = ""
+    left: float = math.nan
+    right: float = math.nan
+    at: float = math.nan
+    limits: tuple[float, float] = (math.nan, math.nan)  #: one-sided limits (any kind)
+    slopes: tuple[float, float] = (math.nan, math.nan)  #: one-sided first derivatives
+    series: str | None = None
+
+
+def _get(point: Any, *names: str, default: Any = None) -> Any:
+    for name in names:
+        value = point.get(name) if isinstance(point, Mapping) else getattr(point, name, None)
+        if value is not None:
+            return value
+    return default
+
+
+def _point(point: Any) -> tuple[float, str]:
+    """(s, kind) of a point record, or one clear error."""
+    s = _get(point, "s", "theta0")
+    kind = _get(point, "kind")
+    if s is None or kind is None:
+        raise InvalidInputError(
+            f"a point needs 's' (or 'theta0') and 'kind', got {type(point).__name__} {point!r}")
+    return float(s), str(kind)
+
+
+def _base_kind(kind: str) -> str:
+    """'u1: jump' (a policy component's) -> 'jump'."""
+    return kind.rsplit(":", 1)[-1].strip()
+
+
+def _curves(s: npt.ArrayLike, series: Mapping[str, npt.ArrayLike], what: str
+            ) -> tuple[Array, dict[str, Array]]:
+    grid = np.asarray(s, dtype=np.float64)
+    if grid.ndim != 1 or grid.size < 2:
+        raise InvalidInputError(f"s must be a 1-D array of at least 2 values, got {grid.shape}")
+    if np.any(np.diff(grid) <= 0):
+        raise InvalidInputError("s must be strictly increasing")
+    out = {}
+    for label, values in series.items():
+        v = np.asarray(values, dtype=np.float64)
+        if v.shape != grid.shape:
+            raise InvalidInputError(
+                f"{what} {label!r} has shape {v.shape}, s has {grid.shape}")
+        out[str(label)] = v
+    return grid, out
+
+
+def _belongs(point: Any, label: str) -> bool:
+    """Whether a point is on the curve ``label`` (a point naming no curve is on every one)."""
+    owner = _get(point, "series", "input")
+    return owner is None or owner == label
+
+
+def _draw_curve(ax, s: Array, y: Array, breaks: Sequence[float], **style: Any) -> None:
+    """A curve as lines between its breaks; a grid value lying exactly on a break (the
+    simultaneous event itself) is an isolated dot."""
+    cuts = np.sort(np.asarray(breaks, dtype=np.float64))
+    piece = 2 * np.searchsorted(cuts, s, side="left") + np.isin(s, cuts)
+    label = style.pop("label", None)
+    colour = style.pop("color")
+    starts = np.flatnonzero(np.r_[True, piece[1:] != piece[:-1]])
+    ends = np.r_[starts[1:], s.size]
+    for a, b in zip(starts, ends):
+        if piece[a] % 2:  # exactly on a break
+            ax.plot(s[a:b], y[a:b], "o", ms=3.5, color=colour, zorder=4)
+            continue
+        ax.plot(s[a:b], y[a:b], "-", color=colour, label=label, **style)
+        label = None
+
+
+def _draw_points(ax, s: Array, curves: Mapping[str, Array], points: Sequence[Any],
+                 causes: bool = True) -> None:
+    """A vertical line per point (style by kind), markers at the one-sided limits of a jump and
+    at the value of a kink, the cause written along the line."""
+    seen: set[str] = set()
+    for p in points:
+        x, kind = _point(p)
+        base = _base_kind(kind)
+        style = KIND_STYLES.get(base, KIND_STYLES["second-derivative"])
+        ax.axvline(x, color="0.75", lw=0.7, ls=style["ls"], zorder=0)
+        owners = [label for label in curves if _belongs(p, label)]
+        for label in owners:
+            y = curves[label]
+            if base == "jump":
+                limits = _get(p, "limits", default=(math.nan, math.nan))
+                left = _get(p, "left", default=math.nan) if np.isnan(limits[0]) else limits[0]
+                right = _get(p, "right", default=math.nan) if np.isnan(limits[1]) else limits[1]
+                ys = [v for v in (left, right) if np.isfinite(v)]
+            else:
+                at = _get(p, "at", default=math.nan)
+                ys = [at if np.isfinite(at) else float(np.interp(x, s, y))]
+            ax.plot([x] * len(ys), ys, style["marker"], ms=6, mfc="none", mec=style["colour"],
+                    mew=1.3, zorder=5, label=None if base in seen else base)
+            seen.add(base)
+        cause = _get(p, "cause", default="")
+        if cause and causes:
+            ax.annotate(f"{kind}: {cause}", xy=(x, 1.0), xycoords=("data", "axes fraction"),
+                        xytext=(2, -4), textcoords="offset points", rotation=90, va="top",
+                        ha="left", fontsize=6, color="0.4")
+
+
+def _panel(ax, s: Array, curves: Mapping[str, Array], points: Sequence[Any],
+           causes: bool = True, legend: str = "best") -> None:
+    for i, (label, y) in enumerate(curves.items()):
+        breaks = [_point(p)[0] for p in points
+                  if _base_kind(_point(p)[1]) == "jump" and _belongs(p, label)]
+        _draw_curve(ax, s, y, breaks, color=SERIES_COLOURS[i % len(SERIES_COLOURS)], lw=1.3,
+                    label=label)
+    _draw_points(ax, s, curves, points, causes)
+    ax.legend(fontsize=8, loc=legend)
+
+
+def outcome_figure(path: str | Path, s: npt.ArrayLike, series: Mapping[str, npt.ArrayLike], *,
+                   points: Sequence[Any] = (), ylabel: str = "outcome", xlabel: str = "s",
+                   title: str = "", figsize: tuple[float, float] = (8.0, 5.0)) -> Path:
+    """Outcome (or cost) over s, one curve per entry of ``series``, broken at the jumps among
+    ``points`` and with every point marked by kind."""
+    grid, curves = _curves(s, series, "series")
+    fig, ax = plt.subplots(figsize=figsize, constrained_layout=True)
+    _panel(ax, grid, curves, points)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=10)
+    return _finish(fig, Path(path))
+
+
+def policy_value_figure(path: str | Path, s: npt.ArrayLike, policy: Mapping[str, npt.ArrayLike],
+                        value: npt.ArrayLike, *, points: Sequence[Any] = (), xlabel: str = "s",
+                        title: str = "", figsize: tuple[float, float] = (8.0, 7.0)) -> Path:
+    """Optimal policy (a) and value (b) over s. A point with a ``quantity`` goes on that panel
+    only; one with an ``input``/``series`` goes on that policy curve."""
+    grid, inputs = _curves(s, policy, "policy")
+    _, values = _curves(grid, {"value": value}, "value")
+    fig, axes = plt.subplots(2, 1, figsize=figsize, sharex=True, constrained_layout=True)
+    for ax, quantity, curves in ((axes[0], "policy", inputs), (axes[1], "value", values)):
+        mine = [p for p in points if _get(p, "quantity", default=quantity) == quantity]
+        _panel(ax, grid, curves, mine)
+    axes[0].set_ylabel(r"optimal policy $\pi(s)$")
+    axes[0].set_title("(a) optimal policy", fontsize=10)
+    axes[1].set_ylabel(r"optimal value $\nu(s)$")
+    axes[1].set_title("(b) optimal value", fontsize=10)
+    axes[1].set_xlabel(xlabel)
+    fig.suptitle(title)
+    return _finish(fig, Path(path))
+
+
+# --- contact modes over time and s --------------------------------------------------------------
+@dataclass(frozen=True)
+class ModeBands:
+    """The contact modes of one trajectory as time intervals [starts[k], ends[k]] in mode
+    modes[k], and the times of all its contact events with the constraints each one switched
+    (a mask; an impact that separates at once, as with restitution, leaves the mode unchanged
+    but is an event)."""
+
+    s: float
+    modes: tuple[int, ...]
+    starts: tuple[float, ...]
+    ends: tuple[float, ...]
+    events: tuple[float, ...]
+    switched: tuple[int, ...]
+    status: str
+
+
+def mode_name(mode: int, constraints: Sequence[str]) -> str:
+    """A mode (bit j: constraint j active) by its constraints' names; 0 is "air"."""
+    names = [c for j, c in enumerate(constraints) if mode >> j & 1]
+    return "+".join(names) if names else "air"
+
+
+def mode_bands(compiled: CompiledSystem, maneuver: str, s_grid: npt.ArrayLike,
+               inputs: Any = None) -> list[ModeBands]:
+    """Simulate ``maneuver`` at every s and cut each trajectory into its mode intervals."""
+    bands = []
+    for s in np.atleast_1d(np.asarray(s_grid, dtype=np.float64)):
+        tr = compiled.simulate(maneuver, float(s), inputs)
+        times = (0.0, *tr.event_times, tr.t_final)
+        # a contact event that does not change the mode (impact and immediate separation)
+        # splits no band
+        modes, starts, ends = [tr.modes[0]], [0.0], []
+        for k, mode in enumerate(tr.modes[1:], start=1):
+            if mode != modes[-1]:
+                ends.append(times[k])
+                modes.append(mode)
+                starts.append(times[k])
+        ends.append(tr.t_final)
+        bands.append(ModeBands(s=float(s), modes=tuple(modes), starts=tuple(starts),
+                               ends=tuple(ends), events=tuple(tr.event_times),
+                               switched=tuple(int(r[2]) | int(r[3])
+                                              for r in tr.events[: len(tr.event_times)]),
+                               status=tr.status))
+    return bands
+
+
+def _mode_colour(mode: int) -> Any:
+    if mode in {m.value for m in ContactMode}:
+        return MODE_COLOURS[ContactMode(mode)]  # the biped's colours for the biped's masks
+    return plt.get_cmap("tab10")(mode % 10)
+
+
+def modes_figure(path: str | Path, compiled: CompiledSystem, maneuver: str,
+                 s_grid: npt.ArrayLike, inputs: Any = None, *, title: str = "",
+                 figsize: tuple[float, float] = (9.0, 5.0)) -> Path:
+    """Contact mode over time t (x) and s (y) as coloured bands, contact events as ticks."""
+    bands = mode_bands(compiled, maneuver, s_grid, inputs)
+    if not bands:
+        raise InvalidInputError("s_grid must hold at least one value")
+    names = compiled.derived.constraint_names
+    ss = np.array([b.s for b in bands])
+    steps = np.diff(ss)
+    height = float(np.min(np.abs(steps))) if steps.size else 1.0
+    fig, ax = plt.subplots(figsize=figsize, constrained_layout=True)
+    used: dict[int, None] = {}
+    for b in bands:
+        for mode, t0, t1 in zip(b.modes, b.starts, b.ends):
+            ax.broken_barh([(t0, t1 - t0)], (b.s - height / 2, height), color=_mode_colour(mode),
+                           lw=0)
+            used[mode] = None
+        if b.status != "OK":
+            ax.plot([b.ends[-1]], [b.s], "x", color="k", ms=4)
+    for mask in sorted({m for b in bands for m in b.switched}):
+        hits = [(t, b.s) for b in bands for t, m in zip(b.events, b.switched) if m == mask]
+        ts, ys = zip(*hits)
+        ax.plot(ts, ys, ".", ms=2.5, mec="none", color=SERIES_COLOURS[mask % 6],
+                label=f"event: {mode_name(mask, names)}")
+    ax.plot([b.ends[-1] for b in bands], ss, ".", ms=2, color="k", label=r"end $t_f$")
+    handles = [plt.Rectangle((0, 0), 1, 1, color=_mode_colour(m)) for m in sorted(used)]
+    legend = ax.legend(handles, [mode_name(m, names) for m in sorted(used)], title="mode",
+                       loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    ax.add_artist(legend)
+    ax.legend(loc="lower left", bbox_to_anchor=(1.01, 0.0), fontsize=8)
+    ax.set_xlabel("time t")
+    ax.set_ylabel(str(compiled.system.s))
+    ax.set_ylim(ss[0] - height, ss[-1] + height)
+    ax.set_title(title or f"{compiled.name} {maneuver}: contact mode over time and "
+                 f"{compiled.system.s}", fontsize=10)
+    return _finish(fig, Path(path))
+
+
+# --- nonsmooth points of a compiled system along a grid -----------------------------------------
+def system_marks(compiled: CompiledSystem, maneuver: str, grid: npt.ArrayLike,
+                 inputs: Any = None, *, series: str | None = None) -> tuple[Array, list[Mark]]:
+    """The outcome along ``grid`` (one batch) and its nonsmooth points
+    (:func:`biped_opt.systems.nonsmooth.find_nonsmooth`: every change of the mode sequence
+    located to 1e-10 in s and classified from extrapolated one-sided limits and slopes)."""
+    s = np.asarray(grid, dtype=np.float64)
+    u = compiled.simulate(maneuver, float(s[0]), inputs).inputs  # checked, in declared order
+    batch = compiled.simulate_batch(maneuver, s, u)
+    report = find_nonsmooth(compiled, maneuver, u, s=s)
+    marks = [Mark(s=p.theta0, kind=p.kind, cause=p.cause, left=p.left, right=p.right, at=p.at,
+                  limits=p.limits, slopes=p.derivatives, series=series) for p in report.points]
+    return batch["outcome"], marks
+
+
+# --- the control experiment ---------------------------------------------------------------------
+#: SYSTEMS.md Sec. 3: the paper's fixed inputs (u1, u2, u_body) of the two-leg walker
+TOUCHDOWN_INPUTS = (2.0, 0.5, 0.0)
+LIFTOFF_INPUTS = (1.5, 3.0, 0.0)
+LAWS = ("coupled", "decoupled")
+
+
+#: what control_experiment.png shows, for the captions file next to it
+CONTROL_EXPERIMENT_CAPTION = """\
+control_experiment.png  The paper's claim as a controlled experiment (SYSTEMS.md Secs. 2-3).
+          (a, b) The two-leg walker with the paper's coupled input law (u_i acts iff leg i
+          alone is down: the biped) and the decoupled law (u_i acts iff foot i is down), same
+          mechanics and inputs: touchdown u = (2, 0.5, 0), liftoff u = (1.5, 3, 0), 801
+          angles in [-0.02, 0.02], 0 included. Coupled: touchdown kinked, liftoff jumping at
+          th0 = 0 (the dot is the simultaneous liftoff itself); decoupled: C^1 (legend: one-
+          sided slopes from the grid). Inset: outcome minus its chord (a V is a kink).
+          (c) The rocking bar (no input; inertial coupling) dropped at pitch th0: its outcome
+          th'(t_f) jumps at 0 and where a third impact meets the apex. Curves are broken at
+          jumps; circles are one-sided limits, diamonds kinks, located to 1e-10."""
+
+
+@dataclass(frozen=True)
+class ControlExperiment:
+    """Walker outcomes under both input laws on one grid (0 included), and the rocking bar's."""
+
+    s: Array
+    touchdown: dict[str, Array]  #: law -> outcome th(t_f)
+    liftoff: dict[str, Array]
+    touchdown_marks: tuple[Mark, ...]  #: each with ``series`` = its law
+    liftoff_marks: tuple[Mark, ...]
+    bar_s: Array
+    bar: Array  #: the rocking bar's drop outcome th'(t_f)
+    bar_marks: tuple[Mark, ...]
+
+
+def control_experiment_data(*, half_width: float = 0.02, num: int = 801,
+                            bar_num: int = 1201) -> ControlExperiment:
+    """Outcomes of the two-leg walker, coupled and decoupled, at touchdown (u = (2, 0.5, 0))
+    and liftoff (u = (1.5, 3, 0)) for th0 in [-half_width, half_width] (``num`` angles), and
+    of the rocking bar's drop over its whole range (``bar_num`` angles), with their nonsmooth
+    points."""
+    if not 0.0 < half_width <= 0.3:
+        raise InvalidInputError(f"half_width must lie in (0, 0.3], got {half_width!r}")
+    for name, n in (("num", num), ("bar_num", bar_num)):
+        if isinstance(n, bool) or not isinstance(n, int) or n < 5:
+            raise InvalidInputError(f"{name} must be an integer >= 5, got {n!r}")
+    s = theta_grid(-half_width, half_width, num)
+    outcomes: dict[str, dict[str, Array]] = {"touchdown": {}, "liftoff": {}}
+    marks: dict[str, list[Mark]] = {"touchdown": [], "liftoff": []}
+    for law in LAWS:
+        walker = CompiledSystem(f"walker2_{law}")
+        for maneuver, u in (("touchdown", TOUCHDOWN_INPUTS), ("liftoff", LIFTOFF_INPUTS)):
+            y, found = system_marks(walker, maneuver, s, u, series=law)
+            outcomes[maneuver][law] = y
+            marks[maneuver] += found
+    bar = CompiledSystem("rocking_bar")
+    lo, hi = bar.derived.maneuvers["drop"].description.s_range
+    bar_s = theta_grid(lo, hi, bar_num)
+    bar_y, bar_marks = system_marks(bar, "drop", bar_s)
+    return ControlExperiment(s=s, touchdown=outcomes["touchdown"], liftoff=outcomes["liftoff"],
+                             touchdown_marks=tuple(marks["touchdown"]),
+                             liftoff_marks=tuple(marks["liftoff"]), bar_s=bar_s, bar=bar_y,
+                             bar_marks=tuple(bar_marks))
+
+
+def grid_one_sided(s: Array, y: Array, x: float, side: int, *, levels: int = 5) -> OneSided:
+    """One-sided limit and slope at the grid point x from the grid's own values: the
+    polynomial extrapolation of :func:`biped_opt.nonsmooth.one_sided` on the ladder of grid
+    points x + side 2^k h, h the spacing, k = levels-1 .. 0 (y at x itself is never used)."""
+    k = int(np.flatnonzero(s == x)[0])
+    spacing = float(s[k + side] - s[k]) * side
+    at = {round((float(v) - x) / spacing): float(w) for v, w in zip(s, y)}
+    return one_sided(lambda v: at[round((v - x) / spacing)], x, side,
+                     h0=spacing * 2 ** (levels - 1), levels=levels)
+
+
+def _law_label(law: str, s: Array, y: Array, marks: Sequence[Mark]) -> str:
+    """'coupled: kink, slopes 0.796 | 0.714' or 'decoupled: C^1, slopes 0.830 | 0.830'."""
+    mine = {m.kind: m for m in marks if m.series == law and m.s == 0.0}
+    if "jump" in mine:
+        m = mine["jump"]
+        return f"{law}: jump, limits {m.limits[0]:+.4f} | {m.limits[1]:+.4f}"
+    if "kink" in mine:
+        m = mine["kink"]
+        return f"{law}: kink, slopes {m.slopes[0]:.4f} | {m.slopes[1]:.4f}"
+    left, right = (grid_one_sided(s, y, 0.0, side).derivative for side in (-1, 1))
+    return f"{law}: C$^1$, slopes {left:.4f} | {right:.4f}"
+
+
+def _value_at(s: Array, y: Array, x: float) -> float:
+    hit = np.flatnonzero(s == x)
+    return float(y[hit[0]]) if hit.size else math.nan
+
+
+def _chord_inset(ax, s: Array, curves: Mapping[str, Array]) -> None:
+    """Each curve minus its chord through the window's ends: a kink of slopes a | b becomes a
+    V of slopes +-(a - b) / 2, a C^1 curve a flat arc (its curvature only)."""
+    inset = ax.inset_axes((0.08, 0.6, 0.36, 0.32))
+    for i, y in enumerate(curves.values()):
+        chord = y[0] + (y[-1] - y[0]) * (s - s[0]) / (s[-1] - s[0])
+        inset.plot(s, 1e3 * (y - chord), color=SERIES_COLOURS[i], lw=1.0)
+    inset.set_title("minus chord [mrad]", fontsize=7)
+    inset.tick_params(labelsize=6)
+    inset.axvline(0.0, color="0.75", lw=0.6, ls="--", zorder=0)
+
+
+def control_experiment_figure(path: str | Path, data: ControlExperiment | None = None, *,
+                              figsize: tuple[float, float] = (15.0, 5.0)) -> Path:
+    """The paper's point in one picture (module docstring); ``data`` defaults to
+    :func:`control_experiment_data` with its defaults."""
+    data = control_experiment_data() if data is None else data
+    fig, axes = plt.subplots(1, 3, figsize=figsize, constrained_layout=True)
+    for ax, maneuver, u, outcome, marks in (
+            (axes[0], "touchdown", TOUCHDOWN_INPUTS, data.touchdown, data.touchdown_marks),
+            (axes[1], "liftoff", LIFTOFF_INPUTS, data.liftoff, data.liftoff_marks)):
+        curves = {_law_label(law, data.s, y, marks): y for law, y in outcome.items()}
+        relabel = dict(zip(outcome, curves))
+        shown = [replace(m, series=relabel[m.series]) for m in marks
+                 if m.kind in ("jump", "kink")]  # the C^1 law's second derivative: not the point
+        _panel(ax, data.s, curves, shown,
+               legend="lower right" if maneuver == "touchdown" else "upper left")
+        if maneuver == "liftoff":
+            low, high = ax.get_ylim()
+            ax.set_ylim(low, high + 0.3 * (high - low))  # room for the legend above the curves
+        letter = "a" if maneuver == "touchdown" else "b"
+        ax.set_title(f"({letter}) two-leg walker, {maneuver}, u = "
+                     f"({', '.join(f'{v:g}' for v in u)})", fontsize=10)
+        ax.set_xlabel(r"initial pitch $\theta_0$ [rad]")
+        ax.set_ylabel(r"outcome $\theta(t_f)$ [rad]")
+    _chord_inset(axes[0], data.s, data.touchdown)
+    ax = axes[2]
+    _panel(ax, data.bar_s, {"rocking bar, no input": data.bar}, data.bar_marks, causes=False)
+    jumps = ", ".join(f"{m.s:+.7f}" for m in data.bar_marks if m.kind == "jump")
+    ax.text(0.02, 0.02, f"jumps at $\\theta_0$ = {jumps}\n(at 0: one simultaneous impact, "
+            f"outcome {_value_at(data.bar_s, data.bar, 0.0):g})", transform=ax.transAxes,
+            fontsize=7, va="bottom", ha="left",
+            bbox={"boxstyle": "round", "fc": "white", "ec": "0.7", "alpha": 0.9})
+    low, high = ax.get_ylim()
+    ax.set_ylim(low - 0.25 * (high - low), high)  # room for the box under the curves
+    ax.set_title("(c) rocking bar dropped at pitch $\\theta_0$: inertial coupling", fontsize=10)
+    ax.set_xlabel(r"initial pitch $\theta_0$ [rad]")
+    ax.set_ylabel(r"outcome $\dot\theta(t_f)$ at the first apex [rad / time]")
+    fig.suptitle("Same mechanics, only the coupling differs: force-coupled inputs (coupled) make "
+                 "the outcome kink or jump at simultaneous contact, decoupled inputs keep it "
+                 "C$^1$; inertial coupling makes it jump without any input", fontsize=10)
+    return _finish(fig, Path(path))
