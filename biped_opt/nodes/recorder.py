@@ -82,6 +82,9 @@ class SweepRequest:
             s = spec(convert.request_maneuver(self.maneuver))
             for name in ("theta0_min", "theta0_max"):
                 convert.request_theta0(s.maneuver, getattr(self, name))
+            if len(self.fixed_inputs) > 3:
+                raise InvalidInputError(
+                    f"fixed_inputs: at most 3 values (u1, u2, u12), got {len(self.fixed_inputs)}")
         else:
             for name in ("theta0_min", "theta0_max"):
                 if not convert.finite(getattr(self, name)):
