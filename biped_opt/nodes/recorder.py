@@ -237,6 +237,11 @@ class RecorderNode(ros.Node):
         if not req.biped:
             return self._record_system(req)
         req = req.validated()
+        with self._system_info_seen:
+            served = self._system_info
+        if served is not None:
+            raise SimulationError(f"the simulator serves {served['system']}: give the recorder "
+                                  "the same system parameter")
         maneuver = spec(req.maneuver).maneuver.value
         grid = theta_grid(req.theta0_min, req.theta0_max, int(req.num))
         fixed = req.fixed_inputs or FIXED_INPUTS[maneuver]
