@@ -89,6 +89,16 @@ def compile_layout(typestore: Any, typename: str, strings: dict[str, str],
     offsets: list[int] = []
     constant: dict[int, bytes] = {}
 
+    def numbers(path: str, primitive: str, count: int | None, offset: int) -> int:
+        """A numeric leaf (``count`` None: a scalar, else an array of ``count``) at the next
+        offset aligned to its size; returns the offset after it."""
+        fmt = numpy_dtype(primitive)
+        offset = _align(offset, fmt.itemsize)
+        names.append(path)
+        formats.append(fmt if count is None else (fmt, (count,)))
+        offsets.append(offset)
+        return offset + fmt.itemsize * (1 if count is None else count)
+
     def walk(tname: str, prefix: str, offset: int) -> int:
         _consts, fields = typestore.fielddefs[tname]
         for fname, (kind, spec) in fields:
@@ -106,37 +116,19 @@ def compile_layout(typestore: Any, typename: str, strings: dict[str, str],
                     constant[offset] = len(data).to_bytes(4, "little") + data
                     offset += 4 + len(data)
                 else:
-                    fmt = numpy_dtype(base)
-                    offset = _align(offset, fmt.itemsize)
-                    names.append(path)
-                    formats.append(fmt)
-                    offsets.append(offset)
-                    offset += fmt.itemsize
-            elif kind == "ARRAY":
+                    offset = numbers(path, base, None, offset)
+            elif kind == "ARRAY" or path in lengths:
+                what = "array" if kind == "ARRAY" else "sequence"
                 (elem_kind, elem_spec), count = spec
                 if getattr(elem_kind, "name", elem_kind) != "BASE" or elem_spec[0] == "string":
-                    raise LayoutError(f"{typename}: array {path} of non-primitives")
-                fmt = numpy_dtype(elem_spec[0])
-                offset = _align(offset, fmt.itemsize)
-                names.append(path)
-                formats.append((fmt, (count,)))
-                offsets.append(offset)
-                offset += fmt.itemsize * count
-            elif path in lengths:
-                (elem_kind, elem_spec), _bound = spec
-                if getattr(elem_kind, "name", elem_kind) != "BASE" or elem_spec[0] == "string":
-                    raise LayoutError(f"{typename}: sequence {path} of non-primitives")
-                count = int(lengths[path])
-                offset = _align(offset, 4)
-                constant[offset] = count.to_bytes(4, "little")
-                offset += 4
+                    raise LayoutError(f"{typename}: {what} {path} of non-primitives")
+                if kind != "ARRAY":  # a sequence: its length, then (if any) its elements
+                    count = int(lengths[path])
+                    offset = _align(offset, 4)
+                    constant[offset] = count.to_bytes(4, "little")
+                    offset += 4
                 if count:  # (an empty sequence is its length alone: no padding follows)
-                    fmt = numpy_dtype(elem_spec[0])
-                    offset = _align(offset, fmt.itemsize)
-                    names.append(path)
-                    formats.append((fmt, (count,)))
-                    offsets.append(offset)
-                    offset += fmt.itemsize * count
+                    offset = numbers(path, elem_spec[0], count, offset)
             else:
                 raise LayoutError(f"{typename}: {path} is a sequence of unknown length")
         return offset

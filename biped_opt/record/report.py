@@ -157,16 +157,23 @@ def load_sweep(path: str | Path) -> RecordedSweep:
     msgs = [points[k] for k in sorted(points)]
     meta = raw.metadata.get("biped_opt.sweep", {})
     maneuver = meta.get("maneuver") or msgs[0].maneuver
+    pol = np.array([np.asarray(m.policy, dtype=float) for m in msgs]).reshape(len(msgs), -1)
     described = system_description(raw.metadata)
-    if described is not None:
-        return _system_sweep(raw, meta, maneuver, msgs, described)
-    optimal = (meta["optimal"] == "True") if "optimal" in meta else bool(msgs[0].optimal)
-    problem = _problem(meta, maneuver)
-    pol = np.array([np.asarray(m.policy, dtype=float) for m in msgs])
-    if optimal:
-        names: Sequence[str] = problem.decisions
+    extra: dict[str, Any] = {}
+    problem: OptimalControlProblem | None = None
+    if described is not None:  # another system: a fixed-input sweep over s, no cost
+        optimal = False
+        names: Sequence[str] = tuple(described["inputs"])
+        inputs = pol[0]
+        extra = {"system": str(described["system"]),
+                 "constraints": tuple(described["constraints"])}
+    elif optimal := ((meta["optimal"] == "True") if "optimal" in meta
+                     else bool(msgs[0].optimal)):
+        problem = _problem(meta, maneuver)
+        names = problem.decisions
         inputs = np.full(3, np.nan)
     else:
+        problem = _problem(meta, maneuver)
         names = INPUT_NAMES[: pol.shape[1]]
         text = meta.get("fixed_inputs")
         inputs = np.zeros(3)
@@ -174,7 +181,7 @@ def load_sweep(path: str | Path) -> RecordedSweep:
         inputs[: len(given)] = given
     if pol.shape[1] != len(names):
         raise ReportError(f"{raw.path}: policy has {pol.shape[1]} entries, expected "
-                          f"{len(names)} ({', '.join(names)})")
+                          f"{len(names)} ({', '.join(names) or 'no inputs'})")
     return RecordedSweep(
         path=raw.path, maneuver=maneuver, optimal=optimal, problem=problem, inputs=inputs,
         theta0=np.array([m.theta0 for m in msgs]), outcome=np.array([m.outcome for m in msgs]),
@@ -182,28 +189,7 @@ def load_sweep(path: str | Path) -> RecordedSweep:
         policy={n: pol[:, k] for k, n in enumerate(names)},
         mode_sequences=tuple(tuple(int(v) for v in m.mode_sequence) for m in msgs),
         event_times=tuple(tuple(float(v) for v in m.event_times) for m in msgs),
-        metadata=dict(meta), complete=raw.complete, note=raw.note,
-    )
-
-
-def _system_sweep(raw: Any, meta: dict[str, str], maneuver: str, msgs: list[Any],
-                  described: dict[str, Any]) -> RecordedSweep:
-    """A recorded fixed-input sweep over s of another system than the biped."""
-    names = tuple(described["inputs"])
-    pol = np.array([np.asarray(m.policy, dtype=float) for m in msgs]).reshape(len(msgs), -1)
-    if pol.shape[1] != len(names):
-        raise ReportError(f"{raw.path}: policy has {pol.shape[1]} entries, expected "
-                          f"{len(names)} ({', '.join(names) or 'no inputs'})")
-    return RecordedSweep(
-        path=raw.path, maneuver=maneuver, optimal=False, problem=None,
-        inputs=pol[0] if len(msgs) else np.zeros(0),
-        theta0=np.array([m.theta0 for m in msgs]), outcome=np.array([m.outcome for m in msgs]),
-        value=np.array([m.value for m in msgs]), t_final=np.array([m.t_final for m in msgs]),
-        policy={n: pol[:, k] for k, n in enumerate(names)},
-        mode_sequences=tuple(tuple(int(v) for v in m.mode_sequence) for m in msgs),
-        event_times=tuple(tuple(float(v) for v in m.event_times) for m in msgs),
-        metadata=dict(meta), complete=raw.complete, note=raw.note,
-        system=str(described["system"]), constraints=tuple(described["constraints"]),
+        metadata=dict(meta), complete=raw.complete, note=raw.note, **extra,
     )
 
 
