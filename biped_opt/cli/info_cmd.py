@@ -16,9 +16,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "info", help="summarise a recording (topics, counts, time range, sweep parameters)",
         description="Topics with types, QoS and message counts, the log-time range, the number "
                     "of sweep points, the sweep's parameters (the biped_opt.sweep metadata "
-                    "record) and whether the file is complete or was recovered from an "
-                    "unfinished write. --to-rosbag2 DIR also writes a rosbag2 directory "
-                    "(metadata.yaml version 8, which ROS 2 Humble reads, and the MCAP).")
+                    "record), the system of a recording of another system than the biped "
+                    "(the biped_opt.system record) and whether the file is complete or was "
+                    "recovered from an unfinished write. --to-rosbag2 DIR also writes a "
+                    "rosbag2 directory (metadata.yaml version 8, which ROS 2 Humble reads, "
+                    "and the MCAP).")
     p.add_argument("file", help="the .mcap recording")
     p.add_argument("--to-rosbag2", type=Path, metavar="DIR",
                    help="write the recording as a rosbag2 directory DIR (new or empty)")
@@ -28,7 +30,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def describe(path: str | Path) -> dict:
     """Plain-data summary of a recording (what ``info`` prints)."""
-    from biped_opt.record.reader import read_raw
+    from biped_opt.record.reader import read_raw, system_description
     from biped_opt.record.replay import qos_from_metadata
 
     raw = read_raw(path)
@@ -55,6 +57,7 @@ def describe(path: str | Path) -> dict:
         "duration_s": (span[1] - span[0]) * 1e-9 if span else 0.0,
         "sweep_points": counts.get("/biped/sweep", 0),
         "sweep": raw.metadata.get("biped_opt.sweep", {}),
+        "system": system_description(raw.metadata),
         "metadata_records": sorted(raw.metadata),
     }
 
@@ -77,6 +80,14 @@ def _text(info: dict) -> str:
         q = t["qos"]
         lines.append(f"  {t['topic']:<{width}}  {t['count']:>8}  {t['type']}  "
                      f"[{q['reliability']}, {q['durability']}, {q['history']} {q['depth']}]")
+    system = info["system"]
+    if system is not None:
+        lines.append(f"system:       {system['system']} (from {system['source']})")
+        for key in ("coordinates", "constraints", "inputs", "maneuvers"):
+            lines.append(f"  {key + ':':<13}{', '.join(system[key]) or 'none'}")
+        params = ", ".join(f"{k} = {v:g}" for k, v in zip(system["parameter_names"],
+                                                         system["parameter_values"]))
+        lines.append(f"  {'parameters:':<13}{params or 'none'}")
     if info["sweep"]:
         lines.append("sweep parameters (biped_opt.sweep):")
         for key, value in info["sweep"].items():

@@ -19,6 +19,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, type=Path,
                    help="output .mcap file (its directory must exist; never overwritten)")
     p.add_argument("--params-file", type=Path, default=None, help="ROS 2 parameter file")
+    p.add_argument("--system", default="",
+                   help="record another system than the biped: a library name or a system "
+                        "file (the --theta0 range is then the maneuver's s; fixed inputs only)")
+    p.add_argument("--inputs", nargs="+", type=finite_float("--inputs"), default=(),
+                   metavar="U", help="fixed inputs: the biped's u1 u2 u12 (default: the "
+                                     "paper's), another system's in its declared order "
+                                     "(default zeros)")
     p.set_defaults(func=run)
 
 
@@ -29,7 +36,8 @@ def run(args: argparse.Namespace) -> int:
 
     request = SweepRequest(maneuver=args.maneuver, theta0_min=args.theta0_min,
                            theta0_max=args.theta0_max, num=args.num, optimal=args.optimal,
-                           output=args.out).validated()
+                           output=args.out, system=args.system,
+                           fixed_inputs=tuple(args.inputs)).validated()
     output_file("--out", args.out, overwrite=False)
     if args.params_file is not None:
         input_file("--params-file", args.params_file)
@@ -38,7 +46,8 @@ def run(args: argparse.Namespace) -> int:
     with stop_requested(interrupt=True) as stop:
         try:
             graph = Graph(params_file=args.params_file,
-                          overrides={"simulator": {"autostart": False}})
+                          overrides={"simulator": {"autostart": False, "system": args.system},
+                                     "recorder": {"system": args.system}})
         except KeyboardInterrupt:
             return 0
         with graph:

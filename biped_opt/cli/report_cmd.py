@@ -31,7 +31,7 @@ def func(args: argparse.Namespace) -> int:
     result = report(args.files, args.out, refine=args.refine)
     for s in result.sweeps:
         state = "complete" if s.complete else f"RECOVERED ({s.note})"
-        print(f"{s.path}: {s.kind} {s.maneuver} sweep, {s.theta0.size} points, {state}")
+        print(f"{s.path}: {s.kind} {s.label} sweep, {s.theta0.size} points, {state}")
     print()
     print(result.table)
     for path in (*result.figures, result.table_path):

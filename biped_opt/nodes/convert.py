@@ -7,15 +7,18 @@ lists) and written as plain float lists, which every backend accepts.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
 from biped_opt import ros
-from biped_opt.errors import InvalidInputError
+from biped_opt.errors import InvalidInputError, quoted
 from biped_opt.hybrid.trajectory import Trajectory
 from biped_opt.maneuvers import Maneuver, check_theta0, parse_maneuver
+
+if TYPE_CHECKING:  # the systems' modules (SymPy) load only where a system is used
+    from biped_opt.systems.compiled import CompiledSystem, SystemTrajectory
 
 __all__ = [
     "NS",
@@ -25,6 +28,13 @@ __all__ = [
     "request_theta0",
     "state_messages",
     "contact_mode_messages",
+    "SYSTEM_INFO_FIELDS",
+    "system_info_fields",
+    "message_fields",
+    "request_system_maneuver",
+    "request_s",
+    "request_system_inputs",
+    "system_state_messages",
 ]
 
 NS = 1_000_000_000
@@ -43,10 +53,10 @@ def stamp_ns(t: Any) -> int:
     return int(t.sec) * NS + int(t.nanosec)
 
 
-def header(ns: int) -> Any:
+def header(ns: int, frame_id: str = FRAME_ID) -> Any:
     h = ros.std_msgs.Header()
     h.stamp = stamp(ns)
-    h.frame_id = FRAME_ID
+    h.frame_id = frame_id
     return h
 
 
@@ -108,6 +118,93 @@ def contact_mode_messages(tr: Trajectory, start_ns: int) -> list[tuple[float, An
         msg.header = header(start_ns + round(t * NS))
         msg.mode = int(mode)
         out.append((t, msg))
+    return out
+
+
+# -- any system (biped_opt.systems) ----------------------------------------------------------
+
+#: the fields of SystemInfo, in its order
+SYSTEM_INFO_FIELDS = ("system", "source", "coordinates", "constraints", "inputs",
+                      "parameter_names", "parameter_values", "maneuvers", "s_min", "s_max")
+
+
+def system_info_fields(compiled: CompiledSystem, source: str) -> dict[str, Any]:
+    """SystemInfo's fields (plain str, list and float values) for ``compiled``, loaded from
+    ``source`` (a library name or a file path)."""
+    system = compiled.system
+    ranges = [system.maneuvers[m].s_range for m in compiled.maneuvers]
+    return {
+        "system": compiled.name, "source": source,
+        "coordinates": list(system.coordinate_names), "constraints": list(system.constraints),
+        "inputs": list(compiled.inputs), "parameter_names": list(compiled.parameters),
+        "parameter_values": [float(v) for v in compiled.parameters.values()],
+        "maneuvers": list(compiled.maneuvers), "s_min": [float(lo) for lo, _ in ranges],
+        "s_max": [float(hi) for _, hi in ranges],
+    }
+
+
+def message_fields(msg: Any, names: tuple[str, ...]) -> dict[str, Any]:
+    """``names`` of a message as plain values (arrays as lists), from any backend."""
+    out: dict[str, Any] = {}
+    for name in names:
+        value = getattr(msg, name)
+        out[name] = value if isinstance(value, (str, int, float)) else [
+            v if isinstance(v, str) else float(v) for v in value]
+    return out
+
+
+def request_system_maneuver(compiled: CompiledSystem, text: str) -> str:
+    """The request's maneuver, one of the system's; the error names the field."""
+    if text not in compiled.maneuvers:
+        raise InvalidInputError(
+            f"maneuver: {compiled.name} has no maneuver {quoted(text)} "
+            f"(maneuvers: {', '.join(compiled.maneuvers) or 'none'})")
+    return text
+
+
+def request_s(value: float) -> float:
+    """The request's s (Simulate.theta0 for a non-biped system): finite; the error names the
+    field. The maneuver's s range is advice, not a limit (outside it other mode sequences
+    appear), so it is not enforced."""
+    if not finite(value):
+        raise InvalidInputError(f"theta0: the maneuver's s must be finite, got {value}")
+    return float(value)
+
+
+def request_system_inputs(compiled: CompiledSystem, values: Any) -> list[float]:
+    """The request's inputs for ``compiled`` in its declared order, padded with zeros."""
+    arr = np.asarray(values, dtype=np.float64).ravel()
+    names = compiled.inputs
+    if arr.size > len(names) and not arr[len(names):].any():
+        arr = arr[: len(names)]  # trailing zeros say nothing (a system without inputs: [0.0])
+    if arr.size > len(names):
+        raise InvalidInputError(
+            f"inputs: at most {len(names)} values ({', '.join(names) or 'none'}) for "
+            f"{compiled.name}, got {arr.size}")
+    if not np.isfinite(arr).all():
+        raise InvalidInputError(f"inputs: must be finite, got {arr.tolist()}")
+    out = [0.0] * len(names)
+    out[: arr.size] = arr.tolist()
+    return out
+
+
+def system_state_messages(tr: SystemTrajectory, ndof: int, start_ns: int) -> list[Any]:
+    """One SystemState per dense sample of ``tr`` (rows [t, q, qdot, mode, lambda]; two at
+    each event: before and after); the frame id is the system's name."""
+    d = ndof
+    out = []
+    for row in tr.samples:
+        msg = ros.msgs.SystemState()
+        msg.header = header(start_ns + round(row[0] * NS), tr.system)
+        msg.system = tr.system
+        msg.maneuver = tr.maneuver
+        msg.s = float(tr.s)
+        msg.t = float(row[0])
+        msg.q = [float(v) for v in row[1 : 1 + d]]
+        msg.qdot = [float(v) for v in row[1 + d : 1 + 2 * d]]
+        msg.contact_mode = int(row[1 + 2 * d])
+        msg.contact_force = [float(v) for v in row[2 + 2 * d :]]
+        out.append(msg)
     return out
 
 

@@ -17,13 +17,23 @@ node is destroyed and on SIGINT/SIGTERM (see :func:`main`).
 
 Parameters: ``maneuver``, ``theta0_min``, ``theta0_max``, ``num``, ``optimal``, ``output``
 (path of the .mcap), ``fixed_inputs`` ([u1, u2, u12] for fixed-input sweeps; empty: the paper's),
-``autostart`` (record the parameters' sweep at start-up), ``service_timeout`` [s].
+``autostart`` (record the parameters' sweep at start-up), ``service_timeout`` [s], ``system``.
+
+**Other systems.** With ``system`` set (as the simulator's: a library name or a system file;
+``""`` = the biped) the recorder takes the system's description from the simulator's latched
+``/biped/system_info``, sweeps the maneuver's s over [theta0_min, theta0_max] with fixed inputs
+(the system's declared order; zeros by default) and writes ``/biped/system_state``, the
+description (``/biped/system_info`` and the ``biped_opt.system`` metadata record) and one
+SweepPoint per s (theta0 = s, policy = the inputs, value NaN: no cost is defined, the contact
+modes as bit masks, which SweepPoint holds for systems of up to 8 constraints). Optimal sweeps
+are the biped's only.
 """
 
 from __future__ import annotations
 
 import json
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -36,6 +46,7 @@ from biped_opt.fixed_sweep import FIXED_INPUTS, theta_grid
 from biped_opt.maneuvers import spec
 from biped_opt.nodes import convert
 from biped_opt.nodes.run import announce_ready, run_node
+from biped_opt.nodes.simulator import BIPED, SYSTEM_INFO_QOS
 from biped_opt.optimal import OptimalControlProblem, get_problem
 from biped_opt.record import SweepWriter
 
@@ -43,6 +54,8 @@ __all__ = ["RecorderNode", "SweepRequest", "SweepSummary", "main"]
 
 #: pause between two sweep points on the log-time axis [s]
 GAP = 0.5
+#: SweepPoint.mode_sequence is uint8[]: the masks of at most this many constraints fit
+MAX_RECORDED_CONSTRAINTS = 8
 
 
 @dataclass(frozen=True)
@@ -54,15 +67,57 @@ class SweepRequest:
     optimal: bool
     output: Path
     fixed_inputs: tuple[float, ...] = ()
+    #: the system the simulator serves: "" (or "biped") the biped, else its library name or
+    #: file (theta0_min/theta0_max then bound the maneuver's s)
+    system: str = ""
+
+    @property
+    def biped(self) -> bool:
+        return self.system.strip() in BIPED
 
     def validated(self) -> SweepRequest:
-        s = spec(convert.request_maneuver(self.maneuver))
-        for name in ("theta0_min", "theta0_max"):
-            convert.request_theta0(s.maneuver, getattr(self, name))
+        """Checks what can be checked without the system's description (all of it for the
+        biped; :meth:`validated_for` checks the rest for another system)."""
+        if self.biped:
+            s = spec(convert.request_maneuver(self.maneuver))
+            for name in ("theta0_min", "theta0_max"):
+                convert.request_theta0(s.maneuver, getattr(self, name))
+            if len(self.fixed_inputs) > 3:
+                raise InvalidInputError(
+                    f"fixed_inputs: at most 3 values (u1, u2, u12), got {len(self.fixed_inputs)}")
+        else:
+            for name in ("theta0_min", "theta0_max"):
+                if not convert.finite(getattr(self, name)):
+                    raise InvalidInputError(f"{name} must be finite, got {getattr(self, name)}")
+            if self.optimal:
+                raise InvalidInputError(
+                    f"optimal sweeps are recorded for the biped only (system {self.system!r}: "
+                    "record fixed inputs)")
         if not self.theta0_min < self.theta0_max:
             raise InvalidInputError("theta0_min must be below theta0_max")
         if not 2 <= int(self.num) <= 100_000:
             raise InvalidInputError(f"num must be between 2 and 100000, got {self.num}")
+        return self
+
+    def validated_for(self, info: dict[str, Any]) -> SweepRequest:
+        """The checks that need the served system's description (SystemInfo's fields)."""
+        self.validated()
+        if self.system.strip() not in (info["system"], info["source"]):
+            raise InvalidInputError(
+                f"system: the simulator serves {info['source']!r}, not {self.system!r}")
+        if self.maneuver not in info["maneuvers"]:
+            raise InvalidInputError(
+                f"maneuver: {info['system']} has no maneuver {self.maneuver!r} (maneuvers: "
+                f"{', '.join(info['maneuvers']) or 'none'})")
+        if len(self.fixed_inputs) > len(info["inputs"]):
+            raise InvalidInputError(
+                f"fixed_inputs: at most {len(info['inputs'])} values "
+                f"({', '.join(info['inputs']) or 'none'}), got {len(self.fixed_inputs)}")
+        if len(info["constraints"]) > MAX_RECORDED_CONSTRAINTS:
+            raise InvalidInputError(
+                f"system: {info['system']} has {len(info['constraints'])} constraints; a "
+                f"recording's SweepPoint holds the contact modes of at most "
+                f"{MAX_RECORDED_CONSTRAINTS}")
         return self
 
 
@@ -99,12 +154,17 @@ class RecorderNode(ros.Node):
         self.declare_parameter("fixed_inputs", [0.0])
         self.declare_parameter("autostart", False)
         self.declare_parameter("service_timeout", 30.0)
+        self.declare_parameter("system", "")
         group = ros.ReentrantCallbackGroup()
         self._optimiser = self.create_client(
             ros.srvs.OptimalPolicy, "/biped/optimal_policy", callback_group=group)
         self._simulator = self.create_client(
             ros.srvs.Simulate, "/biped/simulate", callback_group=group)
         self._sweep_pub = self.create_publisher(ros.msgs.SweepPoint, "/biped/sweep", 10)
+        self._system_info: Any = None
+        self._system_info_seen = threading.Condition()
+        self.create_subscription(ros.msgs.SystemInfo, "/biped/system_info",
+                                 self._on_system_info, SYSTEM_INFO_QOS, callback_group=group)
         self.finished = threading.Event()
         self.last_summary: SweepSummary | None = None
         self.error: BaseException | None = None
@@ -125,7 +185,23 @@ class RecorderNode(ros.Node):
             optimal=bool(g("optimal").value),
             output=Path(str(g("output").value)),
             fixed_inputs=fixed if any(fixed) else (),
+            system=str(g("system").value),
         )
+
+    def _on_system_info(self, msg: Any) -> None:
+        with self._system_info_seen:
+            self._system_info = convert.message_fields(msg, convert.SYSTEM_INFO_FIELDS)
+            self._system_info_seen.notify_all()
+
+    def served_system(self, timeout: float) -> dict[str, Any]:
+        """The simulator's SystemInfo (latched), waiting up to ``timeout`` [s] for it."""
+        with self._system_info_seen:
+            if not self._system_info_seen.wait_for(lambda: self._system_info is not None,
+                                                   timeout):
+                raise SimulationError(
+                    f"no /biped/system_info within {timeout} s: is a simulator serving a "
+                    "system (its parameter system) running?")
+            return dict(self._system_info)
 
     def _record_from_parameters(self) -> None:
         try:
@@ -158,7 +234,14 @@ class RecorderNode(ros.Node):
     def record(self, req: SweepRequest) -> SweepSummary:
         """Record one sweep to ``req.output`` (blocking; call from a thread other than the one
         spinning this node)."""
+        if not req.biped:
+            return self._record_system(req)
         req = req.validated()
+        with self._system_info_seen:
+            served = self._system_info
+        if served is not None:
+            raise SimulationError(f"the simulator serves {served['system']}: give the recorder "
+                                  "the same system parameter")
         maneuver = spec(req.maneuver).maneuver.value
         grid = theta_grid(req.theta0_min, req.theta0_max, int(req.num))
         fixed = req.fixed_inputs or FIXED_INPUTS[maneuver]
@@ -172,6 +255,32 @@ class RecorderNode(ros.Node):
             "cost": json.dumps(problem.describe()),
         }
         writer = SweepWriter(req.output, metadata={k: str(v) for k, v in metadata.items()})
+        return self._sweep(writer, req, grid, lambda th, offset: self._record_point(
+            writer, maneuver, th, req.optimal, fixed, problem, offset))
+
+    def _record_system(self, req: SweepRequest) -> SweepSummary:
+        """A fixed-input sweep over s of the non-biped system the simulator serves."""
+        req.validated()
+        info = self.served_system(float(self.get_parameter("service_timeout").value))
+        req.validated_for(info)
+        grid = theta_grid(req.theta0_min, req.theta0_max, int(req.num))
+        inputs = [0.0] * len(info["inputs"])
+        inputs[: len(req.fixed_inputs)] = req.fixed_inputs
+        metadata = {
+            "system": info["system"], "maneuver": req.maneuver, "theta0_min": req.theta0_min,
+            "theta0_max": req.theta0_max, "num": grid.size, "optimal": False,
+            "fixed_inputs": json.dumps(inputs),
+        }
+        writer = SweepWriter(req.output, metadata={k: str(v) for k, v in metadata.items()},
+                             system=info)
+        ndof = len(info["coordinates"])
+        return self._sweep(writer, req, grid, lambda s, offset: self._record_system_point(
+            writer, req.maneuver, s, inputs, ndof, offset))
+
+    def _sweep(self, writer: SweepWriter, req: SweepRequest, grid: Any,
+               record_point: Callable[[float, int], tuple[bool, float]]) -> SweepSummary:
+        """Record every point of ``grid`` (``record_point(angle, log-time offset)`` -> (reached
+        its end, final time)) into ``writer`` and finish it."""
         with self._writer_lock:
             self._writer = writer
         failed = 0
@@ -181,20 +290,20 @@ class RecorderNode(ros.Node):
             for k, th in enumerate(grid):
                 if self._stop.is_set():
                     break
-                ok, t_final = self._record_point(writer, maneuver, float(th), req.optimal,
-                                                 fixed, problem, offset)
+                ok, t_final = record_point(float(th), offset)
                 failed += not ok
                 recorded += 1
                 offset += int(round((t_final + GAP) * convert.NS))
-                self.get_logger().debug(f"{maneuver} {k + 1}/{grid.size} th0 = {th:+.4f}")
+                self.get_logger().debug(f"{req.maneuver} {k + 1}/{grid.size} at {th:+.4f}")
         finally:
             writer.finish()
             with self._writer_lock:
                 self._writer = None
         summary = SweepSummary(path=req.output, points=grid.size, failed=failed,
                                counts=dict(writer.counts), recorded=recorded)
+        what = req.maneuver if req.biped else f"{req.system} {req.maneuver}"
         self.get_logger().info(
-            f"recorded {recorded} of {grid.size} {maneuver} points to {req.output}: "
+            f"recorded {recorded} of {grid.size} {what} points to {req.output}: "
             + ", ".join(f"{topic} {n}" for topic, n in summary.counts.items()))
         self.last_summary = summary
         return summary
@@ -220,6 +329,9 @@ class RecorderNode(ros.Node):
         reply = self._call(self._simulator, q)
         if not reply.states and not reply.success:
             raise SimulationError(f"simulator failed at th0 = {th}: {reply.message}")
+        if reply.system_states:
+            raise SimulationError("the simulator serves another system than the biped: give "
+                                  "the recorder the same system parameter")
         samples = np.array(
             [[s.t, *np.asarray(s.q), *np.asarray(s.qdot), s.contact_mode,
               *np.asarray(s.contact_force)] for s in reply.states], dtype=float,
@@ -238,10 +350,38 @@ class RecorderNode(ros.Node):
             "outcome": float(reply.outcome), "t_final": float(reply.t_final),
             "mode_sequence": modes, "event_times": times[1:],
         }
+        return self._write_point(writer, point, offset, reply)
+
+    def _record_system_point(self, writer: SweepWriter, maneuver: str, s: float,
+                             inputs: list[float], ndof: int, offset: int) -> tuple[bool, float]:
+        q = ros.srvs.Simulate.Request()
+        q.maneuver, q.theta0, q.inputs, q.real_time_factor = maneuver, s, list(inputs), 0.0
+        reply = self._call(self._simulator, q)
+        if not reply.system_states:
+            raise SimulationError(f"simulator failed at s = {s}: {reply.message}" if
+                                  not reply.success else "the simulator serves the biped, not "
+                                  "another system: give it the recorder's system parameter")
+        samples = np.array(
+            [[m.t, *np.asarray(m.q), *np.asarray(m.qdot), m.contact_mode,
+              *np.asarray(m.contact_force)] for m in reply.system_states], dtype=float)
+        writer.write_system_states(maneuver=maneuver, s=s, samples=samples, ndof=ndof,
+                                   stamp_offset_ns=offset)
+        point = {
+            "header": _header_fields(offset, writer.system["system"]), "maneuver": maneuver,
+            "theta0": s, "optimal": False, "policy": list(inputs), "value": float("nan"),
+            "outcome": float(reply.outcome), "t_final": float(reply.t_final),
+            "mode_sequence": [int(m) for m in np.asarray(reply.contact_modes)],
+            "event_times": [float(t) for t in np.asarray(reply.event_times)],
+        }
+        return self._write_point(writer, point, offset, reply)
+
+    def _write_point(self, writer: SweepWriter, point: dict[str, Any], offset: int,
+                     reply: Any) -> tuple[bool, float]:
+        """The SweepPoint of one simulated point into the file, stamped at its end, and live."""
         end = offset + int(round(reply.t_final * convert.NS))
         writer.write("/biped/sweep", point, end)
         msg = ros.msgs.SweepPoint()
-        msg.header = convert.header(offset)
+        msg.header = convert.header(offset, point["header"]["frame_id"])
         for name in ("maneuver", "theta0", "optimal", "policy", "value", "outcome", "t_final",
                      "mode_sequence", "event_times"):
             setattr(msg, name, point[name])
@@ -266,8 +406,9 @@ class RecorderNode(ros.Node):
         super().destroy_node()
 
 
-def _header_fields(ns: int) -> dict[str, Any]:
-    return {"stamp": {"sec": ns // convert.NS, "nanosec": ns % convert.NS}, "frame_id": "biped"}
+def _header_fields(ns: int, frame_id: str = convert.FRAME_ID) -> dict[str, Any]:
+    return {"stamp": {"sec": ns // convert.NS, "nanosec": ns % convert.NS},
+            "frame_id": frame_id}
 
 
 def main(args: list[str] | None = None) -> None:

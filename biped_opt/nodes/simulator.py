@@ -11,6 +11,18 @@ unit of simulation time, default 200), ``real_time_factor`` (default 1; 0 = as f
 - ``/biped/simulate`` (Simulate.srv): simulate and start playing a new run; the reply carries the
   outcome, the mode sequence, the event times and every state sample (so a recorder loses nothing
   to the best-effort topic).
+
+Any other system (parameter ``system``: a library name such as ``rocking_bar`` or
+``walker3_coupled``, or the path of a system file; default ``""`` = the biped as above):
+
+- ``/biped/system_info`` (SystemInfo, reliable + transient-local, published once): the names of
+  the coordinates, constraints (the bits of a contact mode), inputs, parameters and maneuvers;
+- ``/biped/system_state`` (SystemState, sensor-data QoS): the dense trajectory as above;
+- ``/biped/simulate``: ``maneuver`` one of the system's, ``theta0`` the maneuver's s, ``inputs``
+  in the system's declared order; the reply carries ``contact_modes`` and ``system_states``.
+
+The default ``maneuver`` and ``inputs`` of such a system are its first maneuver and zeros. An
+unknown system or a bad system file stops the node at start-up with one line saying why.
 """
 
 from __future__ import annotations
@@ -21,13 +33,15 @@ from dataclasses import dataclass
 from typing import Any
 
 from biped_opt import ros
-from biped_opt.errors import BipedOptError, InvalidInputError
+from biped_opt.errors import BipedOptError, InvalidInputError, InvalidParameterError
 from biped_opt.hybrid import simulate
-from biped_opt.hybrid.trajectory import Trajectory
 from biped_opt.nodes import convert
 from biped_opt.nodes.run import announce_ready, refuse, run_node, warm_up_kernels
 
-__all__ = ["SimulatorNode", "main", "CONTACT_MODE_QOS"]
+__all__ = ["SimulatorNode", "main", "CONTACT_MODE_QOS", "SYSTEM_INFO_QOS", "BIPED"]
+
+#: values of the ``system`` parameter that mean the biped of the paper (BipedState messages)
+BIPED = ("", "biped")
 
 CONTACT_MODE_QOS = ros.QoSProfile(
     depth=10,
@@ -36,10 +50,38 @@ CONTACT_MODE_QOS = ros.QoSProfile(
     history=ros.HistoryPolicy.KEEP_LAST,
 )
 
+#: the system description: published once, kept for late subscribers
+SYSTEM_INFO_QOS = ros.QoSProfile(
+    depth=1,
+    reliability=ros.ReliabilityPolicy.RELIABLE,
+    durability=ros.DurabilityPolicy.TRANSIENT_LOCAL,
+    history=ros.HistoryPolicy.KEEP_LAST,
+)
+
+
+def compile_served_system(spec: str) -> Any:
+    """The :class:`~biped_opt.systems.compiled.CompiledSystem` of the ``system`` parameter, its
+    kernel compiled (a first start compiles for a while; later ones load it). Any failure is
+    one :class:`BipedOptError` naming the parameter."""
+    from biped_opt.systems.compiled import CompiledSystem
+
+    try:
+        compiled = CompiledSystem(spec)
+        maneuver = compiled.maneuvers[0]
+        compiled.simulate(maneuver, 0.0, sample_dt=0.1)  # compile before serving
+    except BipedOptError as exc:
+        raise InvalidParameterError(f"system: {exc}") from None
+    except IndexError:
+        raise InvalidParameterError(f"system: {spec!r} has no maneuver to simulate") from None
+    except Exception as exc:  # the generated code failed to build: say so, not a traceback
+        raise InvalidParameterError(
+            f"system: cannot compile {spec!r}: {type(exc).__name__}: {exc}") from None
+    return compiled
+
 
 @dataclass
 class _Playback:
-    trajectory: Trajectory
+    trajectory: Any  #: a Trajectory (biped) or a SystemTrajectory
     states: list[Any]
     modes: list[tuple[float, Any]]
     rate: float  # real-time factor; 0 = everything at once
@@ -53,30 +95,51 @@ class SimulatorNode(ros.Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("simulator", **kwargs)
+        self.declare_parameter("system", "")
+        self.source = str(self.get_parameter("system").value).strip()
+        #: the served system's CompiledSystem; None for the biped
+        self.system: Any = None
+        if self.source not in BIPED:
+            self.get_logger().info(f"loading system {self.source!r} (a first start compiles "
+                                   "its simulator, which takes a while; later ones load it)")
+            self.system = compile_served_system(self.source)
+        biped = self.system is None
         self.declare_parameter("warm_up", True)
-        self.declare_parameter("maneuver", "touchdown")
+        self.declare_parameter("maneuver", "touchdown" if biped else self.system.maneuvers[0])
         self.declare_parameter("theta0", 0.1)
-        self.declare_parameter("inputs", [2.0, 0.5, 0.0])
+        self.declare_parameter("inputs", [2.0, 0.5, 0.0] if biped else
+                               [0.0] * max(len(self.system.inputs), 1))
         self.declare_parameter("publish_rate_hz", 200.0)
         self.declare_parameter("real_time_factor", 1.0)
         self.declare_parameter("loop", False)
         self.declare_parameter("autostart", True)
-        if self.get_parameter("warm_up").value:
+        if biped and self.get_parameter("warm_up").value:
             warm_up_kernels(self)
-        self._state_pub = self.create_publisher(
-            ros.msgs.BipedState, "/biped/state", ros.qos_profile_sensor_data
-        )
-        self._mode_pub = self.create_publisher(
-            ros.msgs.ContactMode, "/biped/contact_mode", CONTACT_MODE_QOS
-        )
+        if biped:
+            self._state_pub = self.create_publisher(
+                ros.msgs.BipedState, "/biped/state", ros.qos_profile_sensor_data
+            )
+            self._mode_pub = self.create_publisher(
+                ros.msgs.ContactMode, "/biped/contact_mode", CONTACT_MODE_QOS
+            )
+            topics = ("/biped/state", "/biped/contact_mode")
+        else:
+            self._state_pub = self.create_publisher(
+                ros.msgs.SystemState, "/biped/system_state", ros.qos_profile_sensor_data
+            )
+            self._info_pub = self.create_publisher(
+                ros.msgs.SystemInfo, "/biped/system_info", SYSTEM_INFO_QOS
+            )
+            self._info_pub.publish(ros.msgs.SystemInfo(
+                **convert.system_info_fields(self.system, self.source)))
+            topics = ("/biped/system_state", "/biped/system_info")
         self._service = self.create_service(
             ros.srvs.Simulate, "/biped/simulate", self._on_simulate
         )
         self._lock = threading.Lock()
         self._playback: _Playback | None = None
         self._timer = self.create_timer(0.005, self._on_tick)
-        announce_ready(self, serves=("/biped/simulate",),
-                       publishes=("/biped/state", "/biped/contact_mode"))
+        announce_ready(self, serves=("/biped/simulate",), publishes=topics)
         if self.get_parameter("autostart").value:
             try:
                 self.start(
@@ -89,29 +152,41 @@ class SimulatorNode(ros.Node):
                 self.get_logger().error(f"cannot start from the parameters: {exc}")
 
     # -- running --------------------------------------------------------------------------
-    def run(self, maneuver: str, theta0: float, inputs: Any) -> Trajectory:
-        """Validate a request and simulate it with the node's sampling rate."""
-        m = convert.request_maneuver(maneuver)
-        th = convert.request_theta0(m, theta0)
-        u = convert.request_inputs(inputs)
+    def run(self, maneuver: str, theta0: float, inputs: Any) -> Any:
+        """Validate a request and simulate it with the node's sampling rate: a Trajectory of the
+        biped, else a SystemTrajectory of the served system (theta0 is its maneuver's s)."""
         rate = float(self.get_parameter("publish_rate_hz").value)
         if not (convert.finite(rate) and rate > 0):
             raise InvalidInputError(f"publish_rate_hz must be positive, got {rate}")
+        if self.system is not None:
+            name = convert.request_system_maneuver(self.system, maneuver)
+            s = convert.request_s(theta0)
+            u = convert.request_system_inputs(self.system, inputs)
+            return self.system.simulate(name, s, u or None, sample_dt=1.0 / rate)
+        m = convert.request_maneuver(maneuver)
+        th = convert.request_theta0(m, theta0)
+        u = convert.request_inputs(inputs)
         return simulate(m, th, u, sample_dt=1.0 / rate)
 
     def start(
         self, maneuver: str, theta0: float, inputs: Any, real_time_factor: float
-    ) -> Trajectory:
+    ) -> Any:
         if not (convert.finite(real_time_factor) and real_time_factor >= 0):
             raise InvalidInputError(
                 f"real_time_factor must be >= 0 (0: as fast as possible), got {real_time_factor}"
             )
         tr = self.run(maneuver, theta0, inputs)
         start_ns = self.get_clock().now().nanoseconds
+        if self.system is not None:
+            states = convert.system_state_messages(tr, len(self.system.system.q), start_ns)
+            modes: list[tuple[float, Any]] = []
+        else:
+            states = convert.state_messages(tr, start_ns)
+            modes = convert.contact_mode_messages(tr, start_ns)
         playback = _Playback(
             trajectory=tr,
-            states=convert.state_messages(tr, start_ns),
-            modes=convert.contact_mode_messages(tr, start_ns),
+            states=states,
+            modes=modes,
             rate=real_time_factor,
             wall_start=time.monotonic(),
         )
@@ -147,15 +222,23 @@ class SimulatorNode(ros.Node):
                             request.real_time_factor)
         except Exception as exc:  # bad request, or a bug: one refused request either way
             return refuse(self, "/biped/simulate", response, exc)
-        response.success = tr.success
-        response.message = tr.message
+        with self._lock:
+            states = list(self._playback.states) if self._playback else None
+        if self.system is not None:
+            response.success = tr.success
+            response.message = "" if tr.success else f"simulation ended with status {tr.status}"
+            response.contact_modes = [int(m) for m in tr.modes]
+            response.system_states = states if states is not None else \
+                convert.system_state_messages(tr, len(self.system.system.q), 0)
+        else:
+            response.success = tr.success
+            response.message = tr.message
+            response.mode_sequence = [int(m) for m in tr.mode_sequence]
+            response.contact_modes = list(response.mode_sequence)
+            response.states = states if states is not None else convert.state_messages(tr, 0)
         response.outcome = tr.outcome
         response.t_final = tr.t_final
-        response.mode_sequence = [int(m) for m in tr.mode_sequence]
         response.event_times = [float(t) for t in tr.event_times]
-        with self._lock:
-            response.states = list(self._playback.states) if self._playback else \
-                convert.state_messages(tr, 0)
         return response
 
 

@@ -7,7 +7,9 @@ to its size, relative to the payload after the 4-byte encapsulation header - and
 structured dtype with explicit offsets. Filling an array of that dtype serializes a whole trajectory
 of messages at once; the bytes equal rosbags' ``serialize_cdr`` message for message (tested).
 
-Messages with sequences (variable length) are serialized one by one with rosbags instead.
+A sequence of primitives is fixed too once its length is: :func:`compile_layout` takes the
+lengths (a trajectory of one system has the same number of coordinates and constraints in every
+sample). Other messages with sequences are serialized one by one with rosbags instead.
 """
 
 from __future__ import annotations
@@ -77,12 +79,25 @@ class FixedLayout:
         return [buf[i : i + n] for i in range(0, len(buf), n)]
 
 
-def compile_layout(typestore: Any, typename: str, strings: dict[str, str]) -> FixedLayout:
-    """Layout of ``typename`` with the string fields set to ``strings`` (dotted path -> text)."""
+def compile_layout(typestore: Any, typename: str, strings: dict[str, str],
+                   lengths: dict[str, int] | None = None) -> FixedLayout:
+    """Layout of ``typename`` with the string fields set to ``strings`` (dotted path -> text)
+    and the sequences of primitives to ``lengths`` (dotted path -> number of elements)."""
+    lengths = lengths or {}
     names: list[str] = []
     formats: list[Any] = []
     offsets: list[int] = []
     constant: dict[int, bytes] = {}
+
+    def numbers(path: str, primitive: str, count: int | None, offset: int) -> int:
+        """A numeric leaf (``count`` None: a scalar, else an array of ``count``) at the next
+        offset aligned to its size; returns the offset after it."""
+        fmt = numpy_dtype(primitive)
+        offset = _align(offset, fmt.itemsize)
+        names.append(path)
+        formats.append(fmt if count is None else (fmt, (count,)))
+        offsets.append(offset)
+        return offset + fmt.itemsize * (1 if count is None else count)
 
     def walk(tname: str, prefix: str, offset: int) -> int:
         _consts, fields = typestore.fielddefs[tname]
@@ -101,24 +116,21 @@ def compile_layout(typestore: Any, typename: str, strings: dict[str, str]) -> Fi
                     constant[offset] = len(data).to_bytes(4, "little") + data
                     offset += 4 + len(data)
                 else:
-                    fmt = numpy_dtype(base)
-                    offset = _align(offset, fmt.itemsize)
-                    names.append(path)
-                    formats.append(fmt)
-                    offsets.append(offset)
-                    offset += fmt.itemsize
-            elif kind == "ARRAY":
+                    offset = numbers(path, base, None, offset)
+            elif kind == "ARRAY" or path in lengths:
+                what = "array" if kind == "ARRAY" else "sequence"
                 (elem_kind, elem_spec), count = spec
                 if getattr(elem_kind, "name", elem_kind) != "BASE" or elem_spec[0] == "string":
-                    raise LayoutError(f"{typename}: array {path} of non-primitives")
-                fmt = numpy_dtype(elem_spec[0])
-                offset = _align(offset, fmt.itemsize)
-                names.append(path)
-                formats.append((fmt, (count,)))
-                offsets.append(offset)
-                offset += fmt.itemsize * count
+                    raise LayoutError(f"{typename}: {what} {path} of non-primitives")
+                if kind != "ARRAY":  # a sequence: its length, then (if any) its elements
+                    count = int(lengths[path])
+                    offset = _align(offset, 4)
+                    constant[offset] = count.to_bytes(4, "little")
+                    offset += 4
+                if count:  # (an empty sequence is its length alone: no padding follows)
+                    offset = numbers(path, elem_spec[0], count, offset)
             else:
-                raise LayoutError(f"{typename}: {path} is a sequence (variable length)")
+                raise LayoutError(f"{typename}: {path} is a sequence of unknown length")
         return offset
 
     # offsets inside the payload; the dtype covers header + payload

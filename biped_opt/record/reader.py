@@ -12,6 +12,7 @@ nothing recoverable, is an error.
 from __future__ import annotations
 
 import io
+import json
 import struct
 import zlib
 from collections import defaultdict
@@ -30,12 +31,12 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, ChunkIndex, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
-from biped_opt.record.writer import RecordError
+from biped_opt.record.writer import SYSTEM_METADATA, RecordError
 from biped_opt.ros.interfaces import load_interfaces
 
 __all__ = [
     "RawChannel", "RawMessage", "RawRecording", "RecordedMessage", "Recording", "read_raw",
-    "read_recording",
+    "read_recording", "system_description",
 ]
 
 
@@ -72,6 +73,36 @@ class Recording:
             for m in self.topic("/biped/state") if m.msg.theta0 == theta0
         ]
         return np.array(rows, dtype=float).reshape(-1, 16)
+
+    @property
+    def system(self) -> dict[str, Any] | None:
+        """The recorded system's description (SystemInfo's fields); None for the biped."""
+        return system_description(self.metadata)
+
+    def system_states_of(self, s: float) -> npt.NDArray[np.float64]:
+        """(t, q (d), qdot (d), mode, lambda (n)) rows of the trajectory of a non-biped system
+        recorded for ``s``: the columns of ``SystemTrajectory.samples``."""
+        rows = [
+            [m.msg.t, *m.msg.q, *m.msg.qdot, m.msg.contact_mode, *m.msg.contact_force]
+            for m in self.topic("/biped/system_state") if m.msg.s == s
+        ]
+        return np.array(rows, dtype=float)
+
+
+def system_description(metadata: dict[str, dict[str, str]]) -> dict[str, Any] | None:
+    """SystemInfo's fields from a recording's ``biped_opt.system`` metadata record (lists are
+    stored as JSON); None when there is none (a recording of the biped)."""
+    record = metadata.get(SYSTEM_METADATA)
+    if record is None:
+        return None
+    out: dict[str, Any] = {}
+    for key, text in record.items():
+        try:
+            out[key] = text if key in ("system", "source") else json.loads(text)
+        except ValueError:
+            raise RecordError(f"metadata {SYSTEM_METADATA}: {key} is not JSON: {text!r}"
+                              ) from None
+    return out
 
 
 def read_recording(path: str | Path) -> Recording:

@@ -11,6 +11,11 @@ of :mod:`biped_opt.plots.figures` through the helpers of :mod:`biped_opt.plots.r
 
 A maneuver no file holds leaves its column of the figure empty ("not in the data").
 
+A recording of another system (``biped_opt.system`` metadata: its SystemState sweep over the
+maneuver's s) gets the nonsmoothness table of its outcome over s, the contact modes named by the
+system's constraints, and a plot of the outcome over s; no cost is defined for it (no value),
+and ``refine`` re-locates the biped's points only.
+
 **Nonsmoothness at grid resolution.** Along a sweep, outcome, policy and value are smooth while
 the mode order (and, for optima, which bound holds the policy) stays fixed ([1]_ Sec. III), so
 every change of that label between neighbouring recorded angles brackets a candidate point; for
@@ -47,7 +52,7 @@ from biped_opt.model.modes import ContactMode
 from biped_opt.optimal import OptimalControlProblem, get_problem
 from biped_opt.optimal.nonsmooth import NonsmoothPoint, NonsmoothReport
 from biped_opt.optimal.sweep import FixedSweep, OptimalSweep
-from biped_opt.record.reader import read_raw
+from biped_opt.record.reader import read_raw, system_description
 from biped_opt.ros.interfaces import load_interfaces
 
 __all__ = [
@@ -84,7 +89,8 @@ class RecordedSweep:
     path: Path
     maneuver: str
     optimal: bool
-    problem: OptimalControlProblem  #: the cost (Eqs. (14), (15)) the recorder used
+    #: the cost (Eqs. (14), (15)) the recorder used; None for another system (no cost)
+    problem: OptimalControlProblem | None
     inputs: Array  #: (u1, u2, u12) of a fixed-input sweep (NaN for optimal sweeps)
     theta0: Array
     outcome: Array
@@ -96,15 +102,30 @@ class RecordedSweep:
     metadata: dict[str, str]
     complete: bool
     note: str
+    #: the recorded system: "biped", or another system's name (theta0 is then its s)
+    system: str = "biped"
+    #: another system's constraints in declaration order (the bits of its contact modes)
+    constraints: tuple[str, ...] = ()
 
     @property
     def branch(self) -> tuple[str, ...]:
-        return tuple("->".join(ContactMode(m).name for m in s) if s else "FAILED"
+        return tuple("->".join(self._mode_name(m) for m in s) if s else "FAILED"
                      for s in self.mode_sequences)
+
+    def _mode_name(self, mask: int) -> str:
+        if self.system == "biped":
+            return ContactMode(mask).name
+        active = [c for j, c in enumerate(self.constraints) if mask >> j & 1]
+        return "+".join(active) or "free"
 
     @property
     def kind(self) -> str:
         return "optimal" if self.optimal else "fixed"
+
+    @property
+    def label(self) -> str:
+        """The maneuver, prefixed by the system's name for another system than the biped."""
+        return self.maneuver if self.system == "biped" else f"{self.system}:{self.maneuver}"
 
 
 def _problem(meta: dict[str, str], maneuver: str) -> OptimalControlProblem:
@@ -136,13 +157,23 @@ def load_sweep(path: str | Path) -> RecordedSweep:
     msgs = [points[k] for k in sorted(points)]
     meta = raw.metadata.get("biped_opt.sweep", {})
     maneuver = meta.get("maneuver") or msgs[0].maneuver
-    optimal = (meta["optimal"] == "True") if "optimal" in meta else bool(msgs[0].optimal)
-    problem = _problem(meta, maneuver)
-    pol = np.array([np.asarray(m.policy, dtype=float) for m in msgs])
-    if optimal:
-        names: Sequence[str] = problem.decisions
+    pol = np.array([np.asarray(m.policy, dtype=float) for m in msgs]).reshape(len(msgs), -1)
+    described = system_description(raw.metadata)
+    extra: dict[str, Any] = {}
+    problem: OptimalControlProblem | None = None
+    if described is not None:  # another system: a fixed-input sweep over s, no cost
+        optimal = False
+        names: Sequence[str] = tuple(described["inputs"])
+        inputs = pol[0]
+        extra = {"system": str(described["system"]),
+                 "constraints": tuple(described["constraints"])}
+    elif optimal := ((meta["optimal"] == "True") if "optimal" in meta
+                     else bool(msgs[0].optimal)):
+        problem = _problem(meta, maneuver)
+        names = problem.decisions
         inputs = np.full(3, np.nan)
     else:
+        problem = _problem(meta, maneuver)
         names = INPUT_NAMES[: pol.shape[1]]
         text = meta.get("fixed_inputs")
         inputs = np.zeros(3)
@@ -150,7 +181,7 @@ def load_sweep(path: str | Path) -> RecordedSweep:
         inputs[: len(given)] = given
     if pol.shape[1] != len(names):
         raise ReportError(f"{raw.path}: policy has {pol.shape[1]} entries, expected "
-                          f"{len(names)} ({', '.join(names)})")
+                          f"{len(names)} ({', '.join(names) or 'no inputs'})")
     return RecordedSweep(
         path=raw.path, maneuver=maneuver, optimal=optimal, problem=problem, inputs=inputs,
         theta0=np.array([m.theta0 for m in msgs]), outcome=np.array([m.outcome for m in msgs]),
@@ -158,7 +189,7 @@ def load_sweep(path: str | Path) -> RecordedSweep:
         policy={n: pol[:, k] for k, n in enumerate(names)},
         mode_sequences=tuple(tuple(int(v) for v in m.mode_sequence) for m in msgs),
         event_times=tuple(tuple(float(v) for v in m.event_times) for m in msgs),
-        metadata=dict(meta), complete=raw.complete, note=raw.note,
+        metadata=dict(meta), complete=raw.complete, note=raw.note, **extra,
     )
 
 
@@ -184,6 +215,7 @@ class GridPoint:
 def _labels(s: RecordedSweep) -> list[tuple[Any, ...]]:
     if not s.optimal:
         return [(b,) for b in s.branch]
+    assert s.problem is not None  # (an optimal sweep is the biped's)
     out = []
     for k, b in enumerate(s.branch):
         held = []
@@ -198,9 +230,10 @@ def _labels(s: RecordedSweep) -> list[tuple[Any, ...]]:
 
 def _quantities(s: RecordedSweep) -> dict[str, Array]:
     q = {"outcome": s.outcome}
-    if s.optimal:
+    if s.optimal and s.problem is not None:
         q.update({f"policy:{d}": s.policy[d] for d in s.problem.decisions})
-    q["value"] = s.value
+    if s.problem is not None:  # (another system has no cost, hence no value)
+        q["value"] = s.value
     return q
 
 
@@ -261,7 +294,7 @@ def _events(s: RecordedSweep) -> list[tuple[int, int, int | None, str]]:
         else:
             events.append((a[1], b[0], None, _cause(s, labels, a[1], b[0], None)))
             r += 1
-    if s.optimal:
+    if s.optimal and s.problem is not None:
         # the optimum may jump to another local minimum with the same mode order
         known = {(lo, hi) for lo, hi, _, _ in events}
         for d in s.problem.decisions:
@@ -282,7 +315,7 @@ def _cause(s: RecordedSweep, labels: list[Any], i: int, j: int, mid: int | None)
     if left != right:
         via = f" (th0 = {s.theta0[mid]:g}: {s.branch[mid]})" if mid is not None else ""
         parts.append(f"mode order changes: {left} | {right}{via}")
-    if s.optimal:
+    if s.optimal and s.problem is not None:
         for d, hl, hr in zip(s.problem.decisions, labels[i][1], labels[j][1]):
             if hl != hr:
                 what = (f"reaches its {hr} bound" if hl is None else
@@ -352,8 +385,9 @@ def grid_table(s: RecordedSweep, points: Sequence[GridPoint]) -> str:
     """Plain-text table of grid-resolution estimates, headed by what they are."""
     spacing = np.diff(s.theta0)
     head = [
-        f"== {s.maneuver} ({'optimal' if s.optimal else 'fixed inputs'}) from {s.path.name}: "
-        f"{s.theta0.size} recorded angles in [{s.theta0[0]:g}, {s.theta0[-1]:g}], "
+        f"== {s.label} ({'optimal' if s.optimal else 'fixed inputs'}) from {s.path.name}: "
+        f"{s.theta0.size} recorded {'angles' if s.system == 'biped' else 's values'} in "
+        f"[{s.theta0[0]:g}, {s.theta0[-1]:g}], "
         f"spacing {spacing.min():.3g}..{spacing.max():.3g} ==",
         "GRID-RESOLUTION ESTIMATES from the recording: each point lies in the recorded bracket "
         "[lo, hi]; left/right are one-sided",
@@ -430,20 +464,22 @@ def report(paths: Sequence[str | Path], out_dir: str | Path, *, refine: bool = F
         raise ReportError(f"cannot create directory {str(out)!r}: {exc.strerror}") from None
     by_key: dict[tuple[str, str], RecordedSweep] = {}
     for s in sweeps:
-        by_key[(s.kind, s.maneuver)] = s  # a later file of the same kind and maneuver wins
+        by_key[(s.kind, s.label)] = s  # a later file of the same kind and maneuver wins
     grid: dict[str, tuple[GridPoint, ...]] = {}
     blocks = []
     fixed, optimal = {}, {}
-    for (kind, maneuver), s in by_key.items():
+    figures = []
+    for (kind, label), s in by_key.items():
         pts = grid_nonsmooth(s)
-        grid[f"{kind}:{maneuver}"] = tuple(pts)
+        grid[f"{kind}:{label}"] = tuple(pts)
         blocks.append(grid_table(s, pts))
         core = [g.point for g in pts]
-        if kind == "fixed":
-            fixed[maneuver] = fixed_data(_fixed_sweep(s), s.problem, core)
+        if s.problem is None:
+            figures.append(_system_figure(s, pts, out / f"{s.system}_{s.maneuver}.png"))
+        elif kind == "fixed":
+            fixed[label] = fixed_data(_fixed_sweep(s), s.problem, core)
         else:
-            optimal[maneuver] = optimal_data(_optimal_sweep(s), core)
-    figures = []
+            optimal[label] = optimal_data(_optimal_sweep(s), core)
     if fixed:
         td, lo = fixed.get("touchdown"), fixed.get("liftoff")
         figures += [figure2(td, lo, out / "fig2.png"), figure3(td, lo, out / "fig3.png")]
@@ -451,22 +487,48 @@ def report(paths: Sequence[str | Path], out_dir: str | Path, *, refine: bool = F
         figures.append(figure4(optimal.get("touchdown"), optimal.get("liftoff"),
                                out / "fig4.png"))
     refined: list[NonsmoothReport] = []
-    if refine:
+    biped = [s for s in by_key.values() if s.problem is not None]
+    if refine and biped:
         from biped_opt.optimal.nonsmooth import find_nonsmooth_fixed, find_nonsmooth_optimal
 
-        for (kind, _maneuver), s in by_key.items():
-            if kind == "fixed":
+        for s in biped:
+            if s.kind == "fixed":
                 refined.append(find_nonsmooth_fixed(s.maneuver, s.theta0, s.inputs))
             else:
                 refined.append(find_nonsmooth_optimal(s.problem, s.theta0))
         blocks.append("REFINED with the core (simulated/optimised again, located to 1e-10):\n\n"
                       + nonsmooth_table(refined))
-        blocks.append(_comparison(grid, list(by_key.values()), refined))
+        blocks.append(_comparison(grid, biped, refined))
+    if refine and len(biped) < len(by_key):
+        blocks.append("(--refine re-locates the biped's points only; the other systems' are "
+                      "grid estimates)")
     table = "\n\n".join(blocks) + "\n"
     table_path = out / "nonsmooth_recorded.txt"
     table_path.write_text(table)
     return Report(figures=tuple(figures), table_path=table_path, table=table,
                   sweeps=tuple(by_key.values()), grid_points=grid, refined=tuple(refined))
+
+
+def _system_figure(s: RecordedSweep, points: Sequence[GridPoint], path: Path) -> Path:
+    """Outcome over s of another system's recorded sweep, coloured by mode sequence, with the
+    grid-resolution nonsmooth points marked."""
+    from biped_opt.plots.figures import plt  # (its import selects the file backend)
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    branches = s.branch
+    for branch in dict.fromkeys(branches):
+        k = np.array([b == branch for b in branches])
+        ax.plot(s.theta0[k], s.outcome[k], ".", label=branch)
+    for g in points:
+        ax.axvline(g.point.theta0, color="0.6", lw=0.8, ls="--")
+    ax.set_xlabel("s")
+    ax.set_ylabel("outcome")
+    ax.set_title(f"{s.system}: {s.maneuver} (fixed inputs)")
+    ax.legend(fontsize="small", title="mode sequence")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
 
 
 def _comparison(grid: dict[str, tuple[GridPoint, ...]], sweeps: list[RecordedSweep],
@@ -476,7 +538,7 @@ def _comparison(grid: dict[str, tuple[GridPoint, ...]], sweeps: list[RecordedSwe
              f"{'theta0 refined':>16} {'left grid':>12} {'left refined':>13} {'right grid':>12} "
              f"{'right refined':>14}"]
     for s, rep in zip(sweeps, refined):
-        for g in grid[f"{s.kind}:{s.maneuver}"]:
+        for g in grid[f"{s.kind}:{s.label}"]:
             p = g.point
             same = [r for r in rep.points
                     if (r.quantity, r.input, r.kind) == (p.quantity, p.input, p.kind)]

@@ -11,6 +11,12 @@ Every file opens in ``ros2 bag info/play``, Foxglove and the ``mcap``/``rosbags`
   defaults, which ``ros2 bag`` needs to list topics);
 - a ``biped_opt.sweep`` metadata record with the sweep's parameters.
 
+A recording of another system than the biped (``system=`` the SystemInfo fields) holds
+``/biped/system_state`` (SystemState) instead of ``/biped/state`` and ``/biped/contact_mode``, its
+SystemInfo once on ``/biped/system_info`` (first, at log time 0) and the same description in a
+``biped_opt.system`` metadata record (lists as JSON), so a reader needs no ROS graph to name the
+entries of q, the bits of a contact mode or the inputs.
+
 Log times are integer nanoseconds: a sample's simulation time offset by the start of its sweep
 point, so a sweep replays in order. :class:`SweepWriter` is a context manager; it finishes the file
 on normal exit and on exceptions, and :meth:`SweepWriter.finish_on_signals` makes SIGINT/SIGTERM
@@ -21,6 +27,7 @@ the file never ends in the middle of a batch.
 from __future__ import annotations
 
 import contextlib
+import json
 import signal
 import threading
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -40,6 +47,9 @@ from biped_opt.ros.interfaces import load_interfaces
 __all__ = [
     "RecordError",
     "TOPICS",
+    "BIPED_TOPICS",
+    "SYSTEM_TOPICS",
+    "SYSTEM_METADATA",
     "SweepWriter",
     "qos_yaml",
     "NS",
@@ -63,7 +73,20 @@ TOPICS: dict[str, tuple[str, dict[str, int]]] = {
         "biped_opt_interfaces/msg/SweepPoint",
         {"history": 1, "depth": 10, "reliability": 1, "durability": 2},
     ),
+    "/biped/system_state": (
+        "biped_opt_interfaces/msg/SystemState",
+        {"history": 1, "depth": 5, "reliability": 2, "durability": 2},
+    ),
+    "/biped/system_info": (
+        "biped_opt_interfaces/msg/SystemInfo",
+        {"history": 1, "depth": 1, "reliability": 1, "durability": 1},
+    ),
 }
+#: the topics of a recording of the biped, and of any other system
+BIPED_TOPICS = ("/biped/state", "/biped/contact_mode", "/biped/sweep")
+SYSTEM_TOPICS = ("/biped/system_info", "/biped/system_state", "/biped/sweep")
+#: name of the metadata record describing a non-biped system (SystemInfo's fields)
+SYSTEM_METADATA = "biped_opt.system"
 
 
 class RecordError(BipedOptError, OSError):
@@ -89,6 +112,8 @@ class SweepWriter:
 
     ``output`` is a path or a binary stream (tests use ``BytesIO``). Use as a context manager, or
     call :meth:`finish` yourself; writing after finishing raises :class:`RecordError`.
+    ``system`` (SystemInfo's fields as plain values) makes it a recording of that system
+    (see the module docstring).
     """
 
     def __init__(
@@ -98,6 +123,7 @@ class SweepWriter:
         metadata: Mapping[str, str] | None = None,
         chunk_size: int = 1 << 20,
         compression: str = "zstd",
+        system: Mapping[str, Any] | None = None,
     ) -> None:
         try:
             kind = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
@@ -122,11 +148,14 @@ class SweepWriter:
         self._writer.start(profile="ros2", library=f"biped_opt {biped_opt.__version__}")
         self.typestore = load_interfaces().typestore
         self._channels: dict[str, int] = {}
-        self._layouts: dict[tuple[str, str], FixedLayout] = {}
-        self.counts: dict[str, int] = {topic: 0 for topic in TOPICS}
+        self._layouts: dict[tuple[Any, ...], FixedLayout] = {}
+        self.system = dict(system) if system is not None else None
+        topics = BIPED_TOPICS if system is None else SYSTEM_TOPICS
+        self.counts: dict[str, int] = {topic: 0 for topic in topics}
         self._sequence = 0
         self.finished = False
-        for topic, (typename, qos) in TOPICS.items():
+        for topic in topics:
+            typename, qos = TOPICS[topic]
             text, _ = self.typestore.generate_msgdef(typename, ros_version=2)
             schema = self._writer.register_schema(
                 name=typename, encoding="ros2msg", data=text.encode()
@@ -142,6 +171,10 @@ class SweepWriter:
             )
         if metadata:
             self._writer.add_metadata("biped_opt.sweep", {k: str(v) for k, v in metadata.items()})
+        if self.system is not None:
+            self._writer.add_metadata(SYSTEM_METADATA, {
+                k: v if isinstance(v, str) else json.dumps(v) for k, v in self.system.items()})
+            self.write("/biped/system_info", self.system, 0)
 
     # -- lifecycle -------------------------------------------------------------------------
     def __enter__(self) -> SweepWriter:
@@ -252,17 +285,67 @@ class SweepWriter:
         msgs["qdot"] = samples[:, 8:15]
         msgs["contact_mode"] = samples[:, 15].astype(np.uint8)
         msgs["contact_force"] = samples[:, 16:18]
-        channel = self._channels["/biped/state"]
+        return self._add_batch("/biped/state", layout.serialize(msgs), stamps)
+
+
+    def write_system_states(
+        self,
+        *,
+        maneuver: str,
+        s: float,
+        samples: npt.NDArray[np.float64],
+        ndof: int,
+        stamp_offset_ns: int,
+    ) -> int:
+        """All samples of one trajectory of the recording's system on ``/biped/system_state``
+        in one vectorised pass.
+
+        ``samples`` has the columns of :attr:`biped_opt.systems.compiled.SystemTrajectory.samples`
+        (t, q (d), qdot (d), mode, lambda (n)); ``ndof`` is d. Header stamps and log times are
+        ``stamp_offset_ns`` + t; the frame id is the system's name. Returns the number written.
+        """
+        if self.system is None:
+            raise RecordError("write_system_states: this is a recording of the biped "
+                              "(give system= to record another system)")
+        d = int(ndof)
+        n = samples.shape[1] - 2 - 2 * d
+        name = str(self.system["system"])
+        key = ("system", maneuver, d, n)
+        layout = self._layouts.get(key)
+        if layout is None:
+            layout = compile_layout(
+                self.typestore, TOPICS["/biped/system_state"][0],
+                {"header.frame_id": name, "system": name, "maneuver": maneuver},
+                {"q": d, "qdot": d, "contact_force": n},
+            )
+            self._layouts[key] = layout
+        stamps = stamp_offset_ns + np.round(samples[:, 0] * NS).astype(np.int64)
+        msgs = layout.empty(samples.shape[0])
+        msgs["header.stamp.sec"] = stamps // NS
+        msgs["header.stamp.nanosec"] = stamps % NS
+        msgs["s"] = s
+        msgs["t"] = samples[:, 0]
+        if d:
+            msgs["q"] = samples[:, 1 : 1 + d]
+            msgs["qdot"] = samples[:, 1 + d : 1 + 2 * d]
+        msgs["contact_mode"] = samples[:, 1 + 2 * d].astype(np.uint32)
+        if n:
+            msgs["contact_force"] = samples[:, 2 + 2 * d :]
+        return self._add_batch("/biped/system_state", layout.serialize(msgs), stamps)
+
+    def _add_batch(self, topic: str, data: list[bytes], stamps: npt.NDArray[np.int64]) -> int:
+        """Pre-serialized messages of one topic, under one lock and signal hold."""
+        channel = self._channels[topic]
         with self._lock, self._critical():
             self._check_open()
             add = self._writer.add_message
             seq = self._sequence
-            for data, stamp in zip(layout.serialize(msgs), stamps.tolist()):
-                add(channel, log_time=stamp, data=data, publish_time=stamp, sequence=seq)
+            for item, stamp in zip(data, stamps.tolist()):
+                add(channel, log_time=stamp, data=item, publish_time=stamp, sequence=seq)
                 seq += 1
             self._sequence = seq
-            self.counts["/biped/state"] += n
-        return n
+            self.counts[topic] += len(data)
+        return len(data)
 
 
 def _build(typestore: Any, typename: str, fields: Mapping[str, Any]) -> Any:
@@ -277,7 +360,9 @@ def _build(typestore: Any, typename: str, fields: Mapping[str, Any]) -> Any:
             kwargs[name] = _build(typestore, spec, value or {})
         elif kind in ("ARRAY", "SEQUENCE"):
             (_, (base, _)), _count = spec
-            kwargs[name] = np.asarray(value if value is not None else [], dtype=numpy_dtype(base))
+            items = value if value is not None else []
+            kwargs[name] = [str(v) for v in items] if base == "string" else np.asarray(
+                items, dtype=numpy_dtype(base))
         else:
             base = spec[0]
             default: Any = "" if base == "string" else (False if base == "bool" else 0)

@@ -25,7 +25,7 @@ def test_every_definition_parses(ifc):
     root = find_msg_defs()
     msgs = sorted(p.stem for p in (root / "msg").glob("*.msg"))
     srvs = sorted(p.stem for p in (root / "srv").glob("*.srv"))
-    assert msgs == ["BipedState", "ContactMode", "SweepPoint"]
+    assert msgs == ["BipedState", "ContactMode", "SweepPoint", "SystemInfo", "SystemState"]
     assert srvs == ["OptimalPolicy", "Simulate"]
     for name in msgs:
         assert f"{PKG}/msg/{name}" in ifc.typestore.fielddefs
@@ -105,6 +105,31 @@ def test_cdr_bytes_match_rosbags(ifc):
     ours.header.stamp.sec, ours.header.stamp.nanosec, ours.header.frame_id = 12, 345, "world"
     assert bytes(ours.serialize(use_version_2=False)) == bytes(
         ts.serialize_cdr(ref, f"{PKG}/msg/SweepPoint"))
+
+
+def test_system_messages_cdr_bytes_match_rosbags(ifc):
+    """SystemState (sequences, uint32 mask) and SystemInfo (string sequences) as rosbags."""
+    ts = ifc.typestore
+    name = f"{PKG}/msg/SystemState"
+    header = _rosbags(ifc, "std_msgs/msg/Header",
+                      stamp=_rosbags(ifc, "builtin_interfaces/msg/Time", sec=1, nanosec=2),
+                      frame_id="walker3")
+    ref = _rosbags(ifc, name, header=header, system="walker3", maneuver="touchdown", s=0.1,
+                   t=0.5, q=np.arange(9.0), qdot=-np.arange(9.0), contact_mode=(1 << 31) | 5,
+                   contact_force=np.array([0.5, 0.0, 2.0]))
+    ours = ifc.message_class(name)(system="walker3", maneuver="touchdown", s=0.1, t=0.5,
+                                   q=list(np.arange(9.0)), qdot=list(-np.arange(9.0)),
+                                   contact_mode=(1 << 31) | 5, contact_force=[0.5, 0.0, 2.0])
+    ours.header.stamp.sec, ours.header.stamp.nanosec, ours.header.frame_id = 1, 2, "walker3"
+    assert bytes(ours.serialize(use_version_2=False)) == bytes(ts.serialize_cdr(ref, name))
+    name = f"{PKG}/msg/SystemInfo"
+    fields = {"system": "bar", "source": "bar.py", "coordinates": ["x", "z", "th"],
+              "constraints": ["left", "right"], "inputs": [], "parameter_names": ["m"],
+              "maneuvers": ["drop"]}
+    numbers = {"parameter_values": [1.0], "s_min": [-0.3], "s_max": [0.3]}
+    ref = _rosbags(ifc, name, **fields, **{k: np.array(v) for k, v in numbers.items()})
+    ours = ifc.message_class(name)(**fields, **numbers)
+    assert bytes(ours.serialize(use_version_2=False)) == bytes(ts.serialize_cdr(ref, name))
 
 
 def test_service_wire_has_request_header(ifc):
