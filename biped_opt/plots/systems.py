@@ -47,6 +47,7 @@ from biped_opt.model.modes import ContactMode  # noqa: E402
 from biped_opt.nonsmooth import OneSided, one_sided  # noqa: E402
 from biped_opt.plots.figures import MODE_COLOURS, _finish  # noqa: E402
 from biped_opt.systems.compiled import CompiledSystem  # noqa: E402
+from biped_opt.systems.derive import mode_name  # noqa: E402
 from biped_opt.systems.nonsmooth import find_nonsmooth  # noqa: E402
 
 __all__ = [
@@ -247,12 +248,6 @@ class ModeBands:
     events: tuple[float, ...]
     switched: tuple[int, ...]
     status: str
-
-
-def mode_name(mode: int, constraints: Sequence[str]) -> str:
-    """A mode (bit j: constraint j active) by its constraints' names; 0 is "air"."""
-    names = [c for j, c in enumerate(constraints) if mode >> j & 1]
-    return "+".join(names) if names else "air"
 
 
 def mode_bands(compiled: CompiledSystem, maneuver: str, s_grid: npt.ArrayLike,

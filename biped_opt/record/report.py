@@ -54,6 +54,7 @@ from biped_opt.optimal.nonsmooth import NonsmoothPoint, NonsmoothReport
 from biped_opt.optimal.sweep import FixedSweep, OptimalSweep
 from biped_opt.record.reader import read_raw, system_description
 from biped_opt.ros.interfaces import load_interfaces
+from biped_opt.systems.derive import mode_name
 
 __all__ = [
     "ReportError",
@@ -115,8 +116,7 @@ class RecordedSweep:
     def _mode_name(self, mask: int) -> str:
         if self.system == "biped":
             return ContactMode(mask).name
-        active = [c for j, c in enumerate(self.constraints) if mask >> j & 1]
-        return "+".join(active) or "free"
+        return mode_name(mask, self.constraints)
 
     @property
     def kind(self) -> str:

@@ -13,7 +13,7 @@ reference the compiled kernels are checked against, not the fast path.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -24,7 +24,8 @@ import sympy as sp
 from biped_opt.model.system import MechanicalSystem
 from biped_opt.systems.description import ManeuverDescription, System, SystemDescriptionError
 
-__all__ = ["DerivedSystem", "DerivedManeuver", "NumericSystem", "derive", "mode_mask"]
+__all__ = ["DerivedSystem", "DerivedManeuver", "NumericSystem", "derive", "mode_mask",
+           "mode_name"]
 
 Array = npt.NDArray[np.float64]
 
@@ -83,6 +84,13 @@ def mode_mask(system: System, names: frozenset[str] | set[str] | tuple[str, ...]
                 f"(constraints: {', '.join(order) or 'none'})")
         mask |= 1 << order.index(name)
     return mask
+
+
+def mode_name(mode: int, constraints: Sequence[str]) -> str:
+    """A contact mode (bit j: constraint j active) by its constraints' names joined with "+"
+    (``left+right``); the mode with none is ``air``."""
+    names = [c for j, c in enumerate(constraints) if mode >> j & 1]
+    return "+".join(names) if names else "air"
 
 
 def _normaliser(system: System) -> Callable[[Any], Any]:

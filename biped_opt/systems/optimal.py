@@ -39,10 +39,11 @@ from scipy.optimize import minimize
 from biped_opt.errors import InvalidInputError
 from biped_opt.optimal.solve import POLISH_STEP, XATOL, refine_minimum
 from biped_opt.systems.compiled import STATUS_NAMES, CompiledSystem, SystemTrajectory
+from biped_opt.systems.derive import mode_name
 from biped_opt.systems.problems import Problem, input_modes
 
 __all__ = ["Candidate", "SystemOptimalResult", "optimal_policy", "optimal_sweep", "compiled_for",
-           "mode_name", "branch_of", "GRID_AXIS"]
+           "branch_of", "GRID_AXIS"]
 
 Array = npt.NDArray[np.float64]
 
@@ -70,25 +71,19 @@ def compiled_for(problem: Problem) -> CompiledSystem:
     return found
 
 
-def mode_name(compiled: CompiledSystem, mode: int) -> str:
-    """A contact mode by its active constraints' names (``left+right``), ``air`` for none."""
-    names = compiled.derived.constraint_names
-    active = [names[j] for j in range(len(names)) if mode >> j & 1]
-    return "+".join(active) if active else "air"
-
-
 def branch_of(compiled: CompiledSystem, initial: int, events: Array, status: str = "OK") -> str:
     """The mode sequence as text from the contact-event rows of a trajectory
     (``air->left->left+right``); an impact after which the constraint separated at once
     (restitution) is named in brackets (``air->air[left]``); failures are labelled."""
     if status != "OK":
         return f"FAILED:{status}"
-    parts = [mode_name(compiled, initial)]
+    names = compiled.derived.constraint_names
+    parts = [mode_name(initial, names)]
     for row in events:
         after, touched = int(row[5]), int(row[2])
         bounced = touched & ~after
-        parts.append(mode_name(compiled, after) +
-                     (f"[{mode_name(compiled, bounced)}]" if bounced else ""))
+        parts.append(mode_name(after, names) +
+                     (f"[{mode_name(bounced, names)}]" if bounced else ""))
     return "->".join(parts)
 
 

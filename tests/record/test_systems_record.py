@@ -99,8 +99,8 @@ def test_report_of_a_system_sweep(tmp_path):
     write_system_sweep(path, lo=-0.1, hi=0.1, num=21)
     sweep = load_sweep(path)
     assert sweep.system == "walker3_coupled" and sweep.problem is None
-    assert sweep.branch[10] == "free->foot1+foot2+foot3"
-    assert sweep.branch[0] == "free->foot3->foot2+foot3->foot1+foot2+foot3"
+    assert sweep.branch[10] == "air->foot1+foot2+foot3"
+    assert sweep.branch[0] == "air->foot3->foot2+foot3->foot1+foot2+foot3"
     result = report([path], tmp_path / "rep")
     assert "== walker3_coupled:touchdown (fixed inputs)" in result.table
     points = result.grid_points["fixed:walker3_coupled:touchdown"]
