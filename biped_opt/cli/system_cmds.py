@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -139,10 +140,24 @@ def run_optimise(args: argparse.Namespace) -> int:
     problem = problem_from_system_args(args)
     if args.s is None:
         raise InvalidInputError("--s is required with --system")
+    from biped_opt.errors import SimulationError
+    from biped_opt.systems.optimal_derivatives import optimal_derivatives
+
     r = optimal_policy(problem, args.s)
+    derivatives = None
+    if r.success:
+        try:
+            derivatives = optimal_derivatives(problem, args.s)
+        except SimulationError as exc:  # e.g. a grazing terminal event: say so, keep the optimum
+            print(f"note: no one-sided derivatives at this s: {exc}", file=sys.stderr)
     if args.json:
         out = r.as_dict()
         out["problem"] = problem.as_dict()
+        if derivatives is not None:
+            out["derivatives"] = {"outcome": list(derivatives.outcome),
+                                  "value": list(derivatives.value),
+                                  "policy": {k: list(v) for k, v in derivatives.policy.items()},
+                                  "method": "variational (Theorem 1)"}
         print(strict_json.dumps(out))
         return 0 if r.success else 1
     print(f"problem    {problem.name}  ({problem.description.name}, maneuver "
@@ -153,6 +168,12 @@ def run_optimise(args: argparse.Namespace) -> int:
     print(f"value      {r.value:.15g}")
     print(f"outcome    {r.outcome:+.15g}")
     print(f"branch     {r.branch}")
+    if derivatives is not None:
+        print(f"d/d{problem.description.s}  (Theorem 1; left, right)")
+        print(f"  outcome  {derivatives.outcome[0]:+.10g}  {derivatives.outcome[1]:+.10g}")
+        print(f"  value    {derivatives.value[0]:+.10g}  {derivatives.value[1]:+.10g}")
+        for k, (lft, rgt) in derivatives.policy.items():
+            print(f"  {k:<8} {lft:+.10g}  {rgt:+.10g}")
     print(f"work       simulations = {r.nsim}")
     return 0 if r.success else 1
 
