@@ -72,11 +72,52 @@ def run(args: argparse.Namespace) -> int:
     result = reproduce(args.out / "figures")
     print("\nNonsmooth points of outcomes, optimal policies and values (left | right)\n")
     print(result.table())
+    experiment = control_experiment(args.out / "figures")
     print("\nSummary")
     for s in recorded:
         print(f"  {s.path}  {sum(s.counts.values())} messages, {s.failed} failed points")
-    for path in (*offline.figures, *result.figures, result.captions):
+    for path in (*offline.figures, *result.figures, result.captions, experiment):
         print(f"  {path}")
     print(f"  total {time.perf_counter() - start:.1f} s")
     failed = sum(s.failed for s in recorded)
     return 0 if not failed else 1
+
+
+def control_experiment(folder: Path) -> Path:
+    """The paper's claim as a controlled experiment (SYSTEMS.md Secs. 2-3), printed and drawn:
+    the two-leg walker with coupled and decoupled inputs at the paper's fixed inputs, and the
+    rocking bar's jumps. Returns the figure's path."""
+    from biped_opt.plots.systems import (
+        LIFTOFF_INPUTS,
+        TOUCHDOWN_INPUTS,
+        control_experiment_data,
+        control_experiment_figure,
+    )
+    from biped_opt.systems.compiled import CompiledSystem
+    from biped_opt.systems.derivatives import one_sided_derivatives
+
+    print("\nThe control experiment: same walker, coupled vs decoupled inputs (SYSTEMS.md)\n",
+          flush=True)
+    data = control_experiment_data()
+    inputs = {"touchdown": TOUCHDOWN_INPUTS, "liftoff": LIFTOFF_INPUTS}
+    for maneuver, marks in (("touchdown", data.touchdown_marks),
+                            ("liftoff", data.liftoff_marks)):
+        for law in ("coupled", "decoupled"):
+            at_zero = [m for m in marks if m.series == law and m.s == 0.0
+                       and m.kind in ("kink", "jump")]
+            if at_zero:
+                m = at_zero[0]
+                pair = m.limits if m.kind == "jump" else m.slopes
+                what = "limits" if m.kind == "jump" else "slopes"
+                line = f"{m.kind} at th0 = 0, {what} {pair[0]:+.10f} | {pair[1]:+.10f}"
+            else:
+                walker = CompiledSystem(f"walker2_{law}")
+                left, right = one_sided_derivatives(walker, maneuver, 0.0,
+                                                    list(inputs[maneuver]))
+                line = f"smooth at th0 = 0 (no kink, no jump), slopes {left:+.10f} | {right:+.10f}"
+            print(f"  walker2 {law:9s} {maneuver:9s} u = {inputs[maneuver]}: {line}")
+    print("\n  rocking bar (no input, inertial coupling), drop outcome th'(t_f):")
+    for m in data.bar_marks:
+        print(f"    {m.kind} at th0 = {m.s:+.10f}: limits {m.limits[0]:+.10f} | "
+              f"{m.limits[1]:+.10f}")
+    return control_experiment_figure(folder / "control_experiment.png", data)
