@@ -8,7 +8,9 @@ import sys
 
 CORE = ["biped_opt", "biped_opt.model", "biped_opt.hybrid", "biped_opt.maneuvers",
         "biped_opt.nonsmooth", "biped_opt.fixed_sweep", "biped_opt.optimal",
-        "biped_opt.optimal.derivatives", "biped_opt.systems"]
+        "biped_opt.optimal.derivatives", "biped_opt.systems", "biped_opt.systems.problems",
+        "biped_opt.systems.optimal", "biped_opt.systems.nonsmooth", "biped_opt.systems.derivatives",
+        "biped_opt.systems.optimal_derivatives", "biped_opt.systems.compiled"]
 FORBIDDEN = ["rclpy", "cyclonedds", "rosbags", "mcap", "mcap_ros2", "matplotlib",
              "biped_opt.ros", "biped_opt.plots", "biped_opt.nodes", "biped_opt.record"]
 

@@ -38,7 +38,6 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import sympy as sp
-import yaml
 
 from biped_opt.errors import InvalidParameterError, quoted
 from biped_opt.systems.description import System
@@ -306,6 +305,8 @@ def load_problem(spec: str | Path, *, system: System | str | None = None) -> Pro
         if not isinstance(problem, Problem):
             raise InvalidParameterError(f"{path}: must define PROBLEM = Problem(...)")
         return problem
+    import yaml  # file format: only when a problem file is read
+
     try:
         spec_map = yaml.safe_load(path.read_text())
     except yaml.YAMLError as exc:
