@@ -27,6 +27,7 @@ COMMAND_MODULES = (
     "sweep_cmd",
     "nonsmooth_cmd",
     "figures_cmd",
+    "study_cmd",
     "node_cmd",
     "record_cmd",
     "replay_cmd",

@@ -283,6 +283,19 @@ def get_problem(system: System | str, name: str) -> Problem:
                              where=f"{description.where()}: problem {name}")
 
 
+def read_yaml(path: Path) -> Any:
+    """The YAML document of ``path``; a syntax error is one line naming the file and place."""
+    import yaml  # file format: only when a file is read
+
+    try:
+        return yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        what = getattr(exc, "problem", None) or type(exc).__name__
+        raise InvalidParameterError(f"{path}:{where}: not valid YAML ({what})") from None
+
+
 def load_problem(spec: str | Path, *, system: System | str | None = None) -> Problem:
     """A problem from a file (``.yaml``/``.yml`` or ``.py`` with ``PROBLEM``), or by the name of
     one that ``system`` declares."""
@@ -305,12 +318,7 @@ def load_problem(spec: str | Path, *, system: System | str | None = None) -> Pro
         if not isinstance(problem, Problem):
             raise InvalidParameterError(f"{path}: must define PROBLEM = Problem(...)")
         return problem
-    import yaml  # file format: only when a problem file is read
-
-    try:
-        spec_map = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise InvalidParameterError(f"{path}: not valid YAML ({exc})") from None
+    spec_map = read_yaml(path)
     if not isinstance(spec_map, Mapping):
         raise InvalidParameterError(f"{path}: must hold a mapping with the keys "
                                     f"{', '.join(KEYS)}")

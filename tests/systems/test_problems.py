@@ -114,7 +114,7 @@ def test_bad_problem_files_get_one_clear_message(tmp_path: Path, text: str,
     path.write_text(text)
     with pytest.raises(Exception) as info:
         load_problem(path)
-    assert message in str(info.value)
+    assert message in str(info.value) and "\n" not in str(info.value)
     assert isinstance(info.value, ValueError)  # a BipedOptError/ValueError, never a KeyError
 
 

@@ -1,0 +1,59 @@
+"""``biped-opt study``: a parameter study of the nonsmoothness, resumable, on local processes.
+
+``biped-opt study STUDY.yaml --out TABLE.csv [--workers N]``: the study file holds the keys of
+:meth:`biped_opt.study.Study.from_spec` (system, maneuver and inputs and/or problem, grid and/or
+sample with samples and seed, s_range, num, num_optimal, name). Run again with the same
+arguments to continue an interrupted study; SIGINT/SIGTERM stop it after the points under way.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from biped_opt.cli.args import int_at_least
+from biped_opt.errors import BipedOptError, InvalidInputError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("study", help="parameter study: where kinks and jumps persist (CSV)")
+    p.add_argument("spec", metavar="STUDY.yaml", type=Path,
+                   help="the study (system, maneuver/problem, grid/sample, ...)")
+    p.add_argument("--out", required=True, type=Path, metavar="TABLE.csv",
+                   help="the table; if it exists with the same study, the run continues it")
+    p.add_argument("--workers", type=int_at_least("--workers", 1), default=1,
+                   help="local processes (default 1)")
+    p.add_argument("--progress", dest="progress", action="store_true", default=None,
+                   help="draw a progress bar on stderr (default: when stderr is a terminal)")
+    p.add_argument("--no-progress", dest="progress", action="store_false")
+    p.set_defaults(func=run)
+
+
+def load_study(path: Path):
+    """A Study from a YAML file; errors name the file."""
+    from biped_opt.study import Study
+    from biped_opt.systems.problems import read_yaml
+
+    if not path.is_file():
+        raise InvalidInputError(f"{path}: no such study file")
+    try:
+        return Study.from_spec(read_yaml(path), where=str(path))
+    except BipedOptError as exc:
+        raise InvalidInputError(str(exc)) from None
+
+
+def run(args: argparse.Namespace) -> int:
+    from biped_opt.cli.signals import stop_requested
+    from biped_opt.cli.sweep_cmd import progress_from_args
+    from biped_opt.optimal.sweep import Progress
+    from biped_opt.record.study_table import run_study
+
+    study = load_study(args.spec)
+    bar = Progress(1, f"{study.name}", enabled=progress_from_args(args))
+    with stop_requested() as stop:
+        summary = run_study(study, args.out, workers=args.workers, progress=bar.update,
+                            stop=stop.is_set)
+    print(f"{summary.path}: {summary.points} parameter points, {summary.computed} computed now, "
+          f"{summary.resumed} resumed, {summary.rows} rows"
+          + ("; stopped early, run again to continue" if summary.stopped else ""))
+    return 0

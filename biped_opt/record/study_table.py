@@ -1,0 +1,169 @@
+"""A study's tidy table on disk: CSV, resumable, computed by one or many local processes.
+
+The table is CSV (what pandas' ``read_csv`` and polars' ``read_csv`` take with no extra
+dependency; Parquet would add pyarrow, ~100 MB, for tables of a few thousand rows): one row per
+parameter point and nonsmooth point, columns ``point``, the varied parameters, then
+:data:`biped_opt.study.COLUMNS`. Next to it, ``<table>.study.json`` holds the study, so that an
+interrupted run continues where it stopped: the rows of a parameter point are appended in one
+write and flushed; on resume the points whose rows are all there are kept, anything torn (a half
+line, a point with missing rows) is dropped and recomputed, and no point appears twice.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import multiprocessing
+import os
+import signal
+from collections.abc import Callable, Iterable
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from pathlib import Path
+
+from biped_opt.errors import InvalidInputError
+from biped_opt.study import COLUMNS, Study, StudyRow, evaluate_point
+
+__all__ = ["run_study", "read_table", "StudySummary", "spec_path"]
+
+
+@dataclass(frozen=True)
+class StudySummary:
+    path: Path
+    points: int  #: parameter points of the study
+    computed: int  #: computed in this run
+    resumed: int  #: already in the table when the run started
+    rows: int  #: rows in the table now
+    stopped: bool  #: interrupted before every point was done
+
+
+def spec_path(path: Path) -> Path:
+    return path.with_name(path.name + ".study.json")
+
+
+def _header(study: Study) -> list[str]:
+    return ["point", *study.parameter_names, *COLUMNS]
+
+
+def _text(study: Study, rows: Iterable[StudyRow]) -> str:
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    for row in rows:
+        d = row.as_dict()
+        writer.writerow([("" if isinstance(v, float) and math.isnan(v) else v)
+                         for v in (d[c] for c in _header(study))])
+    return buf.getvalue()
+
+
+def read_table(path: Path) -> list[dict[str, str]]:
+    """The complete rows of a study table (torn lines and incomplete points left out)."""
+    text = Path(path).read_text()
+    if text and not text.endswith("\n"):
+        text = text[: text.rfind("\n") + 1]  # a line cut by an interruption
+    rows = list(csv.DictReader(io.StringIO(text)))
+    count: dict[str, int] = {}
+    for r in rows:
+        count[r["point"]] = count.get(r["point"], 0) + 1
+    return [r for r in rows if r.get("rows") and str(count[r["point"]]) == r["rows"]]
+
+
+def _resume(study: Study, path: Path) -> set[int]:
+    """Points already complete in ``path`` (rewritten without torn rows), or a new table."""
+    spec = spec_path(path)
+    if not path.exists():
+        path.write_text(",".join(_header(study)) + "\n")
+        spec.write_text(json.dumps(study.as_dict(), indent=1))
+        return set()
+    if not spec.exists():
+        raise InvalidInputError(f"--out: {path} exists and is not a study table (no {spec.name})")
+    try:
+        saved = json.loads(spec.read_text())
+    except json.JSONDecodeError:
+        raise InvalidInputError(f"--out: {spec} is not valid JSON") from None
+    if saved != json.loads(json.dumps(study.as_dict())):
+        raise InvalidInputError(f"--out: {path} holds a different study; choose another file "
+                                "or remove it to start again")
+    with open(path, encoding="utf-8") as fh:
+        first = fh.readline().rstrip("\n")
+    if first != ",".join(_header(study)):
+        raise InvalidInputError(f"--out: {path}: unexpected header {first!r}")
+    keep = read_table(path)
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=_header(study), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(keep)
+    if buf.getvalue() != path.read_text():  # drop torn rows once, atomically
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(buf.getvalue())
+        os.replace(tmp, path)
+    return {int(r["point"]) for r in keep}
+
+
+def _worker_init() -> None:
+    # a terminal's Ctrl-C reaches the whole process group: the parent decides when to stop,
+    # the workers finish the point they hold
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+
+
+def _evaluate(args: tuple[Study, int, dict[str, float]]) -> list[StudyRow]:
+    study, index, values = args
+    return evaluate_point(study, index, values)
+
+
+def run_study(study: Study, path: Path, *, workers: int = 1,
+              progress: Callable[[int, int], None] | None = None,
+              stop: Callable[[], bool] | None = None) -> StudySummary:
+    """Compute every point of ``study`` not yet in the table at ``path`` (see the module
+    docstring) with ``workers`` local processes; ``progress(done, total)`` after each point;
+    ``stop()`` true ends the run after the points under way (the table stays resumable)."""
+    path = Path(path)
+    if not path.parent.is_dir():
+        raise InvalidInputError(f"--out: directory {str(path.parent)!r} does not exist")
+    points = study.points()
+    done = _resume(study, path)
+    resumed = len(done)
+    pending = [i for i in range(len(points)) if i not in done]
+    computed = 0
+    stopped = False
+
+    def append(rows: list[StudyRow]) -> None:
+        nonlocal computed
+        with open(path, "a", encoding="utf-8") as fh:
+            fh.write(_text(study, rows))
+            fh.flush()
+            os.fsync(fh.fileno())
+        computed += 1
+        if progress is not None:
+            progress(resumed + computed, len(points))
+
+    if progress is not None:
+        progress(resumed, len(points))
+    if workers <= 1:
+        for i in pending:
+            if stop is not None and stop():
+                stopped = True
+                break
+            append(evaluate_point(study, i, points[i]))
+    else:
+        # spawn, not fork: the parent may hold Numba's and DDS's threads
+        context = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=workers, mp_context=context,
+                                 initializer=_worker_init) as pool:
+            queue = list(pending)
+            running = set()
+            while queue or running:
+                while queue and len(running) < 2 * workers and not stopped:
+                    i = queue.pop(0)
+                    running.add(pool.submit(_evaluate, (study, i, points[i])))
+                finished, running = wait(running, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    append(future.result())
+                if stop is not None and stop() and not stopped:
+                    stopped = True
+                    queue.clear()
+    total_rows = len(read_table(path))
+    return StudySummary(path=path, points=len(points), computed=computed, resumed=resumed,
+                        rows=total_rows, stopped=stopped or resumed + computed < len(points))
