@@ -8,6 +8,9 @@ can feed them; each writes one PNG and returns its path:
 - :func:`modes_figure`: contact mode over time and s (Fig. 3 of [1]_ for any system), from
   :func:`mode_bands`;
 - :func:`policy_value_figure`: an optimal policy (one curve per input) and value over s;
+- :func:`fixed_input_figures` and :func:`optimal_figures` (``biped-opt figures --system``): a
+  system's sweep at fixed inputs, or a problem's optimal sweep, analysed and drawn with the
+  figures above into one directory, with captions.txt and data.json (what each figure shows);
 - :func:`control_experiment_figure`: the paper's point in one picture. The two-leg walker under
   the coupled input law (the paper's biped) and under the decoupled law (each leg's input acts
   whenever its foot is down, Pace & Burden 2017): same mechanics, only the coupling differs; the
