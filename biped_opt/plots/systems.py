@@ -8,6 +8,9 @@ can feed them; each writes one PNG and returns its path:
 - :func:`modes_figure`: contact mode over time and s (Fig. 3 of [1]_ for any system), from
   :func:`mode_bands`;
 - :func:`policy_value_figure`: an optimal policy (one curve per input) and value over s;
+- :func:`fixed_input_figures` and :func:`optimal_figures` (``biped-opt figures --system``): a
+  system's sweep at fixed inputs, or a problem's optimal sweep, analysed and drawn with the
+  figures above into one directory, with captions.txt and data.json (what each figure shows);
 - :func:`control_experiment_figure`: the paper's point in one picture. The two-leg walker under
   the coupled input law (the paper's biped) and under the decoupled law (each leg's input acts
   whenever its foot is down, Pace & Burden 2017): same mechanics, only the coupling differs; the
@@ -45,10 +48,12 @@ from biped_opt.errors import InvalidInputError  # noqa: E402
 from biped_opt.fixed_sweep import theta_grid  # noqa: E402
 from biped_opt.model.modes import ContactMode  # noqa: E402
 from biped_opt.nonsmooth import OneSided, one_sided  # noqa: E402
+from biped_opt.optimal.nonsmooth import NonsmoothReport  # noqa: E402
 from biped_opt.plots.figures import MODE_COLOURS, _finish  # noqa: E402
 from biped_opt.systems.compiled import CompiledSystem  # noqa: E402
 from biped_opt.systems.derive import mode_name  # noqa: E402
-from biped_opt.systems.nonsmooth import find_nonsmooth  # noqa: E402
+from biped_opt.systems.nonsmooth import find_nonsmooth, find_nonsmooth_optimal  # noqa: E402
+from biped_opt.systems.problems import Problem  # noqa: E402
 
 __all__ = [
     "Mark",
@@ -60,6 +65,10 @@ __all__ = [
     "modes_figure",
     "policy_value_figure",
     "system_marks",
+    "fixed_input_sweep",
+    "SystemFigures",
+    "fixed_input_figures",
+    "optimal_figures",
     "grid_one_sided",
     "control_experiment_data",
     "control_experiment_figure",
@@ -183,9 +192,13 @@ def _draw_points(ax, s: Array, curves: Mapping[str, Array], points: Sequence[Any
             seen.add(base)
         cause = _get(p, "cause", default="")
         if cause and causes:
-            ax.annotate(f"{kind}: {cause}", xy=(x, 1.0), xycoords=("data", "axes fraction"),
-                        xytext=(2, -4), textcoords="offset points", rotation=90, va="top",
-                        ha="left", fontsize=6, color="0.4")
+            # a long cause (several mode sequences) is cut at the axes' edge and takes no room
+            # in the layout; the captions and tables hold it whole
+            note = ax.annotate(f"{kind}: {cause}", xy=(x, 1.0),
+                               xycoords=("data", "axes fraction"), xytext=(2, -4),
+                               textcoords="offset points", rotation=90, va="top", ha="left",
+                               fontsize=6, color="0.4", annotation_clip=False, clip_on=True)
+            note.set_in_layout(False)
 
 
 def _panel(ax, s: Array, curves: Mapping[str, Array], points: Sequence[Any],
@@ -320,18 +333,183 @@ def modes_figure(path: str | Path, compiled: CompiledSystem, maneuver: str,
 
 
 # --- nonsmooth points of a compiled system along a grid -----------------------------------------
+def fixed_input_sweep(compiled: CompiledSystem, maneuver: str, grid: npt.ArrayLike,
+                      inputs: Any = None, *, progress: bool = False
+                      ) -> tuple[tuple[float, ...], Array, NonsmoothReport]:
+    """The inputs (checked, in declared order), the outcome along ``grid`` (one batch) and its
+    nonsmooth report (:func:`biped_opt.systems.nonsmooth.find_nonsmooth`: every change of the
+    mode sequence located to 1e-10 in s and classified from extrapolated one-sided limits and
+    slopes)."""
+    s = np.asarray(grid, dtype=np.float64)
+    u = compiled.simulate(maneuver, float(s[0]), inputs).inputs
+    batch = compiled.simulate_batch(maneuver, s, u)
+    report = find_nonsmooth(compiled, maneuver, u, s=s, progress=progress)
+    return u, batch["outcome"], report
+
+
 def system_marks(compiled: CompiledSystem, maneuver: str, grid: npt.ArrayLike,
                  inputs: Any = None, *, series: str | None = None) -> tuple[Array, list[Mark]]:
-    """The outcome along ``grid`` (one batch) and its nonsmooth points
-    (:func:`biped_opt.systems.nonsmooth.find_nonsmooth`: every change of the mode sequence
-    located to 1e-10 in s and classified from extrapolated one-sided limits and slopes)."""
-    s = np.asarray(grid, dtype=np.float64)
-    u = compiled.simulate(maneuver, float(s[0]), inputs).inputs  # checked, in declared order
-    batch = compiled.simulate_batch(maneuver, s, u)
-    report = find_nonsmooth(compiled, maneuver, u, s=s)
+    """The outcome along ``grid`` and its nonsmooth points as marks of the curve ``series``
+    (:func:`fixed_input_sweep`)."""
+    _, outcome, report = fixed_input_sweep(compiled, maneuver, grid, inputs)
     marks = [Mark(s=p.theta0, kind=p.kind, cause=p.cause, left=p.left, right=p.right, at=p.at,
                   limits=p.limits, slopes=p.derivatives, series=series) for p in report.points]
-    return batch["outcome"], marks
+    return outcome, marks
+
+
+# --- every figure of one system's sweep, with captions and data ---------------------------------
+@dataclass(frozen=True)
+class SystemFigures:
+    """What :func:`fixed_input_figures` or :func:`optimal_figures` drew: the curves over s (the
+    outcome; optimal: also the value and one policy curve per decision), the nonsmooth report
+    whose points are marked on them, and the files written (figures, captions, data)."""
+
+    subject: str
+    s: Array
+    curves: dict[str, Array]
+    report: NonsmoothReport
+    figures: tuple[Path, ...]
+    captions: Path
+    data: Path
+
+
+#: how the nonsmooth points are drawn, for the captions
+MARKS_CAPTION = ("Circles: one-sided limits of a jump; diamonds: kinks; squares: second-"
+                 "derivative jumps; the cause of each is written along its line.")
+
+
+def _caption(file: str | None, text: str) -> str:
+    """A caption paragraph wrapped to 96 columns: a figure's under its file name with a hanging
+    indent, any other one with its later lines indented by two."""
+    import textwrap
+
+    first = "" if file is None else f"{file:<18}"
+    return textwrap.fill(text, 96, initial_indent=first,
+                         subsequent_indent=" " * (2 if file is None else 18))
+
+
+def _error(name: str, reference: float) -> str:
+    """'(name - r)', or '(name + |r|)' for a negative r."""
+    return f"({name} {'-' if reference >= 0 else '+'} {abs(reference):g})"
+
+
+def _setting(compiled: CompiledSystem, maneuver: str, grid: Array) -> list[str]:
+    """Caption lines naming the system, its parameters, the maneuver and the grid."""
+    m = compiled.derived.maneuvers[maneuver].description
+    where = f" ({compiled.system.source})" if compiled.system.source else ""
+    return [_caption(None, text) for text in (
+        f"System {compiled.name}{where}, parameters "
+        + (", ".join(f"{k} = {v:g}" for k, v in compiled.parameters.items()) or "none") + ".",
+        f"Maneuver {maneuver}" + (f": {m.description}" if m.description else "")
+        + f"; outcome {m.outcome} at t_f.",
+        f"Grid: {grid.size} values of {compiled.system.s} in [{grid[0]:g}, {grid[-1]:g}]"
+        + (", 0 included." if 0.0 in grid else "."))]
+
+
+def _write_outputs(out: Path, subject: str, grid: Array, curves: dict[str, Array],
+                   report: NonsmoothReport, figures: Sequence[Path], lines: list[str],
+                   about: Mapping[str, Any]) -> SystemFigures:
+    """captions.txt (``lines`` and the nonsmooth table) and data.json (what the figures show)."""
+    from biped_opt import strict_json
+
+    captions = out / "captions.txt"
+    captions.write_text("\n".join([
+        *lines, "",
+        "Nonsmooth points (left | right: limits for jumps, first derivatives for kinks, second",
+        "derivatives for second-derivative jumps; located to 1e-10 in s):", "",
+        report.table(), ""]))
+    data = out / "data.json"
+    data.write_text(strict_json.dumps({
+        **about, "s": grid.tolist(), "curves": {k: v.tolist() for k, v in curves.items()},
+        "points": [p.as_dict() for p in report.points],
+        "figures": [f.name for f in figures]}) + "\n")
+    return SystemFigures(subject=subject, s=grid, curves=curves, report=report,
+                         figures=tuple(figures), captions=captions, data=data)
+
+
+def fixed_input_figures(out: str | Path, compiled: CompiledSystem, maneuver: str,
+                        grid: npt.ArrayLike, inputs: Any = None, *,
+                        progress: bool = False) -> SystemFigures:
+    """``maneuver`` swept over ``grid`` at fixed ``inputs``: ``outcome.png`` (the outcome with
+    its nonsmooth points marked), ``modes.png`` (contact modes over time and s), captions.txt
+    and data.json in ``out``."""
+    out = Path(out)
+    s = np.asarray(grid, dtype=np.float64)
+    u, outcome, report = fixed_input_sweep(compiled, maneuver, s, inputs, progress=progress)
+    shown = ", ".join(f"{k} = {v:g}" for k, v in zip(compiled.inputs, u)) or "none"
+    subject = f"{compiled.name} {maneuver}"
+    name = str(compiled.derived.maneuvers[maneuver].description.outcome)
+    figures = (
+        outcome_figure(out / "outcome.png", s, {f"outcome {name}(t_f)": outcome},
+                       points=report.points, ylabel=f"outcome {name}(t_f)",
+                       xlabel=str(compiled.system.s),
+                       title=f"{subject}: outcome at inputs {shown}"),
+        modes_figure(out / "modes.png", compiled, maneuver, s, u),
+    )
+    lines = [
+        _caption(None, f"{subject} at fixed inputs {shown}."),
+        *_setting(compiled, maneuver, s), "",
+        _caption("outcome.png", f"Outcome {name}(t_f) over {compiled.system.s}, broken at its "
+                 f"jumps (a dot: the value exactly at a jump). {MARKS_CAPTION}"),
+        _caption("modes.png", f"Contact mode over time t and {compiled.system.s} as coloured "
+                 "bands (named by the constraints in contact), contact events as dots (an "
+                 "impact that separates at once changes no band but is a dot), t_f in black."),
+    ]
+    about = {"system": compiled.name, "maneuver": maneuver, "parameters": compiled.parameters,
+             "inputs": dict(zip(compiled.inputs, map(float, u)))}
+    return _write_outputs(out, subject, s, {"outcome": outcome}, report, figures, lines, about)
+
+
+def optimal_figures(out: str | Path, problem: Problem, grid: npt.ArrayLike, *,
+                    progress: bool = False) -> SystemFigures:
+    """The optimal control of ``problem`` over ``grid``: ``outcome.png`` (the optimal outcome)
+    and ``policy_value.png`` (policy and value), each with the nonsmooth points of
+    :func:`biped_opt.systems.nonsmooth.find_nonsmooth_optimal` on its curves, captions.txt and
+    data.json in ``out``."""
+    from biped_opt.optimal.sweep import _bar
+    from biped_opt.systems.optimal import compiled_for, optimal_sweep, policy_table
+
+    out = Path(out)
+    s = np.asarray(grid, dtype=np.float64)
+    compiled = compiled_for(problem)
+    bar = _bar(progress, s.size, f"{problem.name} curves")
+    table = policy_table(optimal_sweep(problem, s, callback=bar.update))
+    report = find_nonsmooth_optimal(problem, s, progress=progress)
+    names = problem.decision_names
+    name = str(compiled.derived.maneuvers[problem.maneuver].description.outcome)
+    subject = f"problem {problem.name} on {compiled.name}"
+    figures = (
+        outcome_figure(out / "outcome.png", s, {f"optimal outcome {name}(t_f)": table["outcome"]},
+                       points=[p for p in report.points if p.quantity == "outcome"],
+                       ylabel=f"outcome {name}(t_f)", xlabel=str(compiled.system.s),
+                       title=f"{subject}: outcome under the optimal policy"),
+        policy_value_figure(out / "policy_value.png", s, {d: table[d] for d in names},
+                            table["value"], points=report.points,
+                            xlabel=str(compiled.system.s), title=subject),
+    )
+    spec = problem.as_dict()
+    fixed = ", ".join(f"{k} = {v:g}" for k, v in zip(problem.description.u.names(),
+                                                     problem.inputs())
+                      if k not in names) or "none"
+    lines = [
+        _caption(None, f"{subject}: minimise the cost over "
+                 + ", ".join(f"{d} in [{lo:g}, {hi:g}]" for d, (lo, hi) in
+                             spec["decisions"].items()) + f" (other inputs: {fixed})."),
+        _caption(None, f"Cost: {spec['outcome_weight']:g} {_error('outcome', spec['target'])}^2"
+                 + "".join(f" + {w:g} {_error(f'{k}(t_f)', r)}^2"
+                           for k, (w, r) in spec["final_state"].items())
+                 + "".join(f" + {a:g} {d}^2" for d, a in spec["weights"].items() if a) + "."),
+        *_setting(compiled, problem.maneuver, s), "",
+        _caption("outcome.png", f"Outcome {name}(t_f) under the optimal policy over "
+                 f"{compiled.system.s}, broken at its jumps. {MARKS_CAPTION}"),
+        _caption("policy_value.png", "(a) Optimal policy, one curve per decision, and (b) "
+                 "optimal value (the minimal cost), each with its own nonsmooth points."),
+    ]
+    about = {"problem": spec, "system": compiled.name, "maneuver": problem.maneuver,
+             "parameters": compiled.parameters}
+    curves = {"outcome": table["outcome"], "value": table["value"],
+              **{f"policy:{d}": table[d] for d in names}}
+    return _write_outputs(out, subject, s, curves, report, figures, lines, about)
 
 
 # --- the control experiment ---------------------------------------------------------------------
