@@ -43,6 +43,10 @@ def _string(text: bytes) -> bytes:
     return raw + bytes(-len(raw) % 8)
 
 
+#: the request's fields after theta0: system and problem, both "" (length 1, NUL, padding)
+_TAIL = struct.pack("<I", 1) + bytes(4) + struct.pack("<I", 1) + bytes(1)
+
+
 def corrupt(rng: random.Random, i: int) -> bytes:
     """The body (after the 16-byte header) of the i-th malformed OptimalPolicy request."""
     name = bytearray(rng.choice([b"touchdown", b"liftoff"]))
@@ -50,15 +54,15 @@ def corrupt(rng: random.Random, i: int) -> bytes:
     if kind == 0:  # bit flips in the name
         for _ in range(rng.randint(1, 4)):
             name[rng.randrange(len(name))] ^= 1 << rng.randrange(8)
-        return _string(bytes(name)) + struct.pack("<d", 0.05)
+        return _string(bytes(name)) + (struct.pack("<d", 0.05) + _TAIL)
     if kind == 1:  # random bytes as the name
-        return _string(rng.randbytes(rng.randrange(1, 64))) + struct.pack("<d", 0.05)
+        return _string(rng.randbytes(rng.randrange(1, 64))) + (struct.pack("<d", 0.05) + _TAIL)
     if kind == 2:  # bit flips anywhere in the body
-        body = bytearray(_string(bytes(name)) + struct.pack("<d", 0.05))
+        body = bytearray(_string(bytes(name)) + (struct.pack("<d", 0.05) + _TAIL))
         for _ in range(rng.randint(1, 4)):
             body[rng.randrange(len(body))] ^= 1 << rng.randrange(8)
         return bytes(body)
-    body = _string(bytes(name)) + struct.pack("<d", 0.05)  # a wrong string length
+    body = _string(bytes(name)) + (struct.pack("<d", 0.05) + _TAIL)  # a wrong string length
     return struct.pack("<I", rng.randrange(1 << 16)) + body[4:]
 
 

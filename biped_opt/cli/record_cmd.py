@@ -21,7 +21,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--params-file", type=Path, default=None, help="ROS 2 parameter file")
     p.add_argument("--system", default="",
                    help="record another system than the biped: a library name or a system "
-                        "file (the --theta0 range is then the maneuver's s; fixed inputs only)")
+                        "file (the --theta0 range is then the maneuver's s)")
+    p.add_argument("--problem", default="",
+                   help="with --system and --optimal: a problem the system declares or a "
+                        "problem file (default: the one named like the maneuver)")
     p.add_argument("--inputs", nargs="+", type=finite_float("--inputs"), default=(),
                    metavar="U", help="fixed inputs: the biped's u1 u2 u12 (default: the "
                                      "paper's), another system's in its declared order "
@@ -36,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
 
     request = SweepRequest(maneuver=args.maneuver, theta0_min=args.theta0_min,
                            theta0_max=args.theta0_max, num=args.num, optimal=args.optimal,
-                           output=args.out, system=args.system,
+                           output=args.out, system=args.system, problem=args.problem,
                            fixed_inputs=tuple(args.inputs)).validated()
     output_file("--out", args.out, overwrite=False)
     if args.params_file is not None:
@@ -47,6 +50,8 @@ def run(args: argparse.Namespace) -> int:
         try:
             graph = Graph(params_file=args.params_file,
                           overrides={"simulator": {"autostart": False, "system": args.system},
+                                     "optimiser": {"systems": [args.system] if args.optimal
+                                                   else []},
                                      "recorder": {"system": args.system}})
         except KeyboardInterrupt:
             return 0

@@ -7,18 +7,20 @@ lists) and written as plain float lists, which every backend accepts.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
 from biped_opt import ros
-from biped_opt.errors import InvalidInputError, quoted
+from biped_opt.errors import BipedOptError, InvalidInputError, quoted
 from biped_opt.hybrid.trajectory import Trajectory
 from biped_opt.maneuvers import Maneuver, check_theta0, parse_maneuver
 
 if TYPE_CHECKING:  # the systems' modules (SymPy) load only where a system is used
     from biped_opt.systems.compiled import CompiledSystem, SystemTrajectory
+    from biped_opt.systems.problems import Problem
 
 __all__ = [
     "NS",
@@ -35,10 +37,13 @@ __all__ = [
     "request_s",
     "request_system_inputs",
     "system_state_messages",
+    "request_problem",
 ]
 
 NS = 1_000_000_000
 FRAME_ID = "biped"
+#: suffixes of the files a request may name (systems .py, problems .yaml/.yml/.py)
+FILE_SUFFIXES = (".py", ".yaml", ".yml")
 
 
 def stamp(ns: int) -> Any:
@@ -210,3 +215,44 @@ def system_state_messages(tr: SystemTrajectory, ndof: int, start_ns: int) -> lis
 
 def finite(value: float) -> bool:
     return isinstance(value, (int, float)) and math.isfinite(value)
+
+
+def _is_file(text: str) -> bool:
+    return Path(text).suffix in FILE_SUFFIXES
+
+
+def request_problem(system: str, problem: str, maneuver: str, *, allow_files: bool = True
+                    ) -> Problem:
+    """The :class:`~biped_opt.systems.problems.Problem` of a request on any system: ``system``
+    a library name or a system file (``""``: the biped, or the system a problem file names),
+    ``problem`` one the system declares or a problem file (``""``: the one named like
+    ``maneuver``), which must be on ``maneuver``. Each error names the request's field."""
+    from biped_opt.systems.problems import describe, load_problem
+
+    for field, text in (("system", system), ("problem", problem)):
+        if _is_file(text) and not allow_files:
+            raise InvalidInputError(f"{field}: files are not served here (parameter "
+                                    f"allow_files is false), got {quoted(text)}")
+    described = None
+    if system or not _is_file(problem):
+        try:
+            described = describe(system or "biped")
+        except BipedOptError as exc:
+            raise InvalidInputError(f"system: {exc}") from None
+        if not problem and maneuver not in described.maneuvers:
+            raise InvalidInputError(
+                f"maneuver: {described.name} has no maneuver {quoted(maneuver)} "
+                f"(maneuvers: {', '.join(described.maneuvers) or 'none'})")
+    try:
+        found = load_problem(problem or maneuver, system=system or "biped")
+    except BipedOptError as exc:
+        raise InvalidInputError(f"problem: {exc}") from None
+    if described is not None and found.description.name != described.name:
+        raise InvalidInputError(
+            f"problem: {found.name} is a problem on {found.description.name}, not on "
+            f"{described.name}")
+    if found.maneuver != maneuver:
+        raise InvalidInputError(
+            f"maneuver: problem {found.name} is on maneuver {found.maneuver!r}, not "
+            f"{quoted(maneuver)}")
+    return found

@@ -13,6 +13,19 @@ the field (an unexpected error: ``success = false`` and ``internal error: ...``)
 it (one line a second at most) and keeps serving. Requests are served concurrently (reentrant
 callback group, multi-threaded executor).
 
+**Any system.** A request whose ``system`` (a library name or a system file) or ``problem`` (one
+the system declares, or a problem file; ``""``: the one named like the maneuver) is set is
+solved by :func:`biped_opt.systems.optimal.optimal_policy` with ``theta0`` as the maneuver's s;
+the reply names the decisions (``decision_names``), gives the full input vector in the system's
+order (``system_inputs``) and the contact modes as bit masks (``contact_modes``). Its
+``value_derivative`` is the envelope theorem's dc/ds at the optimal inputs with the outcome's and
+final state's one-sided sensitivities (:func:`biped_opt.systems.derivatives.outcome_gradient`),
+NaN on a side where they are not defined. A system is compiled on its first request (a first
+compile in a checkout takes 20-30 s, later ones load it); the parameter ``systems`` (a list of
+library names or files) compiles them, with the problems they declare, at start-up. With
+``allow_files`` false a request may name library systems and declared problems only (a system or
+problem file is Python the node runs: only allow it where every peer on the domain is trusted).
+
 Answers are cached by (maneuver, theta0, problem), least recently used first out, at most
 ``cache_size`` entries (parameter, default 4096). An entry holds only the reply's numbers (about
 1 KB with its key), not the optimisation's trajectories, so the cache stays under ~4 MB at the
@@ -21,25 +34,36 @@ default size whatever the traffic (``bench/service_load.py`` measures the node's
 
 from __future__ import annotations
 
+import json
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from biped_opt import ros
-from biped_opt.errors import InvalidParameterError
+from biped_opt.errors import (
+    BipedOptError,
+    InvalidParameterError,
+    SimulationError,
+)
 from biped_opt.maneuvers import Maneuver
 from biped_opt.nodes import convert
 from biped_opt.nodes.run import announce_ready, refuse, run_node, warm_up_kernels
+from biped_opt.nodes.simulator import BIPED, compile_served_system
 from biped_opt.optimal import OptimalControlProblem, OptimalResult, get_problem, optimal_policy
 from biped_opt.optimal.derivatives import outcome_sensitivity
 
-__all__ = ["Answer", "OptimiserNode", "main", "value_derivative"]
+if TYPE_CHECKING:  # the systems' modules (SymPy) load only where a system is used
+    from biped_opt.systems.optimal import SystemOptimalResult
+    from biped_opt.systems.problems import Problem
+
+__all__ = ["Answer", "OptimiserNode", "main", "value_derivative", "system_value_derivative"]
 
 #: default of the ``cache_size`` parameter [entries]
 CACHE_SIZE = 4096
+NAN = float("nan")
 
 
 def value_derivative(problem: OptimalControlProblem, result: OptimalResult) -> tuple[float, float]:
@@ -53,6 +77,37 @@ def value_derivative(problem: OptimalControlProblem, result: OptimalResult) -> t
             direction=(side, 0.0, 0.0, 0.0), params=problem.params,
         )
         out.append(problem.outcome_slope(s.outcome) * s.gradient[0])
+    return out[0], out[1]
+
+
+def system_value_derivative(problem: Problem, result: SystemOptimalResult
+                            ) -> tuple[float, float]:
+    """[left, right] dV/ds of a problem on any system by the envelope theorem: the partial in s
+    of c = w (outcome - target)^2 + sum_k W_k (y_k(t_f) - r_k)^2 + sum alpha u^2 at the optimal
+    inputs (the input terms do not depend on s), each side with the outcome's and final state's
+    limits and sensitivities on the branch s -> s^- or s^+. NaN on a side the sensitivities
+    cannot be had (a grazing terminal event, a failed simulation)."""
+    from biped_opt.systems.derivatives import outcome_gradient
+    from biped_opt.systems.optimal import compiled_for
+
+    compiled = compiled_for(problem)
+    system = problem.description
+    states = [*system.coordinate_names, *(str(v) for v in system.dq)]
+    e_s = np.zeros(1 + len(compiled.inputs))
+    e_s[0] = 1.0
+    out = []
+    for side in (-1.0, 1.0):
+        try:
+            g = outcome_gradient(compiled, problem.maneuver, result.s, result.inputs,
+                                 direction=side * e_s)
+        except SimulationError:
+            out.append(NAN)
+            continue
+        slope = 2.0 * problem.outcome_weight * (g.outcome - problem.target) * g.gradient[0]
+        for name, weight, target in problem.final_state:
+            k = states.index(name)
+            slope += 2.0 * weight * (g.y_final[k] - target) * g.state_gradient[k, 0]
+        out.append(float(slope))
     return out[0], out[1]
 
 
@@ -72,14 +127,22 @@ class OptimiserNode(ros.Node):
             self.declare_parameter(f"{name}.fixed_inputs", list(default.fixed_inputs))
             self._problems[maneuver] = self._problem_from_parameters(maneuver)
         self.declare_parameter("cache_size", CACHE_SIZE)
+        self.declare_parameter("systems", [])
+        self.declare_parameter("allow_files", True)
+        self._allow_files = bool(self.get_parameter("allow_files").value)
         self._cache_size = int(self.get_parameter("cache_size").value)
         if self._cache_size < 0:
             raise InvalidParameterError(
                 f"cache_size must be >= 0 (0: no cache), got {self._cache_size}")
         self._cache: OrderedDict[tuple, Answer] = OrderedDict()
         self._lock = threading.Lock()
+        #: compiled systems (keys of :meth:`_compiled`), and the lock a first compile holds
+        self._compiled_keys: set[tuple] = set()
+        self._compile_lock = threading.Lock()
         if self.get_parameter("warm_up").value:
             warm_up_kernels(self)
+        for system in self.get_parameter("systems").value:
+            self._warm_up_system(str(system).strip())
         self._group = ros.ReentrantCallbackGroup()
         self._service = self.create_service(
             ros.srvs.OptimalPolicy, "/biped/optimal_policy", self._on_request,
@@ -98,17 +161,69 @@ class OptimiserNode(ros.Node):
             fixed_inputs=tuple(float(v) for v in self.get_parameter(f"{name}.fixed_inputs").value),
         )
 
-    def solve(self, maneuver_text: str, theta0: float) -> Answer:
+    # -- other systems -----------------------------------------------------------------------
+    def _warm_up_system(self, system: str) -> None:
+        """Compile ``system`` (an entry of the parameter ``systems``) for the problems it
+        declares before serving; a bad entry stops the node with one line naming it."""
+        if system in BIPED:
+            return  # (the biped's kernels: parameter warm_up)
+        from biped_opt.systems.problems import describe
+        from biped_opt.systems.problems import get_problem as system_problem
+
+        self.get_logger().info(f"compiling system {system!r} (a first compile takes a while; "
+                               "later starts load it)")
+        try:
+            names = list(describe(system).problems)
+            for name in names:
+                self._compiled(system_problem(system, name))
+        except BipedOptError as exc:
+            raise InvalidParameterError(f"systems: {exc}") from None
+        if not names:  # no declared problem: a problem file will need its kernel
+            compile_served_system(system)
+
+    def _compiled(self, problem: Problem) -> None:
+        """Compile the system of ``problem`` once (concurrent first requests wait for one
+        compile instead of each starting its own)."""
+        from biped_opt.systems.optimal import compiled_for
+
+        key = (id(problem.description), problem.parameters)
+        if key in self._compiled_keys:
+            return
+        with self._compile_lock:
+            if key not in self._compiled_keys:
+                compiled = compiled_for(problem)
+                compiled.simulate(problem.maneuver, 0.0, problem.inputs())
+                self._compiled_keys.add(key)
+
+    # -- requests ----------------------------------------------------------------------------
+    def solve(self, maneuver_text: str, theta0: float, system: str = "", problem: str = ""
+              ) -> Answer:
         """Validated, cached answer to one request."""
-        maneuver = convert.request_maneuver(maneuver_text)
-        th = convert.request_theta0(maneuver, theta0)
-        problem = self._problems[maneuver]
-        key = (maneuver, th, problem)
+        system, problem = system.strip(), problem.strip()
+        if system in BIPED and not problem:
+            maneuver = convert.request_maneuver(maneuver_text)
+            th = convert.request_theta0(maneuver, theta0)
+            biped = self._problems[maneuver]
+            return self._cached((maneuver, th, biped),
+                                lambda: Answer.of(biped, optimal_policy(biped, th)))
+        on = convert.request_problem(system, problem, maneuver_text, allow_files=self._allow_files)
+        s = convert.request_s(theta0)
+        key = ("system", id(on.description), json.dumps(on.as_dict(), sort_keys=True), s)
+
+        def answer() -> Answer:
+            from biped_opt.systems.optimal import optimal_policy as system_optimal_policy
+
+            self._compiled(on)
+            return Answer.of_system(on, system_optimal_policy(on, s))
+
+        return self._cached(key, answer)
+
+    def _cached(self, key: tuple, compute: Any) -> Answer:
         with self._lock:
             if key in self._cache:
                 self._cache.move_to_end(key)
                 return self._cache[key]
-        answer = Answer.of(problem, optimal_policy(problem, th))
+        answer = compute()
         with self._lock:
             self._cache[key] = answer
             while len(self._cache) > self._cache_size:
@@ -117,7 +232,8 @@ class OptimiserNode(ros.Node):
 
     def _on_request(self, request: Any, response: Any) -> Any:
         try:
-            answer = self.solve(request.maneuver, request.theta0)
+            answer = self.solve(request.maneuver, request.theta0, request.system,
+                                request.problem)
         except Exception as exc:  # bad request, or a bug: one refused request either way
             return refuse(self, "/biped/optimal_policy", response, exc)
         answer.fill(response)
@@ -138,19 +254,40 @@ class Answer:
     event_times: tuple[float, ...]
     value_derivative: tuple[float, float]
     inputs: tuple[float, ...]
+    contact_modes: tuple[int, ...]
+    decision_names: tuple[str, ...]
+    system_inputs: tuple[float, ...]
 
     @classmethod
     def of(cls, problem: OptimalControlProblem, result: OptimalResult) -> Answer:
         dv = value_derivative(problem, result)
+        modes = tuple(int(m) for m in result.modes)
+        inputs = tuple(float(v) for v in result.inputs)
         return cls(
             success=bool(result.success), message=result.message,
             policy=tuple(float(v) for v in result.x), value=float(result.value),
             outcome=float(result.outcome),
-            t_final=float(result.trajectory.t_final) if result.trajectory else float("nan"),
-            mode_sequence=tuple(int(m) for m in result.modes),
+            t_final=float(result.trajectory.t_final) if result.trajectory else NAN,
+            mode_sequence=modes,
             event_times=tuple(float(t) for t in np.asarray(result.event_times)),
             value_derivative=(float(dv[0]), float(dv[1])),
-            inputs=tuple(float(v) for v in result.inputs),
+            inputs=inputs, contact_modes=modes, decision_names=tuple(problem.decisions),
+            system_inputs=inputs,
+        )
+
+    @classmethod
+    def of_system(cls, problem: Problem, result: SystemOptimalResult) -> Answer:
+        dv = system_value_derivative(problem, result) if result.success else (NAN, NAN)
+        return cls(
+            success=bool(result.success), message=result.message,
+            policy=tuple(float(result.policy[d]) for d in problem.decision_names),
+            value=float(result.value), outcome=float(result.outcome),
+            t_final=float(result.t_final), mode_sequence=(),
+            event_times=tuple(float(t) for t in result.event_times),
+            value_derivative=(float(dv[0]), float(dv[1])), inputs=(NAN, NAN, NAN),
+            contact_modes=tuple(int(m) for m in result.modes),
+            decision_names=problem.decision_names,
+            system_inputs=tuple(float(v) for v in result.inputs),
         )
 
     def fill(self, response: Any) -> None:
@@ -162,6 +299,9 @@ class Answer:
         response.event_times = list(self.event_times)
         response.value_derivative = list(self.value_derivative)
         response.inputs = list(self.inputs)
+        response.contact_modes = list(self.contact_modes)
+        response.decision_names = list(self.decision_names)
+        response.system_inputs = list(self.system_inputs)
 
 
 def main(args: list[str] | None = None) -> None:

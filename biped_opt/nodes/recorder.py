@@ -17,7 +17,8 @@ node is destroyed and on SIGINT/SIGTERM (see :func:`main`).
 
 Parameters: ``maneuver``, ``theta0_min``, ``theta0_max``, ``num``, ``optimal``, ``output``
 (path of the .mcap), ``fixed_inputs`` ([u1, u2, u12] for fixed-input sweeps; empty: the paper's),
-``autostart`` (record the parameters' sweep at start-up), ``service_timeout`` [s], ``system``.
+``autostart`` (record the parameters' sweep at start-up), ``service_timeout`` [s], ``system``,
+``problem``.
 
 **Other systems.** With ``system`` set (as the simulator's: a library name or a system file;
 ``""`` = the biped) the recorder takes the system's description from the simulator's latched
@@ -25,8 +26,12 @@ Parameters: ``maneuver``, ``theta0_min``, ``theta0_max``, ``num``, ``optimal``, 
 (the system's declared order; zeros by default) and writes ``/biped/system_state``, the
 description (``/biped/system_info`` and the ``biped_opt.system`` metadata record) and one
 SweepPoint per s (theta0 = s, policy = the inputs, value NaN: no cost is defined, the contact
-modes as bit masks, which SweepPoint holds for systems of up to 8 constraints). Optimal sweeps
-are the biped's only.
+modes as bit masks, which SweepPoint holds for systems of up to 8 constraints). An optimal sweep
+of such a system asks the optimiser for ``problem`` (one the system declares or a problem file;
+``""``: the one named like the maneuver) at every s and simulates its optimal inputs; its
+SweepPoints hold the decisions (policy), the optimal value and ``optimal = true``, and the
+``biped_opt.sweep`` metadata record the problem (``problem``: the problem file's mapping as
+JSON, :meth:`~biped_opt.systems.problems.Problem.as_dict`).
 """
 
 from __future__ import annotations
@@ -36,7 +41,7 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -49,6 +54,9 @@ from biped_opt.nodes.run import announce_ready, run_node
 from biped_opt.nodes.simulator import BIPED, SYSTEM_INFO_QOS
 from biped_opt.optimal import OptimalControlProblem, get_problem
 from biped_opt.record import SweepWriter
+
+if TYPE_CHECKING:  # the systems' modules (SymPy) load only where a system is used
+    from biped_opt.systems.problems import Problem
 
 __all__ = ["RecorderNode", "SweepRequest", "SweepSummary", "main"]
 
@@ -70,6 +78,9 @@ class SweepRequest:
     #: the system the simulator serves: "" (or "biped") the biped, else its library name or
     #: file (theta0_min/theta0_max then bound the maneuver's s)
     system: str = ""
+    #: an optimal sweep's problem on another system: one it declares or a problem file ("":
+    #: the one named like the maneuver)
+    problem: str = ""
 
     @property
     def biped(self) -> bool:
@@ -85,14 +96,16 @@ class SweepRequest:
             if len(self.fixed_inputs) > 3:
                 raise InvalidInputError(
                     f"fixed_inputs: at most 3 values (u1, u2, u12), got {len(self.fixed_inputs)}")
+            if self.problem.strip():
+                raise InvalidInputError(
+                    "problem: the biped's optimal sweeps solve the optimiser's problems (its "
+                    "parameters); a problem is given for another system")
         else:
             for name in ("theta0_min", "theta0_max"):
                 if not convert.finite(getattr(self, name)):
                     raise InvalidInputError(f"{name} must be finite, got {getattr(self, name)}")
-            if self.optimal:
-                raise InvalidInputError(
-                    f"optimal sweeps are recorded for the biped only (system {self.system!r}: "
-                    "record fixed inputs)")
+        if self.problem.strip() and not self.optimal:
+            raise InvalidInputError("problem: given for a fixed-input sweep (optimal is false)")
         if not self.theta0_min < self.theta0_max:
             raise InvalidInputError("theta0_min must be below theta0_max")
         if not 2 <= int(self.num) <= 100_000:
@@ -119,6 +132,15 @@ class SweepRequest:
                 f"recording's SweepPoint holds the contact modes of at most "
                 f"{MAX_RECORDED_CONSTRAINTS}")
         return self
+
+    def system_problem(self, info: dict[str, Any]) -> Problem:
+        """An optimal sweep's problem on the served system (SystemInfo's fields)."""
+        problem = convert.request_problem(self.system.strip(), self.problem.strip(),
+                                          self.maneuver)
+        if problem.description.name != info["system"]:
+            raise InvalidInputError(f"problem: {problem.name} is a problem on "
+                                    f"{problem.description.name}, not on {info['system']}")
+        return problem
 
 
 @dataclass(frozen=True)
@@ -155,6 +177,7 @@ class RecorderNode(ros.Node):
         self.declare_parameter("autostart", False)
         self.declare_parameter("service_timeout", 30.0)
         self.declare_parameter("system", "")
+        self.declare_parameter("problem", "")
         group = ros.ReentrantCallbackGroup()
         self._optimiser = self.create_client(
             ros.srvs.OptimalPolicy, "/biped/optimal_policy", callback_group=group)
@@ -186,6 +209,7 @@ class RecorderNode(ros.Node):
             output=Path(str(g("output").value)),
             fixed_inputs=fixed if any(fixed) else (),
             system=str(g("system").value),
+            problem=str(g("problem").value),
         )
 
     def _on_system_info(self, msg: Any) -> None:
@@ -259,7 +283,8 @@ class RecorderNode(ros.Node):
             writer, maneuver, th, req.optimal, fixed, problem, offset))
 
     def _record_system(self, req: SweepRequest) -> SweepSummary:
-        """A fixed-input sweep over s of the non-biped system the simulator serves."""
+        """A fixed-input or optimal sweep over s of the non-biped system the simulator
+        serves."""
         req.validated()
         info = self.served_system(float(self.get_parameter("service_timeout").value))
         req.validated_for(info)
@@ -268,14 +293,16 @@ class RecorderNode(ros.Node):
         inputs[: len(req.fixed_inputs)] = req.fixed_inputs
         metadata = {
             "system": info["system"], "maneuver": req.maneuver, "theta0_min": req.theta0_min,
-            "theta0_max": req.theta0_max, "num": grid.size, "optimal": False,
-            "fixed_inputs": json.dumps(inputs),
+            "theta0_max": req.theta0_max, "num": grid.size, "optimal": req.optimal,
+            "fixed_inputs": "" if req.optimal else json.dumps(inputs),
         }
+        if req.optimal:
+            metadata["problem"] = json.dumps(req.system_problem(info).as_dict())
         writer = SweepWriter(req.output, metadata={k: str(v) for k, v in metadata.items()},
                              system=info)
         ndof = len(info["coordinates"])
         return self._sweep(writer, req, grid, lambda s, offset: self._record_system_point(
-            writer, req.maneuver, s, inputs, ndof, offset))
+            writer, req, s, inputs, ndof, offset))
 
     def _sweep(self, writer: SweepWriter, req: SweepRequest, grid: Any,
                record_point: Callable[[float, int], tuple[bool, float]]) -> SweepSummary:
@@ -352,8 +379,20 @@ class RecorderNode(ros.Node):
         }
         return self._write_point(writer, point, offset, reply)
 
-    def _record_system_point(self, writer: SweepWriter, maneuver: str, s: float,
+    def _record_system_point(self, writer: SweepWriter, req: SweepRequest, s: float,
                              inputs: list[float], ndof: int, offset: int) -> tuple[bool, float]:
+        maneuver = req.maneuver
+        policy, value = list(inputs), float("nan")
+        if req.optimal:
+            ask = ros.srvs.OptimalPolicy.Request()
+            ask.maneuver, ask.theta0 = maneuver, s
+            ask.system, ask.problem = req.system.strip(), req.problem.strip()
+            answer = self._call(self._optimiser, ask)
+            if not answer.success:
+                raise SimulationError(f"optimiser failed at s = {s}: {answer.message}")
+            inputs = [float(v) for v in np.asarray(answer.system_inputs)]
+            policy = [float(v) for v in np.asarray(answer.policy)]
+            value = float(answer.value)
         q = ros.srvs.Simulate.Request()
         q.maneuver, q.theta0, q.inputs, q.real_time_factor = maneuver, s, list(inputs), 0.0
         reply = self._call(self._simulator, q)
@@ -368,7 +407,7 @@ class RecorderNode(ros.Node):
                                    stamp_offset_ns=offset)
         point = {
             "header": _header_fields(offset, writer.system["system"]), "maneuver": maneuver,
-            "theta0": s, "optimal": False, "policy": list(inputs), "value": float("nan"),
+            "theta0": s, "optimal": req.optimal, "policy": policy, "value": value,
             "outcome": float(reply.outcome), "t_final": float(reply.t_final),
             "mode_sequence": [int(m) for m in np.asarray(reply.contact_modes)],
             "event_times": [float(t) for t in np.asarray(reply.event_times)],

@@ -13,8 +13,9 @@ A maneuver no file holds leaves its column of the figure empty ("not in the data
 
 A recording of another system (``biped_opt.system`` metadata: its SystemState sweep over the
 maneuver's s) gets the nonsmoothness table of its outcome over s, the contact modes named by the
-system's constraints, and a plot of the outcome over s; no cost is defined for it (no value),
-and ``refine`` re-locates the biped's points only.
+system's constraints, and a plot of the outcome over s; a fixed-input sweep has no cost (no
+value), an optimal one (its problem in the ``biped_opt.sweep`` record's ``problem``) adds the
+value and the policy to the table and the plot. ``refine`` re-locates the biped's points only.
 
 **Nonsmoothness at grid resolution.** Along a sweep, outcome, policy and value are smooth while
 the mode order (and, for optima, which bound holds the policy) stays fixed ([1]_ Sec. III), so
@@ -107,6 +108,24 @@ class RecordedSweep:
     system: str = "biped"
     #: another system's constraints in declaration order (the bits of its contact modes)
     constraints: tuple[str, ...] = ()
+    #: the problem of an optimal sweep of another system (Problem.as_dict(), as recorded)
+    system_problem: dict[str, Any] | None = None
+
+    @property
+    def decision_bounds(self) -> tuple[tuple[str, tuple[float, float]], ...]:
+        """The decisions of an optimal sweep with their bounds, in the problem's order."""
+        if not self.optimal:
+            return ()
+        if self.problem is not None:
+            return tuple((d, self.problem.bound(d)) for d in self.problem.decisions)
+        assert self.system_problem is not None
+        return tuple((str(d), (float(b[0]), float(b[1])))
+                     for d, b in self.system_problem["decisions"].items())
+
+    @property
+    def has_value(self) -> bool:
+        """Whether a cost, hence a value, is defined (not for another system's fixed inputs)."""
+        return self.problem is not None or self.system_problem is not None
 
     @property
     def branch(self) -> tuple[str, ...]:
@@ -161,12 +180,21 @@ def load_sweep(path: str | Path) -> RecordedSweep:
     described = system_description(raw.metadata)
     extra: dict[str, Any] = {}
     problem: OptimalControlProblem | None = None
-    if described is not None:  # another system: a fixed-input sweep over s, no cost
-        optimal = False
-        names: Sequence[str] = tuple(described["inputs"])
-        inputs = pol[0]
+    if described is not None:  # another system: a sweep over s, no cost at fixed inputs
         extra = {"system": str(described["system"]),
                  "constraints": tuple(described["constraints"])}
+        optimal = meta.get("optimal") == "True"
+        if optimal:
+            try:
+                extra["system_problem"] = json.loads(meta["problem"])
+                names: Sequence[str] = tuple(extra["system_problem"]["decisions"])
+            except (KeyError, TypeError, ValueError):
+                raise ReportError(f"{raw.path}: an optimal sweep of {described['system']} "
+                                  "without its problem (biped_opt.sweep: problem)") from None
+            inputs = np.full(len(described["inputs"]), np.nan)
+        else:
+            names = tuple(described["inputs"])
+            inputs = pol[0]
     elif optimal := ((meta["optimal"] == "True") if "optimal" in meta
                      else bool(msgs[0].optimal)):
         problem = _problem(meta, maneuver)
@@ -215,12 +243,10 @@ class GridPoint:
 def _labels(s: RecordedSweep) -> list[tuple[Any, ...]]:
     if not s.optimal:
         return [(b,) for b in s.branch]
-    assert s.problem is not None  # (an optimal sweep is the biped's)
     out = []
     for k, b in enumerate(s.branch):
         held = []
-        for d in s.problem.decisions:
-            lo, hi = s.problem.bound(d)
+        for d, (lo, hi) in s.decision_bounds:
             v = s.policy[d][k]
             held.append("lower" if abs(v - lo) <= BOUND_TOL else
                         "upper" if abs(v - hi) <= BOUND_TOL else None)
@@ -230,9 +256,8 @@ def _labels(s: RecordedSweep) -> list[tuple[Any, ...]]:
 
 def _quantities(s: RecordedSweep) -> dict[str, Array]:
     q = {"outcome": s.outcome}
-    if s.optimal and s.problem is not None:
-        q.update({f"policy:{d}": s.policy[d] for d in s.problem.decisions})
-    if s.problem is not None:  # (another system has no cost, hence no value)
+    q.update({f"policy:{d}": s.policy[d] for d, _ in s.decision_bounds})
+    if s.has_value:  # (another system's fixed inputs have no cost, hence no value)
         q["value"] = s.value
     return q
 
@@ -294,10 +319,10 @@ def _events(s: RecordedSweep) -> list[tuple[int, int, int | None, str]]:
         else:
             events.append((a[1], b[0], None, _cause(s, labels, a[1], b[0], None)))
             r += 1
-    if s.optimal and s.problem is not None:
+    if s.optimal:
         # the optimum may jump to another local minimum with the same mode order
         known = {(lo, hi) for lo, hi, _, _ in events}
-        for d in s.problem.decisions:
+        for d, _ in s.decision_bounds:
             step = np.abs(np.diff(s.policy[d]))
             for k in range(1, step.size - 1):
                 big = step[k] > STEP_RATIO * max(step[k - 1], step[k + 1]) and step[k] > 1e-6
@@ -315,8 +340,8 @@ def _cause(s: RecordedSweep, labels: list[Any], i: int, j: int, mid: int | None)
     if left != right:
         via = f" (th0 = {s.theta0[mid]:g}: {s.branch[mid]})" if mid is not None else ""
         parts.append(f"mode order changes: {left} | {right}{via}")
-    if s.optimal and s.problem is not None:
-        for d, hl, hr in zip(s.problem.decisions, labels[i][1], labels[j][1]):
+    if s.optimal:
+        for (d, _), hl, hr in zip(s.decision_bounds, labels[i][1], labels[j][1]):
             if hl != hr:
                 what = (f"reaches its {hr} bound" if hl is None else
                         f"leaves its {hl} bound" if hr is None else f"moves to its {hr} bound")
@@ -474,8 +499,9 @@ def report(paths: Sequence[str | Path], out_dir: str | Path, *, refine: bool = F
         grid[f"{kind}:{label}"] = tuple(pts)
         blocks.append(grid_table(s, pts))
         core = [g.point for g in pts]
-        if s.problem is None:
-            figures.append(_system_figure(s, pts, out / f"{s.system}_{s.maneuver}.png"))
+        if s.system != "biped":
+            figures.append(_system_figure(
+                s, pts, out / f"{s.system}_{s.maneuver}{'_optimal' if s.optimal else ''}.png"))
         elif kind == "fixed":
             fixed[label] = fixed_data(_fixed_sweep(s), s.problem, core)
         else:
@@ -487,7 +513,7 @@ def report(paths: Sequence[str | Path], out_dir: str | Path, *, refine: bool = F
         figures.append(figure4(optimal.get("touchdown"), optimal.get("liftoff"),
                                out / "fig4.png"))
     refined: list[NonsmoothReport] = []
-    biped = [s for s in by_key.values() if s.problem is not None]
+    biped = [s for s in by_key.values() if s.system == "biped"]
     if refine and biped:
         from biped_opt.optimal.nonsmooth import find_nonsmooth_fixed, find_nonsmooth_optimal
 
@@ -511,20 +537,32 @@ def report(paths: Sequence[str | Path], out_dir: str | Path, *, refine: bool = F
 
 def _system_figure(s: RecordedSweep, points: Sequence[GridPoint], path: Path) -> Path:
     """Outcome over s of another system's recorded sweep, coloured by mode sequence, with the
-    grid-resolution nonsmooth points marked."""
+    grid-resolution nonsmooth points marked; an optimal sweep adds its value and policy."""
     from biped_opt.plots.figures import plt  # (its import selects the file backend)
 
-    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    rows = [("outcome", {"": s.outcome})]
+    if s.optimal:
+        rows += [("value", {"": s.value}), ("policy", {d: s.policy[d] for d, _ in
+                                                        s.decision_bounds})]
+    fig, axes = plt.subplots(len(rows), 1, figsize=(6.4, 2.2 + 1.8 * len(rows)), sharex=True,
+                             squeeze=False)
     branches = s.branch
-    for branch in dict.fromkeys(branches):
-        k = np.array([b == branch for b in branches])
-        ax.plot(s.theta0[k], s.outcome[k], ".", label=branch)
-    for g in points:
-        ax.axvline(g.point.theta0, color="0.6", lw=0.8, ls="--")
-    ax.set_xlabel("s")
-    ax.set_ylabel("outcome")
-    ax.set_title(f"{s.system}: {s.maneuver} (fixed inputs)")
-    ax.legend(fontsize="small", title="mode sequence")
+    for ax, (what, series) in zip(axes[:, 0], rows):
+        for name, y in series.items():
+            for branch in dict.fromkeys(branches):
+                k = np.array([b == branch for b in branches])
+                ax.plot(s.theta0[k], y[k], ".", label=branch if what == "outcome" else None,
+                        color=f"C{list(dict.fromkeys(branches)).index(branch)}")
+            if name:
+                ax.plot(s.theta0, y, "-", color="0.7", lw=0.6, zorder=0)
+                ax.annotate(name, (s.theta0[-1], y[-1]), fontsize="small")
+        for g in points:
+            ax.axvline(g.point.theta0, color="0.6", lw=0.8, ls="--")
+        ax.set_ylabel(what)
+    axes[-1, 0].set_xlabel("s")
+    axes[0, 0].set_title(f"{s.system}: {s.maneuver} "
+                         f"({'optimal' if s.optimal else 'fixed inputs'})")
+    axes[0, 0].legend(fontsize="small", title="mode sequence")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)

@@ -130,7 +130,13 @@ def test_bad_requests_are_refused_and_the_node_keeps_serving(graph, probe, maneu
     assert not bad_sim.success and bad_sim.message.startswith("inputs:")
 
 
-def _not_utf8_request(client, maneuver: bytes, theta0: float):
+#: the request fields after theta0 of each service: Simulate's empty inputs and
+#: real_time_factor 0, OptimalPolicy's system and problem "" (length 1, the NUL, padding)
+_TAILS = {"Simulate": bytes(24),
+          "OptimalPolicy": struct.pack("<I", 1) + bytes(4) + struct.pack("<I", 1) + bytes(4)}
+
+
+def _not_utf8_request(client, maneuver: bytes, theta0: float, srv: str):
     """A request whose maneuver is not UTF-8, written raw behind ``client``'s header (what a
     broken or hostile peer can send); the reply comes to ``client``'s future."""
     future = ros.Future()
@@ -140,7 +146,7 @@ def _not_utf8_request(client, maneuver: bytes, theta0: float):
     text = struct.pack("<I", len(maneuver) + 1) + maneuver + b"\x00"
     text += bytes(-len(text) % 8)
     data = b"\x00\x01\x00\x00" + struct.pack("<Qq", client.guid, seq) + text
-    data += struct.pack("<d", theta0) + bytes(24)  # Simulate: empty inputs, real_time_factor 0
+    data += struct.pack("<d", theta0) + _TAILS[srv]
     assert ddspy_write(client._writer._ref, data) >= 0
     return future
 
@@ -154,7 +160,7 @@ def test_no_request_can_take_a_node_down(graph, probe, capfd, service, srv):
     srv_type = getattr(ros.srvs, srv)
     client = probe.create_client(srv_type, service)
     assert client.wait_for_service(timeout_sec=10.0)
-    future = _not_utf8_request(client, b"touch\xffdown", 0.1)
+    future = _not_utf8_request(client, b"touch\xffdown", 0.1, srv)
     done = threading.Event()
     future.add_done_callback(lambda _f: done.set())
     assert done.wait(30.0)

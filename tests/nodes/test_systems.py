@@ -166,7 +166,7 @@ def test_recorder_refuses_what_the_system_cannot_do(served, tmp_path):
     for change, start in (({"maneuver": "hop"}, "maneuver:"),
                           ({"fixed_inputs": (1.0,) * 9}, "fixed_inputs:"),
                           ({"system": "walker5"}, "system:"),
-                          ({"optimal": True}, "optimal sweeps are recorded for the biped")):
+                          ({"problem": maneuver}, "problem: given for a fixed-input sweep")):
         with pytest.raises(BipedOptError) as err:
             graph.recorder.record(SweepRequest(**{**base, **change}))
         assert str(err.value).startswith(start), err.value

@@ -164,3 +164,38 @@ def test_writer_refuses_system_states_in_a_biped_recording(tmp_path):
     with SweepWriter(tmp_path / "b.mcap") as w, pytest.raises(RecordError, match="biped"):
         w.write_system_states(maneuver="drop", s=0.0, samples=np.zeros((1, 10)), ndof=3,
                               stamp_offset_ns=0)
+
+
+def test_optimal_sweep_of_a_system_through_the_cli(tmp_path, capsys, monkeypatch, domain_id):
+    """``record --system walker3_coupled --optimal`` (the graph in-process): every SweepPoint
+    equals the core's optimum at its s, ``info`` shows the problem, ``report`` finds the
+    policy's kinks where the foot order changes at s = 0 (foot 3 first below, foot 1 above)."""
+    from biped_opt.systems.optimal import optimal_policy
+    from biped_opt.systems.problems import get_problem
+
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain_id))
+    path = tmp_path / "w.mcap"
+    assert main(["record", "--system", "walker3_coupled", "--maneuver", "touchdown",
+                 "--optimal", "--problem", "touchdown", "--theta0-min", "-0.1",
+                 "--theta0-max", "0.1", "--num", "11", "--out", str(path)]) == 0
+    capsys.readouterr()
+    sweep = load_sweep(path)
+    problem = get_problem("walker3_coupled", "touchdown")
+    assert sweep.optimal and list(sweep.policy) == ["u1", "u2", "u3"]
+    assert sweep.system_problem == json.loads(json.dumps(problem.as_dict()))
+    for k, s in enumerate(sweep.theta0):
+        core = optimal_policy(problem, s)
+        assert abs(sweep.value[k] - core.value) <= TOL
+        assert all(abs(sweep.policy[d][k] - core.policy[d]) <= TOL for d in sweep.policy)
+        assert sweep.mode_sequences[k] == core.modes
+    assert main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "optimal: True" in out and '"decisions": {"u1": [-0.5, 1.5]' in out
+    result = report([path], tmp_path / "rep")
+    assert "== walker3_coupled:touchdown (optimal)" in result.table
+    # the bracket is the recorded grid's neighbours of s = 0 (0.02 apart, to rounding)
+    kinks = {(p.point.quantity, p.point.input, p.point.kind, round(p.point.theta0, 12),
+              tuple(round(v, 12) for v in p.point.bracket))
+             for p in result.grid_points["optimal:walker3_coupled:touchdown"]}
+    assert {("policy", d, "kink", 0.0, (-0.02, 0.02)) for d in ("u1", "u3")} <= kinks
+    assert [f.name for f in result.figures] == ["walker3_coupled_touchdown_optimal.png"]

@@ -151,13 +151,16 @@ def test_service_wire_has_request_header(ifc):
     svc = ifc.services[f"{PKG}/srv/OptimalPolicy"]
     response = svc.Response(success=True, message="ok", policy=[1.0, 2.0], value=0.5,
                             mode_sequence=[1, 3], value_derivative=[0.1, 0.2],
-                            inputs=[1.0, 2.0, 0.0])
+                            inputs=[1.0, 2.0, 0.0], contact_modes=[1, 3, 70000],
+                            decision_names=["u1", "u_body"], system_inputs=[1.0, 2.0, 0.0, 4.0])
     data = bytes(svc.ResponseWire(body=response).serialize(use_version_2=False))
     ref = _rosbags(
         ifc, f"{PKG}/srv/OptimalPolicy_Response", success=True, message="ok",
         policy=np.array([1.0, 2.0]), value=0.5, outcome=0.0, t_final=0.0,
         mode_sequence=np.array([1, 3], dtype=np.uint8), event_times=np.zeros(0),
         value_derivative=np.array([0.1, 0.2]), inputs=np.array([1.0, 2.0, 0.0]),
+        contact_modes=np.array([1, 3, 70000], dtype=np.uint32),
+        decision_names=["u1", "u_body"], system_inputs=np.array([1.0, 2.0, 0.0, 4.0]),
     )
     plain = bytes(ts.serialize_cdr(ref, f"{PKG}/srv/OptimalPolicy_Response"))
     assert data == plain[:4] + bytes(16) + plain[4:]

@@ -42,7 +42,10 @@ def _cdr_string(text: bytes) -> bytes:
 
 
 def _body(maneuver: bytes, theta0: float) -> bytes:
-    return _cdr_string(maneuver) + struct.pack("<d", theta0)
+    """An OptimalPolicy request: maneuver, theta0, then system and problem both "" (each a
+    length of 1 and the NUL; the first padded to 4 for the second's length)."""
+    return (_cdr_string(maneuver) + struct.pack("<d", theta0)
+            + struct.pack("<I", 1) + bytes(4) + struct.pack("<I", 1) + bytes(1))
 
 
 def write_raw(writer, data: bytes) -> bool:
