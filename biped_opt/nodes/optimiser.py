@@ -89,10 +89,9 @@ def system_value_derivative(problem: Problem, result: SystemOptimalResult
     cannot be had (a grazing terminal event, a failed simulation)."""
     from biped_opt.systems.derivatives import outcome_gradient
     from biped_opt.systems.optimal import compiled_for
+    from biped_opt.systems.optimal_derivatives import cost_gradient
 
     compiled = compiled_for(problem)
-    system = problem.description
-    states = [*system.coordinate_names, *(str(v) for v in system.dq)]
     e_s = np.zeros(1 + len(compiled.inputs))
     e_s[0] = 1.0
     out = []
@@ -103,11 +102,7 @@ def system_value_derivative(problem: Problem, result: SystemOptimalResult
         except SimulationError:
             out.append(NAN)
             continue
-        slope = 2.0 * problem.outcome_weight * (g.outcome - problem.target) * g.gradient[0]
-        for name, weight, target in problem.final_state:
-            k = states.index(name)
-            slope += 2.0 * weight * (g.y_final[k] - target) * g.state_gradient[k, 0]
-        out.append(float(slope))
+        out.append(float(cost_gradient(problem, g, result.inputs)[0]))
     return out[0], out[1]
 
 
