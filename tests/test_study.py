@@ -143,8 +143,10 @@ def test_cli_runs_and_resumes(tmp_path: Path, capsys) -> None:
     out = tmp_path / "bar.csv"
     assert main(["study", str(spec), "--out", str(out), "--no-progress"]) == 0
     assert "1 parameter points, 1 computed now, 0 resumed, 5 rows" in capsys.readouterr().out
-    assert main(["study", str(spec), "--out", str(out), "--no-progress"]) == 0
+    assert main(["study", str(spec), "--out", str(out), "--no-progress", "--figures",
+                 str(tmp_path / "fig")]) == 0
     assert "0 computed now, 1 resumed" in capsys.readouterr().out
+    assert (tmp_path / "fig").is_dir()  # one parameter: no heat map, no optimal table
     assert json.loads(spec_path(out).read_text())["grid"] == {"gamma": [0.5]}
 
 

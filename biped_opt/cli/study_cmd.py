@@ -23,6 +23,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the table; if it exists with the same study, the run continues it")
     p.add_argument("--workers", type=int_at_least("--workers", 1), default=1,
                    help="local processes (default 1)")
+    p.add_argument("--figures", type=Path, default=None, metavar="DIR",
+                   help="draw the table's figures (heat maps over the first two parameters, "
+                        "policy switch locations) into DIR")
     p.add_argument("--progress", dest="progress", action="store_true", default=None,
                    help="draw a progress bar on stderr (default: when stderr is a terminal)")
     p.add_argument("--no-progress", dest="progress", action="store_false")
@@ -48,7 +51,11 @@ def run(args: argparse.Namespace) -> int:
     from biped_opt.optimal.sweep import Progress
     from biped_opt.record.study_table import run_study
 
+    from biped_opt.cli.args import output_directory
+
     study = load_study(args.spec)
+    if args.figures is not None:
+        output_directory("--figures", args.figures)
     bar = Progress(1, f"{study.name}", enabled=progress_from_args(args))
     with stop_requested() as stop:
         summary = run_study(study, args.out, workers=args.workers, progress=bar.update,
@@ -56,4 +63,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"{summary.path}: {summary.points} parameter points, {summary.computed} computed now, "
           f"{summary.resumed} resumed, {summary.rows} rows"
           + ("; stopped early, run again to continue" if summary.stopped else ""))
+    if args.figures is not None:
+        from biped_opt.plots.study import study_figures
+        from biped_opt.record.study_table import read_table
+
+        for path in study_figures(args.figures, read_table(args.out), study.parameter_names):
+            print(f"  {path}")
     return 0
