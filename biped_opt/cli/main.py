@@ -32,6 +32,7 @@ COMMAND_MODULES = (
     "replay_cmd",
     "report_cmd",
     "info_cmd",
+    "pieces_cmd",
 )
 
 EXIT_USAGE = 2
