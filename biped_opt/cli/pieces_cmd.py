@@ -10,6 +10,10 @@ from pathlib import Path
 from biped_opt import strict_json
 from biped_opt.cli.args import int_at_least, int_in_range, positive_float
 
+#: the exact derivatives are accurate to ~1e-10 (variational tolerance); a cone whose further
+#: direction misses g.d by more than this is cut into more than one linear piece
+LINEAR_TOL = 1e-8
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     from biped_opt.pieces import MAX_LEGS
@@ -81,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
 def _print(counts, derivatives, args, distinct_gradients) -> None:
     print(f"Pieces near simultaneous contact (radius {args.radius:g}, {args.samples} samples, "
           f"seed {args.seed}): distinct contact-mode sequences over k rounds\n")
-    print(f"{'n':>2} {'k':>2}  {'rounds':<28} {'heights':>8} {'+veloc.':>8} {'(n!)^k':>7}  "
+    print(f"{'n':>2} {'k':>2}  {'rounds':<30} {'heights':>8} {'+veloc.':>8} {'(n!)^k':>7}  "
           "boundaries confirmed")
     by_key = {(c.n, c.k, c.velocities): c for c in counts}
     for (n, k, velocities), c in by_key.items():
@@ -92,7 +96,7 @@ def _print(counts, derivatives, args, distinct_gradients) -> None:
         confirmed = f"{sum(c.confirmed.values())}/{c.count}"
         if both is not None:
             confirmed += f", {sum(both.confirmed.values())}/{both.count}"
-        print(f"{n:>2} {k:>2}  {rounds:<28} {c.count:>8} "
+        print(f"{n:>2} {k:>2}  {rounds:<30} {c.count:>8} "
               f"{both.count if both is not None else '-':>8} {c.bound:>7}  {confirmed}")
     for n in sorted({c.n for c in counts}):
         available = max(c.k for c in counts if c.n == n)
@@ -102,9 +106,13 @@ def _print(counts, derivatives, args, distinct_gradients) -> None:
         return
     print("\nB-derivative of the touchdown outcome (pitch at the nadir) at the simultaneous "
           "point, along the offsets:")
-    print(f"{'n':>2} {'orders':>6} {'distinct':>8}  {'max |exact - g.d|':>18} "
+    print(f"{'n':>2} {'orders':>6} {'linear':>6} {'distinct':>8}  {'max |exact - g.d|':>18} "
           f"{'max |exact - FD|':>17}")
     for n, ps in derivatives.items():
         lin = max(abs(p.exact - p.linear) for p in ps)
         fd = max(abs(p.exact - p.finite_difference) for p in ps)
-        print(f"{n:>2} {len(ps):>6} {distinct_gradients(ps):>8}  {lin:>18.2e} {fd:>17.2e}")
+        linear = sum(abs(p.exact - p.linear) <= LINEAR_TOL for p in ps)
+        print(f"{n:>2} {len(ps):>6} {linear:>6} {distinct_gradients(ps):>8}  {lin:>18.2e} "
+              f"{fd:>17.2e}")
+    print(f"  linear: orders whose cone is one linear piece (a further direction inside it "
+          f"agrees with g.d to {LINEAR_TOL:g})")

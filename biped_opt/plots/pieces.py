@@ -59,11 +59,11 @@ def pieces_figure(path: str | Path, counts: Sequence[Any],
         bx = axes[0][1]
         ns = sorted(derivative)
         bx.plot(ns, [math.factorial(n) for n in ns], "--", color="0.4", label="n!")
-        bx.plot(ns, [derivative[n] for n in ns], "o-", label="linear pieces measured")
+        bx.plot(ns, [derivative[n] for n in ns], "o-", label="distinct g over the n! order cones")
         bx.set_yscale("log")
         bx.set_xticks(ns)
         bx.set_xlabel("legs n")
-        bx.set_ylabel("linear pieces of the B-derivative")
+        bx.set_ylabel("linear pieces g . d of the B-derivative")
         bx.set_title("B-derivative at the simultaneous touchdown", fontsize=10)
         bx.legend(fontsize=7)
         bx.grid(True, which="both", alpha=0.3)
