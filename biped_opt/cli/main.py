@@ -33,6 +33,7 @@ COMMAND_MODULES = (
     "replay_cmd",
     "report_cmd",
     "info_cmd",
+    "pieces_cmd",
 )
 
 EXIT_USAGE = 2

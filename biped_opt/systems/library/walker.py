@@ -4,6 +4,18 @@ Hips at body-frame offsets s_i w, s_i evenly spaced in [-1, 1]; identical massle
 legs ending in point feet of mass mf; q = (x, z, th, x_1, z_1, ..., x_n, z_n). Input laws:
 ``coupled`` (the paper's: u_i acts iff leg i alone is on the ground, u_body iff all are) and
 ``decoupled`` (u_i acts iff foot i is on the ground, u_body never).
+
+``walker(n, offsets=True)`` adds the foot-offset family (SYSTEMS.md Sec. 3, paper Sec. V-B):
+parameters d1..dn and v1..vn (default 0) and a maneuver ``offsets`` that drops the level body
+(th = 0) from z = 1 with foot i raised by s d_i, its leg compressed by as much, and moving
+upward at s v_i (s is the maneuver's parameter, named th0 like the others'); at s = 0 every
+foot touches down at once, and the choice of the d_i selects any of the n! touchdown orders.
+``offsets`` ends at the body's nadir after touchdown. A walker dropped like that bounces
+(touchdown, liftoff, touchdown, ...); to follow k rounds of such events the variant also carries
+a clock, a coordinate ``clock`` of unit mass, no force and unit initial velocity (so clock = t),
+and a second maneuver ``rounds`` from the same states that ends when the clock reaches the
+parameter ``horizon``. The variant is opt-in, so the library's walkers (and the biped) keep
+their coordinates, parameters, maneuvers and generated code.
 """
 
 from __future__ import annotations
@@ -20,6 +32,8 @@ PARAMETERS = {"mb": 1.0, "Ib": 0.5, "mf": 1.0, "g": 1.0, "l0": 0.5, "w": 0.25, "
 #: initial body height of touchdown, leg compression of liftoff (MODEL.md Sec. 4)
 TOUCHDOWN_HEIGHT = 1
 LIFTOFF_COMPRESSION = sp.Rational(15, 100)
+#: default end time of the offsets variant's ``rounds`` maneuver
+OFFSETS_HORIZON = 2.0
 
 
 def hip_offsets(n: int) -> list[sp.Rational]:
@@ -30,9 +44,11 @@ def hip_offsets(n: int) -> list[sp.Rational]:
 
 
 def walker(n: int = 3, law: str = "coupled", *, name: str | None = None,
-           feet: list[str] | None = None, inputs: list[str] | None = None) -> System:
+           feet: list[str] | None = None, inputs: list[str] | None = None,
+           offsets: bool = False) -> System:
     """The n-leg walker with input law ``law``. ``feet`` and ``inputs`` rename the constraints
-    and the inputs (u_1..u_n, u_body by default): the biped is this walker with n = 2."""
+    and the inputs (u_1..u_n, u_body by default): the biped is this walker with n = 2.
+    ``offsets`` adds the foot-offset family (see the module docstring)."""
     if not isinstance(n, int) or n < 1:
         raise SystemDescriptionError(f"walker: n must be an integer >= 1, got {n!r}")
     if law not in LAWS:
@@ -40,21 +56,26 @@ def walker(n: int = 3, law: str = "coupled", *, name: str | None = None,
     feet = feet or [f"foot{i + 1}" for i in range(n)]
     inputs = inputs or [*(f"u{i + 1}" for i in range(n)), "u_body"]
     coords = ["x", "z", "th"] + [c for i in range(n) for c in (f"x{i + 1}", f"z{i + 1}")]
-    s = System(name or f"walker{n}_{law}", coords, parameters=PARAMETERS, inputs=inputs,
-               s="th0")
+    parameters = dict(PARAMETERS)
+    if offsets:
+        coords.append("clock")
+        parameters.update({f"{c}{i + 1}": 0.0 for c in "dv" for i in range(n)},
+                          horizon=OFFSETS_HORIZON)
+    s = System(name or f"walker{n}_{law}" + ("_offsets" if offsets else ""), coords,
+               parameters=parameters, inputs=inputs, s="th0")
     p, u = s.p, list(s.u)
     x, z, th = s.q[:3]
     dx, dz, dth = s.dq[:3]
-    s.mass_matrix = sp.diag(p.mb, p.mb, p.Ib, *([p.mf] * (2 * n)))
+    s.mass_matrix = sp.diag(p.mb, p.mb, p.Ib, *([p.mf] * (2 * n)), *([1] if offsets else []))
     s.restitution = p.gamma
-    offsets = hip_offsets(n)
+    hips = hip_offsets(n)
     for i, foot in enumerate(feet):
         s.constraint(foot, s.q[4 + 2 * i])
 
     def forces(J: frozenset[str]) -> list[sp.Expr]:
-        f = [sp.Integer(0)] * (3 + 2 * n)
+        f = [sp.Integer(0)] * len(coords)
         f[1] = -p.mb * p.g
-        for i, si in enumerate(offsets):
+        for i, si in enumerate(hips):
             rx, rz = si * p.w * sp.cos(th), si * p.w * sp.sin(th)
             ex, ez = x + rx - s.q[3 + 2 * i], z + rz - s.q[4 + 2 * i]
             vx = dx - rz * dth - s.dq[3 + 2 * i]
@@ -74,18 +95,31 @@ def walker(n: int = 3, law: str = "coupled", *, name: str | None = None,
 
     s.forces = forces
     body = {s.q[1]: TOUCHDOWN_HEIGHT, s.q[2]: s.s}
-    for i, si in enumerate(offsets):
+    for i, si in enumerate(hips):
         body[s.q[3 + 2 * i]] = si * p.w * sp.cos(s.s) + p.l0 * sp.sin(s.s)
         body[s.q[4 + 2 * i]] = TOUCHDOWN_HEIGHT + si * p.w * sp.sin(s.s) - p.l0 * sp.cos(s.s)
     s.maneuver("touchdown", initial=body, terminal=-dz, outcome=th, armed_after="touchdown",
                s_range=(-0.25, 0.25),
                description="fall from rest at z = 1 to the body's nadir after touchdown")
     stance = {s.q[1]: p.l0 - LIFTOFF_COMPRESSION, s.q[2]: s.s}
-    for i, si in enumerate(offsets):
+    for i, si in enumerate(hips):
         stance[s.q[3 + 2 * i]] = si * p.w * sp.cos(s.s)
     s.maneuver("liftoff", initial=stance, mode=feet, terminal=dz, outcome=th, final_mode=(),
                s_range=(-0.3, 0.3),
                description="push off from rest on all feet to the body's apex in the air")
+    if offsets:
+        raised = {s.q[1]: TOUCHDOWN_HEIGHT, s.dq[-1]: 1}
+        for i, si in enumerate(hips):
+            raised[s.q[3 + 2 * i]] = si * p.w
+            raised[s.q[4 + 2 * i]] = TOUCHDOWN_HEIGHT - p.l0 + s.s * p[f"d{i + 1}"]
+            raised[s.dq[4 + 2 * i]] = s.s * p[f"v{i + 1}"]
+        s.maneuver("offsets", initial=raised, terminal=-dz, outcome=th, armed_after="touchdown",
+                   s_range=(-0.1, 0.1),
+                   description="fall from z = 1, level, foot i raised by th0 d_i and rising at "
+                               "th0 v_i, to the body's nadir after touchdown")
+        s.maneuver("rounds", initial=raised, terminal=p.horizon - s.q[-1], outcome=th,
+                   s_range=(-0.1, 0.1),
+                   description="the same fall, bouncing on until t = horizon")
     _problems(s, feet, [str(v) for v in u])
     return s
 

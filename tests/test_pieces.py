@@ -1,0 +1,160 @@
+"""The count of smooth pieces near simultaneous contact (paper Sec. V-B) for n = 1, 2 legs.
+
+The counts are exact integers for a fixed seed; the sampled neighbourhoods are large enough
+(200 samples) that every piece holds at least 5 of them (the smallest n = 2 pieces cover about
+5 % of the directions), so the counts do not hinge on one sample. Derivative tolerances are
+stated where they are used.
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from biped_opt.cli.main import main
+from biped_opt.errors import InvalidInputError
+from biped_opt.pieces import (
+    count_pieces,
+    derivative_pieces,
+    distinct_gradients,
+    leg_inputs,
+    offsets_walker,
+    simultaneous_rounds,
+)
+from biped_opt.plots.pieces import pieces_figure
+from biped_opt.systems import walker
+from biped_opt.systems.compiled import compile_system
+from biped_opt.systems.library import biped
+
+
+def test_the_offsets_variant_is_opt_in():
+    """The library's walkers and the biped keep their coordinates, parameters and maneuvers."""
+    for system in (walker(2), biped()):
+        assert "clock" not in system.coordinate_names and "d1" not in system.defaults
+        assert list(system.maneuvers) == ["touchdown", "liftoff"]
+    variant = walker(2, offsets=True)
+    assert variant.name == "walker2_coupled_offsets"
+    assert list(variant.maneuvers) == ["touchdown", "liftoff", "offsets", "rounds"]
+    assert {k: variant.defaults[k] for k in ("d1", "d2", "v1", "v2")} == dict.fromkeys(
+        ("d1", "d2", "v1", "v2"), 0.0)
+
+
+def test_at_zero_offsets_it_is_the_level_touchdown():
+    """At s = 0 the offsets maneuver starts where the touchdown maneuver does at th0 = 0 (level
+    body, legs vertical at rest length): same outcome and final time. The clock only adds a
+    component to the step-size control, so they agree to integration accuracy (1e-9), not
+    to rounding."""
+    inputs = leg_inputs(2)
+    plain = compile_system("walker2_coupled").simulate("touchdown", 0.0, inputs)
+    variant = offsets_walker(2)
+    variant.set_parameters(d1=0.3, d2=-0.2)  # no effect at s = 0
+    mine = variant.simulate("offsets", 0.0, inputs)
+    assert plain.success and mine.success
+    assert mine.t_final == pytest.approx(plain.t_final, abs=1e-9)
+    assert mine.outcome == pytest.approx(plain.outcome, abs=1e-9)
+    clock = mine.y_final[len(mine.y_final) // 2 - 1]  # the last coordinate
+    assert clock == pytest.approx(mine.t_final, abs=1e-12)
+    variant.set_parameters()
+
+
+def test_rounds_of_the_unperturbed_walker():
+    """The dropped walker lands at t = 1 (a fall of z - l0 = 0.5 under g = 1: t = sqrt(2 * 0.5)),
+    bounces and lands again; the one-leg walker's second landing is inconsistent (its stretched
+    leg pulls the landing foot up), so it has two rounds."""
+    two = simultaneous_rounds(2)
+    assert [r.kind for r in two] == ["touchdown", "liftoff", "touchdown"]
+    assert two[0].t == pytest.approx(1.0, abs=1e-12)
+    one = simultaneous_rounds(1)
+    assert [r.kind for r in one] == ["touchdown", "liftoff"]
+    assert one[0].t == pytest.approx(1.0, abs=1e-12)
+    with pytest.raises(InvalidInputError, match="2 simultaneous rounds"):
+        count_pieces(1, 3)
+
+
+@pytest.mark.parametrize(("n", "velocities", "expected"), [
+    (1, False, [1, 1]), (1, True, [1, 1]),
+    (2, False, [2, 2, 2]), (2, True, [2, 4, 4])])
+def test_piece_counts(n, velocities, expected):
+    """n = 1: one piece. n = 2, heights only: the pieces are the two touchdown orders for every
+    k (one number, d2 - d1, decides every round); with the feet's velocities too the liftoff
+    order of round 2 is free, 2 x 2 = 4 = (2!)^2, and round 3 adds none (4 < 8). Every piece's
+    boundary is confirmed at a tie of two events."""
+    rounds = simultaneous_rounds(n)
+    for k, want in enumerate(expected, start=1):
+        c = count_pieces(n, k, samples=200, seed=0, velocities=velocities, rounds=rounds)
+        assert c.count == want, (k, c.pieces)
+        assert c.bound == math.factorial(n) ** k
+        assert all(c.confirmed.values()), c.tie_gap
+        assert min(c.pieces.values()) >= 5  # each piece sampled several times
+    first = count_pieces(n, 1, samples=200, seed=0, rounds=rounds)
+    if n == 2:
+        assert set(first.pieces) == {"air->foot1->foot1+foot2", "air->foot2->foot1+foot2"}
+
+
+def test_counts_are_reproducible_from_the_seed():
+    a = count_pieces(2, 2, samples=60, seed=7, velocities=True).as_dict()
+    b = count_pieces(2, 2, samples=60, seed=7, velocities=True).as_dict()
+    assert a == b
+
+
+def test_bad_arguments_are_one_clear_error():
+    with pytest.raises(InvalidInputError, match="n must be an integer in 1..4"):
+        count_pieces(5, 1)
+    with pytest.raises(InvalidInputError, match="k must be an integer >= 1"):
+        count_pieces(2, 0)
+    with pytest.raises(InvalidInputError, match="radius"):
+        count_pieces(2, 1, radius=0.5)
+
+
+def test_linear_pieces_of_the_b_derivative_two_legs():
+    """One linear piece per touchdown order, and they differ (the first foot down pushes alone
+    for a time proportional to the offsets: force coupling). Each is linear to the accuracy of
+    the exact derivatives (1e-8: the variational equation's tolerance), agrees with extrapolated
+    difference quotients to 1e-6 (their own error estimate is ~1e-9, the integrator's 1e-10
+    relative error divided by h ~ 1e-4 limits them), and vanishes on the common raise (1, 1),
+    which keeps the motion symmetric and the pitch 0."""
+    pieces = derivative_pieces(2, seed=0)
+    assert [p.order for p in pieces] == [(1, 2), (2, 1)]
+    assert distinct_gradients(pieces) == 2
+    assert abs(pieces[0].gradient[0] - pieces[1].gradient[0]) > 0.1
+    for p in pieces:
+        assert p.exact == pytest.approx(p.linear, abs=1e-8)
+        assert p.exact == pytest.approx(p.finite_difference, abs=1e-6)
+        assert p.gradient @ np.ones(2) == pytest.approx(0.0, abs=1e-8)
+
+
+def test_cli_table_figure_and_json(tmp_path, capsys):
+    figure = tmp_path / "pieces.png"
+    assert main(["pieces", "--legs", "1", "2", "--rounds", "3", "--samples", "40",
+                 "--no-derivative", "--figure", str(figure)]) == 0
+    out = capsys.readouterr().out
+    assert " 2  2  touchdown, liftoff" in out and "n = 1: the unperturbed walker has 2" in out
+    assert figure.stat().st_size > 10_000
+    assert main(["pieces", "--legs", "2", "--rounds", "1", "--samples", "20", "--json"]) == 0
+    import json
+
+    data = json.loads(capsys.readouterr().out)
+    assert [c["count"] for c in data["counts"]] == [2, 2]
+    assert [d["order"] for d in data["derivative"]["2"]] == [[1, 2], [2, 1]]
+
+
+def test_cli_bad_input_is_one_line():
+    done = subprocess.run([sys.executable, "-m", "biped_opt.cli.main", "pieces", "--legs", "5"],
+                          capture_output=True, text=True, check=False)
+    assert done.returncode == 2
+    assert done.stderr.strip().count("\n") == 0 and "--legs must be between 1 and 4" in done.stderr
+
+
+def test_figure_from_plain_records(tmp_path):
+    rows = [SimpleNamespace(n=n, k=k, count=c, velocities=v)
+            for n, k, c, v in [(2, 1, 2, False), (2, 2, 2, False), (2, 2, 4, True),
+                               (3, 1, 6, False)]]
+    path = pieces_figure(tmp_path / "p.png", rows, {2: 2, 3: 6})
+    assert path.stat().st_size > 10_000
+    with pytest.raises(InvalidInputError, match="no counts"):
+        pieces_figure(tmp_path / "q.png", [])
