@@ -46,12 +46,11 @@ def load_study(path: Path):
 
 
 def run(args: argparse.Namespace) -> int:
+    from biped_opt.cli.args import output_directory
     from biped_opt.cli.signals import stop_requested
     from biped_opt.cli.sweep_cmd import progress_from_args
     from biped_opt.optimal.sweep import Progress
     from biped_opt.record.study_table import run_study
-
-    from biped_opt.cli.args import output_directory
 
     study = load_study(args.spec)
     if args.figures is not None:
