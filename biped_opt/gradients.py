@@ -162,15 +162,21 @@ class Objective:
                 y[:, i] += sign * h[i]
                 shifted.append(y)
         c = self.values(np.vstack(shifted)).reshape(1 + 2 * m, k)
-        forward = (c[1::2] - c[0]) / h[:, None]
-        backward = (c[0] - c[2::2]) / h[:, None]
-        grads = (0.5 * (forward + backward)).T
-        scale = np.maximum(np.abs(forward), np.abs(backward))
-        bad = np.any(~np.isfinite(scale) | (np.abs(forward - backward) >
-                                            STRADDLE_RTOL * scale + STRADDLE_ATOL), axis=0)
-        for j in np.flatnonzero(bad):
-            grads[j] = self.gradient(x[j])
-        return grads, int(bad.sum())
+        with np.errstate(invalid="ignore"):
+            forward = (c[1::2] - c[0]) / h[:, None]
+            backward = (c[0] - c[2::2]) / h[:, None]
+            grads = (0.5 * (forward + backward)).T
+            scale = np.maximum(np.abs(forward), np.abs(backward))
+            bad = np.any(~np.isfinite(scale) | (np.abs(forward - backward) >
+                                                STRADDLE_RTOL * scale + STRADDLE_ATOL), axis=0)
+        failed = ~np.isfinite(c[0])
+        grads[failed] = np.nan  # the maneuver fails at the row itself: no derivative
+        for j in np.flatnonzero(bad & ~failed):
+            try:
+                grads[j] = self.gradient(x[j])
+            except SimulationError:
+                grads[j] = np.nan
+        return grads, int((bad & ~failed).sum())
 
 
 def find_switches(objective: Objective, x: npt.ArrayLike, axis: int, *, num: int = 401,
@@ -205,6 +211,7 @@ def zeroth_order_terms(objective: Objective, x: npt.ArrayLike, sigma: float, w: 
     baseline c(x) leaves it unbiased and lowers its variance)."""
     x = np.asarray(x, dtype=np.float64).ravel()
     c = objective.values(np.vstack([x, x + sigma * w]))
+    c[~np.isfinite(c)] = np.nan  # a draw whose maneuver fails gives no term
     return (c[1:] - c[0])[:, None] * w / sigma
 
 
@@ -247,6 +254,7 @@ class EstimatorStats:
     bias_se: float
     sample_std: float
     exact_calls: int = 0
+    failed: int = 0  #: draws whose maneuver failed (left out of the statistics)
 
     def std(self, n: int) -> float:
         return self.sample_std / math.sqrt(n)
@@ -260,12 +268,15 @@ def estimator_stats(objective: Objective, x: npt.ArrayLike, sigma: float, refere
     for name, terms_of in (("zeroth", zeroth_order_terms), ("first", first_order_terms)):
         before = objective.ngrad
         terms = terms_of(objective, x, sigma, w)
-        spread = float(math.sqrt(np.sum(np.var(terms, axis=0, ddof=1))))
+        ok = np.all(np.isfinite(terms), axis=1)
+        terms = terms[ok]
+        spread = float(math.sqrt(np.sum(np.var(terms, axis=0, ddof=1)))) if ok.sum() > 1 \
+            else math.nan
         out.append(EstimatorStats(
             estimator=name, sigma=sigma,
-            bias=float(np.linalg.norm(terms.mean(axis=0) - reference)),
-            bias_se=spread / math.sqrt(samples), sample_std=spread,
-            exact_calls=objective.ngrad - before))
+            bias=float(np.linalg.norm(terms.mean(axis=0) - reference)) if ok.any() else math.nan,
+            bias_se=spread / math.sqrt(max(int(ok.sum()), 1)), sample_std=spread,
+            exact_calls=objective.ngrad - before, failed=int((~ok).sum())))
     return out
 
 
@@ -404,7 +415,8 @@ def policy_gradient_descent(objective: Objective, start: npt.ArrayLike, estimato
     tail = []
     for k in range(1, iterations + 1):
         g = terms_of(objective, x, sigma, rng.standard_normal((samples, objective.m)))
-        g = g.mean(axis=0) * objective.width
+        g = g[np.all(np.isfinite(g), axis=1)]  # draws whose maneuver failed are left out
+        g = (g.mean(axis=0) if len(g) else np.zeros(objective.m)) * objective.width
         norm = float(np.linalg.norm(g))
         if norm > 0 and math.isfinite(norm):
             x = _project(objective, x - rate / math.sqrt(k) * objective.width * g / norm)
@@ -547,7 +559,6 @@ def run_study(*, seed: int = 0, quick: bool = False, problems: Sequence[str] | N
               progress: Callable[[str], None] | None = None) -> Study:
     """The gradient study (module docstring) on the study problems; ``quick`` shrinks every
     grid (for ``make demo`` and tests). Reproducible: all draws come from ``seed``."""
-    rng = np.random.default_rng(seed)
     say = progress or (lambda _msg: None)
     study = Study(seed=seed, quick=quick)
     per_axis = {1: 3, 2: 2} if quick else {1: 7, 2: 4}
@@ -555,6 +566,8 @@ def run_study(*, seed: int = 0, quick: bool = False, problems: Sequence[str] | N
     pg_iterations = 30 if quick else 60
     for problem, s_est, s_values in study_problems(problems):
         name = problem.name.split(":")[-1]
+        # one stream per problem: its numbers do not depend on which others are studied
+        rng = np.random.default_rng([seed, [p[1] for p in PROBLEMS].index(name)])
         s_values = s_values[1::2] if quick else s_values
         say(f"{name}: optima")
         study.optimum[name] = {s: optimal_policy(problem, s).value for s in (*s_values, s_est)}
@@ -629,8 +642,8 @@ def report(study: Study, sample_counts: Sequence[int] = (4, 64)) -> str:
              "estimators of D J_sigma (sigma relative to the decision's bound interval; bias = "
              "|mean - D J_sigma| +- its standard error; std of the N-sample estimate)", "",
              "| problem | point | sigma | D J_sigma | estimator | bias | "
-             + " | ".join(f"std N={n}" for n in sample_counts) + " | exact calls |",
-             "|---|---|---|---|---|---|" + "---|" * len(sample_counts) + "---|"]
+             + " | ".join(f"std N={n}" for n in sample_counts) + " | exact calls | failed |",
+             "|---|---|---|---|---|---|" + "---|" * len(sample_counts) + "---|---|"]
     for name, by_point in study.stats.items():
         for label, stats in by_point.items():
             x = study.points[name][label]
@@ -642,7 +655,7 @@ def report(study: Study, sample_counts: Sequence[int] = (4, 64)) -> str:
                     f"{', '.join(f'{v:.4g}' for v in ref)} (+-{err:.1g}) | {e.estimator} | "
                     f"{e.bias:.3g} +- {e.bias_se:.2g} | "
                     + " | ".join(f"{e.std(n):.3g}" for n in sample_counts)
-                    + f" | {e.exact_calls} |")
+                    + f" | {e.exact_calls} | {e.failed} |")
     lines += ["", "descent from a grid of starts and s (reached: final cost within "
               f"{VALUE_TOL:g} of the global optimum)", "",
               "| problem | method | runs | reached | median iterations | failures (count) |",
