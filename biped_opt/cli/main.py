@@ -26,6 +26,7 @@ COMMAND_MODULES = (
     "optimise_cmd",
     "sweep_cmd",
     "nonsmooth_cmd",
+    "gradients_cmd",
     "figures_cmd",
     "study_cmd",
     "node_cmd",

@@ -1,0 +1,162 @@
+"""The gradient study's estimators, descent and smoothed model (biped_opt.gradients)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from biped_opt.cli.main import main
+from biped_opt.errors import InvalidInputError
+from biped_opt.gradients import (
+    Objective,
+    descend,
+    estimator_stats,
+    find_switches,
+    first_order_terms,
+    smooth_problem,
+    smoothed_gradient,
+    zeroth_order_terms,
+)
+from biped_opt.systems.optimal import compiled_for, optimal_policy
+from biped_opt.systems.problems import get_problem
+
+SIGMA = 0.2
+
+
+class Analytic(Objective):
+    """An objective with a closed-form cost on the box [-1, 1]^2 (the study's machinery, a known
+    answer): c(x, y) = x^3 + sin(y) + x y + jump * [x > 0]."""
+
+    def __init__(self, jump: float = 0.0) -> None:
+        self.lo, self.hi = np.array([-1.0, -1.0]), np.array([1.0, 1.0])
+        self.width = self.hi - self.lo
+        self.cols = [0, 1]
+        self.jump, self.nsim, self.ngrad, self.s = jump, 0, 0, 0.0
+
+    def values(self, x):
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        self.nsim += len(x)
+        return x[:, 0] ** 3 + np.sin(x[:, 1]) + x[:, 0] * x[:, 1] + self.jump * (x[:, 0] > 0)
+
+    def gradient(self, x, direction=None):
+        self.ngrad += 1
+        a, b = np.asarray(x, dtype=float).ravel()
+        return np.array([3 * a * a + b, math.cos(b) + a])
+
+    def branches(self, x):
+        return ["right" if v > 0 else "left" for v in np.atleast_2d(x)[:, 0]]
+
+    def smoothed(self, x, sigma):
+        """D J_sigma in closed form: E over w ~ N(0, I) of D c(x + sigma w), plus the jump's
+        term jump * pdf(x / sigma) / sigma in the first component."""
+        a, b = x
+        pdf = math.exp(-0.5 * (a / sigma) ** 2) / math.sqrt(2 * math.pi)
+        return np.array([3 * a * a + 3 * sigma ** 2 + b + self.jump * pdf / sigma,
+                         math.cos(b) * math.exp(-0.5 * sigma ** 2) + a])
+
+
+@pytest.mark.parametrize("point", [(0.3, -0.4), (-0.5, 0.7)])
+def test_quadrature_reference_matches_closed_form(point):
+    objective = Analytic()
+    ref, err = smoothed_gradient(objective, point, SIGMA)
+    # a smooth Gaussian-weighted integrand: the trapezoidal rule on 241^2 points is accurate to
+    # ~1e-8 (its own estimate, fine vs coarse, is below 1e-7); what is left is the truncation
+    # of w at +-6, where the cubic's w^4 pdf(w) tail holds ~1e-7: tolerance 1e-6
+    np.testing.assert_allclose(ref, objective.smoothed(point, SIGMA), atol=1e-6)
+    assert err < 1e-7
+
+
+@pytest.mark.parametrize("estimator", [zeroth_order_terms, first_order_terms])
+def test_estimators_unbiased_on_smooth_cost(estimator):
+    objective = Analytic()
+    rng = np.random.default_rng(1)
+    x = np.array([0.3, -0.4])
+    terms = estimator(objective, x, SIGMA, rng.standard_normal((40000, 2)))
+    mean, se = terms.mean(axis=0), terms.std(axis=0, ddof=1) / math.sqrt(len(terms))
+    truth = objective.smoothed(x, SIGMA)
+    # unbiased: the mean is within 4 standard errors of D J_sigma (a false alarm has chance
+    # ~6e-5 per component); the standard errors are small (< 0.01) so this is a real check
+    assert np.all(se < 0.01)
+    assert np.all(np.abs(mean - truth) < 4 * se), (mean, truth, se)
+    # the per-sample derivatives are the analytic ones to the difference quotient's accuracy
+    if estimator is first_order_terms:
+        w = rng.standard_normal((50, 2))
+        exact = np.array([objective.gradient(x + SIGMA * v) for v in w])
+        np.testing.assert_allclose(estimator(objective, x, SIGMA, w), exact, atol=1e-6)
+
+
+def test_first_order_estimator_misses_a_jump():
+    """Near a jump the reparameterised estimator is biased by the jump's term (Suh et al.);
+    the score-function estimator is not."""
+    objective = Analytic(jump=0.5)
+    x = np.array([0.05, 0.2])
+    truth = objective.smoothed(x, SIGMA)
+    stats = {e.estimator: e for e in estimator_stats(objective, x, SIGMA, truth,
+                                                     np.random.default_rng(2), 40000)}
+    missing = 0.5 * math.exp(-0.5 * (0.05 / SIGMA) ** 2) / math.sqrt(2 * math.pi) / SIGMA
+    # first order: bias = the jump's term (0.966) to within 4 standard errors
+    assert abs(stats["first"].bias - missing) < 4 * stats["first"].bias_se + 1e-6
+    assert missing > 100 * stats["first"].bias_se
+    # zeroth order: no bias beyond 4 standard errors (2-norm over 2 components)
+    assert stats["zeroth"].bias < 4 * stats["zeroth"].bias_se
+    # the exact derivative is used only where the quotients disagree (a sample within the step
+    # of the jump, or a component whose gradient is near 0): at most 0.1% of the samples
+    assert stats["first"].exact_calls <= 40
+
+
+@pytest.fixture(scope="module")
+def liftoff():
+    return Objective(get_problem("biped", "liftoff"), 0.01)
+
+
+def test_pathwise_gradient_matches_exact_derivative(liftoff):
+    x = np.array([[0.2], [-0.3], [0.06]])
+    grads, fallback = liftoff.pathwise_gradients(x)
+    assert fallback == 0
+    exact = np.array([liftoff.gradient(row) for row in x])
+    # difference quotients of step 1e-7 on a cost integrated to rtol ~1e-11: agree with the
+    # variational (exact) derivative to 1e-3 relative (its own finite-difference columns are
+    # accurate to ~1e-6)
+    np.testing.assert_allclose(grads, exact, rtol=1e-3, atol=1e-9)
+
+
+def test_liftoff_switch_and_descent_stall(liftoff):
+    """The liftoff cost at s = 0.01 jumps where the feet lift off together (u12 ~ -0.106):
+    exact-gradient descent started left of it stops there; started right of it, it reaches the
+    global optimum."""
+    switches = find_switches(liftoff, [0.0], 0)
+    assert len(switches) == 1 and -0.12 < switches[0] < -0.09
+    left, right = liftoff.values([[switches[0] - 1e-6], [switches[0] + 1e-6]])
+    assert right - left > 1e-4  # a jump up, not a kink (the scan's jump is 7.5e-4)
+    best = optimal_policy(liftoff.problem, liftoff.s)
+    stuck = descend(liftoff, [-0.4], "exact", best.value)
+    assert not stuck.reached
+    assert stuck.stop.endswith("at a switch")
+    assert abs(stuck.end[0] - switches[0]) < 1e-4
+    good = descend(liftoff, [0.25], "exact", best.value)
+    assert good.reached and abs(good.end[0] - best.policy["u12"]) < 1e-3
+    assert good.stop == "converged, on a smooth piece"
+
+
+def test_smoothed_model_removes_the_liftoff_jump():
+    exact = get_problem("biped", "liftoff")
+    smooth = smooth_problem(exact, 0.02)
+    u = exact.inputs({"u12": 0.0})
+    ce, cs = compiled_for(exact), compiled_for(smooth)
+    o_exact = [ce.simulate("liftoff", s, u).outcome for s in (-1e-6, 1e-6)]
+    o_smooth = [cs.simulate("liftoff", s, u).outcome for s in (-1e-6, 1e-6)]
+    # the real model jumps by 0.033 across s = 0 (+0.0263 | -0.0065); the smoothed one changes
+    # by its slope (~0.4) times 2e-6
+    assert abs(o_exact[1] - o_exact[0]) > 0.01
+    assert abs(o_smooth[1] - o_smooth[0]) < 1e-4
+    with pytest.raises(InvalidInputError):
+        smooth_problem(exact, -1.0)
+
+
+def test_cli_rejects_unknown_problem(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["gradients", "--problem", "nope"])
+    assert exc.value.code == 2
+    assert "invalid choice" in capsys.readouterr().err
