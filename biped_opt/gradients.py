@@ -54,11 +54,11 @@ from biped_opt.systems.optimal_derivatives import cost_gradient
 from biped_opt.systems.problems import Problem, get_problem
 
 __all__ = [
-    "Objective", "DescentRun", "EstimatorStats", "SmoothingResult", "Study", "VALUE_TOL",
+    "Objective", "DescentRun", "EstimatorStats", "SmoothingResult", "GradientStudy", "VALUE_TOL",
     "zeroth_order_terms", "first_order_terms", "smoothed_gradient", "estimator_stats",
     "descend", "where_stopped", "policy_gradient_descent", "find_switches", "study_problems",
     "smooth_problem",
-    "run_study", "report",
+    "run_gradient_study", "report",
 ]
 
 Array = npt.NDArray[np.float64]
@@ -495,7 +495,7 @@ def study_problems(names: Sequence[str] | None = None) -> list[tuple[Problem, fl
 
 
 @dataclass
-class Study:
+class GradientStudy:
     """Everything one run of the study measured, per problem name."""
 
     seed: int
@@ -553,14 +553,16 @@ def _starts(objective: Objective, per_axis: int) -> Array:
     return np.array(list(itertools.product(*axes)))
 
 
-def run_study(*, seed: int = 0, quick: bool = False, problems: Sequence[str] | None = None,
-              sigmas: Sequence[float] = (0.003, 0.03), sample_counts: Sequence[int] = (4, 64),
-              eps_values: Sequence[float] = (0.02, 0.002),
-              progress: Callable[[str], None] | None = None) -> Study:
+def run_gradient_study(*, seed: int = 0, quick: bool = False,
+                       problems: Sequence[str] | None = None,
+                       sigmas: Sequence[float] = (0.003, 0.03),
+                       sample_counts: Sequence[int] = (4, 64),
+                       eps_values: Sequence[float] = (0.02, 0.002),
+                       progress: Callable[[str], None] | None = None) -> GradientStudy:
     """The gradient study (module docstring) on the study problems; ``quick`` shrinks every
     grid (for ``make demo`` and tests). Reproducible: all draws come from ``seed``."""
     say = progress or (lambda _msg: None)
-    study = Study(seed=seed, quick=quick)
+    study = GradientStudy(seed=seed, quick=quick)
     per_axis = {1: 3, 2: 2} if quick else {1: 7, 2: 4}
     samples = 2000 if quick else 20000
     pg_iterations = 30 if quick else 60
@@ -636,7 +638,7 @@ def run_study(*, seed: int = 0, quick: bool = False, problems: Sequence[str] | N
 
 
 # --- text -------------------------------------------------------------------------------------
-def report(study: Study, sample_counts: Sequence[int] = (4, 64)) -> str:
+def report(study: GradientStudy, sample_counts: Sequence[int] = (4, 64)) -> str:
     """The study's three tables as Markdown text."""
     lines = [f"gradient study, seed {study.seed}{' (quick)' if study.quick else ''}", "",
              "estimators of D J_sigma (sigma relative to the decision's bound interval; bias = "

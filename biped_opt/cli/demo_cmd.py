@@ -74,6 +74,7 @@ def run(args: argparse.Namespace) -> int:
     print(result.table())
     experiment = control_experiment(args.out / "figures")
     piece_counts()
+    gradient_methods(args.out / "figures")
     print("\nSummary")
     for s in recorded:
         print(f"  {s.path}  {sum(s.counts.values())} messages, {s.failed} failed points")
@@ -138,3 +139,19 @@ def piece_counts() -> None:
                 what = "heights + velocities" if velocities else "foot heights"
                 print(f"  n = {n}, k = {k}, {what:20s}: {c.count} pieces "
                       f"({sum(c.confirmed.values())} confirmed by bisection), (n!)^k = {c.bound}")
+
+
+def gradient_methods(folder: Path) -> None:
+    """Paper Sec. V-A, small: gradient methods on the liftoff problem, whose cost jumps in u12
+    (``biped-opt gradients`` runs every problem, larger)."""
+    from biped_opt.cli.gradients_cmd import EPS_VALUES, SAMPLE_COUNTS, SIGMAS
+    from biped_opt.gradients import report, run_gradient_study
+    from biped_opt.plots.gradients import gradient_figure
+
+    print("\nGradient methods at a jump of the liftoff cost (biped-opt gradients --quick "
+          "--problem liftoff, seed 0)\n", flush=True)
+    study = run_gradient_study(seed=0, quick=True, problems=["liftoff"], sigmas=SIGMAS,
+                               sample_counts=SAMPLE_COUNTS, eps_values=EPS_VALUES)
+    print(report(study, SAMPLE_COUNTS))
+    for name in study.curves:
+        print(f"  {gradient_figure(study, name, folder / f'gradients_{name}.png')}")

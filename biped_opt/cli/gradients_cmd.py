@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from biped_opt import strict_json
-from biped_opt.gradients import PROBLEMS, report, run_study
+from biped_opt.gradients import PROBLEMS, report, run_gradient_study
 
 SIGMAS = (0.003, 0.03)
 SAMPLE_COUNTS = (4, 64)
@@ -33,9 +33,9 @@ def run(args: argparse.Namespace) -> int:
     def say(message: str) -> None:
         print(message, file=sys.stderr, flush=True)
 
-    study = run_study(seed=args.seed, quick=args.quick, problems=args.problem, sigmas=SIGMAS,
-                      sample_counts=SAMPLE_COUNTS, eps_values=EPS_VALUES,
-                      progress=say if args.verbose else None)
+    study = run_gradient_study(seed=args.seed, quick=args.quick, problems=args.problem,
+                               sigmas=SIGMAS, sample_counts=SAMPLE_COUNTS,
+                               eps_values=EPS_VALUES, progress=say if args.verbose else None)
     if args.json:
         print(strict_json.dumps(study.as_dict()))
     else:

@@ -35,7 +35,7 @@ def smoothed_curve(u: np.ndarray, cost: np.ndarray, sigma: float) -> np.ndarray:
 
 
 def gradient_figure(study: Any, name: str, path: str | Path) -> Path:
-    """The figure of problem ``name`` of a :class:`biped_opt.gradients.Study`."""
+    """The figure of problem ``name`` of a :class:`biped_opt.gradients.GradientStudy`."""
     curve = study.curves[name]
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
     ax = axes[0]
