@@ -44,6 +44,7 @@ setup(
             "simulator = biped_opt.nodes.simulator:main",
             "optimiser = biped_opt.nodes.optimiser:main",
             "recorder = biped_opt.nodes.recorder:main",
+            "coordinator = biped_opt.nodes.coordinator:main",
         ],
     },
 )

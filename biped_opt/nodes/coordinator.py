@@ -23,24 +23,25 @@ it after the items under way), and :meth:`StudyCoordinator.run_study` runs one f
 from __future__ import annotations
 
 import collections
+import contextlib
 import dataclasses
 import json
 import math
 import queue
 import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
 from biped_opt import ros
 from biped_opt.errors import BipedOptError, InvalidParameterError
 from biped_opt.nodes.run import announce_ready
-from biped_opt.record.study_table import StudySummary, StudyTable
+from biped_opt.record.study_table import StudySummary, StudyTable, spec_path
 from biped_opt.study import Study, StudyRow
 
 __all__ = ["StudyCoordinator", "StudyFailedError", "WORK_ITEM_TYPE", "encode_rows",
-           "decode_rows", "main"]
+           "decode_rows", "coordinator_on_domain", "run_on_domain", "main"]
 
 #: the ROS type of the work-item services the coordinator looks for
 WORK_ITEM_TYPE = "biped_opt_interfaces/srv/StudyPoint"
@@ -102,8 +103,14 @@ class StudyCoordinator(ros.Node):
         #: points each work-item service computed for the table
         self.dispatches: collections.Counter[int] = collections.Counter()
         self.served: dict[str, list[int]] = {}
-        self._action: Any = None
-        announce_ready(self, calls=("~/study/* of the optimiser nodes",))
+        #: the compute time the nodes reported for the points written [s]
+        self.node_seconds = 0.0
+        self._action: Any = ros.ActionServer(
+            self, ros.actions.Study, "/biped/study", self._execute,
+            goal_callback=self._on_goal, cancel_callback=lambda _: ros.CancelResponse.ACCEPT,
+            callback_group=self._group)
+        announce_ready(self, serves=("/biped/study",),
+                       calls=("~/study/* of the optimiser nodes",))
 
     def workers(self) -> list[str]:
         """The work-item services on the domain now."""
@@ -123,6 +130,52 @@ class StudyCoordinator(ros.Node):
             return _Run(self, study, path, progress, stop).run()
         finally:
             self._busy.release()
+
+    # -- the action ----------------------------------------------------------------------------
+    def _on_goal(self, goal: Any) -> Any:
+        if self._busy.locked():
+            self.get_logger().warning("rejected a study goal: a study is running")
+            return ros.GoalResponse.REJECT
+        return ros.GoalResponse.ACCEPT
+
+    def _execute(self, goal_handle: Any) -> Any:
+        """A goal: the study (JSON or YAML) into the table ``out``; feedback after each point;
+        a cancel ends it after the points under way (the table stays resumable)."""
+        import yaml
+
+        result = ros.actions.Study.Result()
+        goal = goal_handle.request
+        try:
+            try:
+                spec = yaml.safe_load(goal.study)
+            except yaml.YAMLError as exc:
+                raise InvalidParameterError(f"study: neither JSON nor YAML ({exc})") from None
+            study = Study.from_spec(spec, where="study")
+            points = study.points()
+
+            def progress(done: int, total: int, index: int) -> None:
+                goal_handle.publish_feedback(ros.actions.Study.Feedback(
+                    done=done, total=total, current_point=index,
+                    current=point_values(points, index)))
+
+            summary = self.run_study(study, Path(goal.out), progress=progress,
+                                     stop=lambda: goal_handle.is_cancel_requested)
+        except BipedOptError as exc:
+            self.get_logger().warning(f"study goal failed: {exc}")
+            result.success, result.message = False, str(exc)
+            goal_handle.abort()
+            return result
+        result.success = not summary.stopped
+        result.message = "done" if result.success else "stopped before every point was done"
+        result.table, result.spec = str(summary.path), str(spec_path(summary.path))
+        result.points, result.computed = summary.points, summary.computed
+        result.resumed, result.rows, result.stopped = summary.resumed, summary.rows, \
+            summary.stopped
+        if goal_handle.is_cancel_requested:
+            goal_handle.canceled()
+        else:
+            goal_handle.succeed()
+        return result
 
     def destroy_node(self) -> None:
         if self._action is not None:
@@ -144,7 +197,7 @@ class _Run:
         self.events: queue.SimpleQueue[tuple[str, int, Any]] = queue.SimpleQueue()
         self.workers: dict[str, _Worker] = {}
         self.progress, self.stop = progress, stop
-        node.dispatches, node.served = collections.Counter(), {}
+        node.dispatches, node.served, node.node_seconds = collections.Counter(), {}, 0.0
         self._waiting_logged = False
 
     def run(self) -> StudySummary:
@@ -255,6 +308,7 @@ class _Run:
             raise StudyFailedError(f"point {index} failed on {name}: {response.message}")
         if self.table.append(decode_rows(response.rows, index)):
             self.node.served.setdefault(name, []).append(index)
+            self.node.node_seconds += response.seconds
             if self.progress is not None:
                 self.progress(len(self.table.done), len(self.table.points), index)
 
@@ -265,6 +319,42 @@ def point_values(study_points: list[dict[str, float]], index: int) -> str:
         return "{}"
     return json.dumps({k: (v if math.isfinite(v) else None)
                        for k, v in study_points[index].items()})
+
+
+@contextlib.contextmanager
+def coordinator_on_domain(domain_id: int | None = None,
+                          parameters: dict[str, Any] | None = None
+                          ) -> Iterator[StudyCoordinator]:
+    """A coordinator of its own (a context, the node with ``parameters``, an executor thread)
+    for the ``with`` block, torn down at its end."""
+    context = ros.Context()
+    ros.init(args=[], context=context, domain_id=domain_id)
+    try:
+        node = StudyCoordinator(context=context, parameter_overrides=[
+            ros.Parameter(k, value=v) for k, v in (parameters or {}).items()])
+    except BaseException:
+        ros.try_shutdown(context=context)
+        raise
+    executor = ros.MultiThreadedExecutor(num_threads=2, context=context)
+    executor.add_node(node)
+    thread = threading.Thread(target=executor.spin, name="study-coordinator", daemon=True)
+    thread.start()
+    try:
+        yield node
+    finally:
+        executor.shutdown(timeout_sec=10)
+        thread.join(10)
+        node.destroy_node()
+        ros.try_shutdown(context=context)
+
+
+def run_on_domain(study: Study, path: Path, *, domain_id: int | None = None,
+                  parameters: dict[str, Any] | None = None,
+                  progress: Callable[[int, int, int], None] | None = None,
+                  stop: Callable[[], bool] | None = None) -> StudySummary:
+    """Run ``study`` on the optimiser nodes of the domain from a coordinator of its own."""
+    with coordinator_on_domain(domain_id, parameters) as node:
+        return node.run_study(study, path, progress=progress, stop=stop)
 
 
 def main(args: list[str] | None = None) -> None:

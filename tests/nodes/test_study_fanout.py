@@ -53,11 +53,15 @@ def coordinator(domain: int, **params) -> Host:
         ros.Parameter(k, value=v) for k, v in params.items()]), domain, threads=4)
 
 
+def local_rows(spec: dict, directory: Path) -> list[dict[str, str]]:
+    """The table of ``spec`` computed in this process (what the nodes must reproduce)."""
+    run_study(Study.from_spec(spec), directory / "local.csv")
+    return read_table(directory / "local.csv")
+
+
 @pytest.fixture(scope="module")
 def local_table(tmp_path_factory) -> list[dict[str, str]]:
-    path = tmp_path_factory.mktemp("local") / "local.csv"
-    run_study(Study.from_spec(SPEC), path)
-    return read_table(path)
+    return local_rows(SPEC, tmp_path_factory.mktemp("local"))
 
 
 @pytest.fixture()
@@ -112,8 +116,8 @@ def test_a_node_vanishing_mid_study_loses_nothing_and_one_joining_gets_work(
     def progress(done: int, total: int, index: int) -> None:
         if done == 3:  # the second node joins...
             hosts.append(optimiser(domain, "h2"))
-        if done == 9:  # ...and the first vanishes (its participant deleted, items in hand)
-            threading.Thread(target=first.close).start()
+        if done == 9:  # ...and the first vanishes (its participant deleted, items in hand:
+            first.close()  # a request it had not taken is never answered)
 
     summary = coord.run_study(Study.from_spec(SPEC), tmp_path / "t.csv", progress=progress)
     assert summary.computed == 16
@@ -174,3 +178,16 @@ def test_a_refused_item_ends_the_study_with_the_node_message(tmp_path, hosts):
     odd = Future(**{f: getattr(study, f) for f in study.__dataclass_fields__})
     with pytest.raises(StudyFailedError, match="failed on /h1/optimiser/study/h1: .*'colour'"):
         coord.run_study(odd, tmp_path / "t.csv")
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--ros", "--workers", "2"], "--workers: not with --ros"),
+    (["--item-timeout", "5"], "--item-timeout: only with --ros"),
+])
+def test_cli_ros_options_are_checked(tmp_path, capsys, args, message):
+    from tests.cli.test_systems_cmd import _run
+
+    spec = tmp_path / "s.yaml"
+    spec.write_text("system: rocking_bar\nmaneuver: drop\ngrid: {gamma: [0.5]}\n")
+    status, _, err = _run(["study", str(spec), "--out", str(tmp_path / "t.csv"), *args], capsys)
+    assert status == 2 and message in err and "Traceback" not in err
