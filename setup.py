@@ -29,6 +29,7 @@ setup(
         (f"share/{package_name}/msg_defs", ["msg_defs/package.xml", "msg_defs/CMakeLists.txt"]),
         (f"share/{package_name}/msg_defs/msg", sorted(glob("msg_defs/msg/*.msg"))),
         (f"share/{package_name}/msg_defs/srv", sorted(glob("msg_defs/srv/*.srv"))),
+        (f"share/{package_name}/msg_defs/action", sorted(glob("msg_defs/action/*.action"))),
     ],
     install_requires=pinned_requirements(),
     python_requires=">=3.10",
@@ -43,6 +44,7 @@ setup(
             "simulator = biped_opt.nodes.simulator:main",
             "optimiser = biped_opt.nodes.optimiser:main",
             "recorder = biped_opt.nodes.recorder:main",
+            "coordinator = biped_opt.nodes.coordinator:main",
         ],
     },
 )

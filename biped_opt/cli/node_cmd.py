@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-NODES = ("simulator", "optimiser", "recorder")
+NODES = ("simulator", "optimiser", "recorder", "coordinator")
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -1,9 +1,12 @@
-"""``biped-opt study``: a parameter study of the nonsmoothness, resumable, on local processes.
+"""``biped-opt study``: a parameter study of the nonsmoothness, resumable, on local processes
+or on the optimiser nodes of a ROS 2 domain.
 
-``biped-opt study STUDY.yaml --out TABLE.csv [--workers N]``: the study file holds the keys of
-:meth:`biped_opt.study.Study.from_spec` (system, maneuver and inputs and/or problem, grid and/or
-sample with samples and seed, s_range, num, num_optimal, name). Run again with the same
-arguments to continue an interrupted study; SIGINT/SIGTERM stop it after the points under way.
+``biped-opt study STUDY.yaml --out TABLE.csv [--workers N | --ros]``: the study file holds the
+keys of :meth:`biped_opt.study.Study.from_spec` (system, maneuver and inputs and/or problem, grid
+and/or sample with samples and seed, s_range, num, num_optimal, name). With ``--ros`` a
+coordinator (:mod:`biped_opt.nodes.coordinator`) hands the points to every optimiser node on the
+domain (``ROS_DOMAIN_ID``), on any machine. Run again with the same arguments to continue an
+interrupted study; SIGINT/SIGTERM stop it after the points under way.
 """
 
 from __future__ import annotations
@@ -11,7 +14,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from biped_opt.cli.args import int_at_least
+from biped_opt.cli.args import int_at_least, positive_float
 from biped_opt.errors import BipedOptError, InvalidInputError
 
 
@@ -26,6 +29,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--figures", type=Path, default=None, metavar="DIR",
                    help="draw the table's figures (heat maps over the first two parameters, "
                         "policy switch locations) into DIR")
+    p.add_argument("--ros", action="store_true",
+                   help="compute on the optimiser nodes of the ROS 2 domain (start `biped-opt "
+                        "node optimiser` on each machine with the same ROS_DOMAIN_ID)")
+    p.add_argument("--item-timeout", type=positive_float("--item-timeout"), default=None,
+                   metavar="S", help="with --ros: a point a node has not answered in S seconds "
+                                     "goes to another node (default 300)")
     p.add_argument("--progress", dest="progress", action="store_true", default=None,
                    help="draw a progress bar on stderr (default: when stderr is a terminal)")
     p.add_argument("--no-progress", dest="progress", action="store_false")
@@ -56,9 +65,21 @@ def run(args: argparse.Namespace) -> int:
     if args.figures is not None:
         output_directory("--figures", args.figures)
     bar = Progress(1, f"{study.name}", enabled=progress_from_args(args))
+    if args.ros and args.workers > 1:
+        raise InvalidInputError("--workers: not with --ros (the optimiser nodes do the work)")
+    if args.item_timeout is not None and not args.ros:
+        raise InvalidInputError("--item-timeout: only with --ros")
     with stop_requested() as stop:
-        summary = run_study(study, args.out, workers=args.workers, progress=bar.update,
-                            stop=stop.is_set)
+        if args.ros:
+            from biped_opt.nodes.coordinator import run_on_domain
+
+            parameters = {} if args.item_timeout is None else {"item_timeout": args.item_timeout}
+            summary = run_on_domain(study, args.out, parameters=parameters,
+                                    progress=lambda done, total, _: bar.update(done, total),
+                                    stop=stop.is_set)
+        else:
+            summary = run_study(study, args.out, workers=args.workers, progress=bar.update,
+                                stop=stop.is_set)
     print(f"{summary.path}: {summary.points} parameter points, {summary.computed} computed now, "
           f"{summary.resumed} resumed, {summary.rows} rows"
           + ("; stopped early, run again to continue" if summary.stopped else ""))

@@ -30,12 +30,22 @@ Answers are cached by (maneuver, theta0, problem), least recently used first out
 ``cache_size`` entries (parameter, default 4096). An entry holds only the reply's numbers (about
 1 KB with its key), not the optimisation's trajectories, so the cache stays under ~4 MB at the
 default size whatever the traffic (``bench/service_load.py`` measures the node's memory).
+
+**Parameter studies.** The node also serves work items of a study
+(:mod:`biped_opt.nodes.coordinator`) on ``~/study/<worker>`` (``StudyPoint``: the study as JSON
+and a point's index; the point's rows as JSON), one at a time (further requests wait in the
+service's queue). ``worker`` (parameter; default the host name and process id) makes the name
+unique on the domain, so every optimiser started with the defaults on any machine serves its own.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import re
+import socket
 import threading
+import time
 from collections import OrderedDict
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -124,6 +134,7 @@ class OptimiserNode(ros.Node):
         self.declare_parameter("cache_size", CACHE_SIZE)
         self.declare_parameter("systems", [])
         self.declare_parameter("allow_files", True)
+        self.declare_parameter("worker", "")
         self._allow_files = bool(self.get_parameter("allow_files").value)
         self._cache_size = int(self.get_parameter("cache_size").value)
         if self._cache_size < 0:
@@ -143,7 +154,17 @@ class OptimiserNode(ros.Node):
             ros.srvs.OptimalPolicy, "/biped/optimal_policy", self._on_request,
             callback_group=self._group,
         )
-        announce_ready(self, serves=("/biped/optimal_policy",))
+        self._studies: OrderedDict[str, tuple[Any, list[dict[str, float]]]] = OrderedDict()
+        worker = str(self.get_parameter("worker").value).strip() or default_worker_name()
+        if not re.fullmatch(r"[A-Za-z_]\w*", worker):
+            raise InvalidParameterError(
+                f"worker must be letters, digits and _ (not first a digit), got {worker!r}")
+        # one item at a time: a node is one core's worth of work
+        self._study_service = self.create_service(
+            ros.srvs.StudyPoint, f"~/study/{worker}", self._on_study_point,
+            callback_group=ros.MutuallyExclusiveCallbackGroup())
+        self.study_service_name = f"{self.get_fully_qualified_name()}/study/{worker}"
+        announce_ready(self, serves=("/biped/optimal_policy", self.study_service_name))
 
     def _problem_from_parameters(self, maneuver: Maneuver) -> OptimalControlProblem:
         name = maneuver.value
@@ -233,6 +254,55 @@ class OptimiserNode(ros.Node):
             return refuse(self, "/biped/optimal_policy", response, exc)
         answer.fill(response)
         return response
+
+
+    # -- study work items --------------------------------------------------------------------
+    def _study(self, text: str) -> tuple[Any, list[dict[str, float]]]:
+        """The study of a work item and its points (the last few studies kept)."""
+        from biped_opt.study import Study
+
+        if text in self._studies:
+            self._studies.move_to_end(text)
+            return self._studies[text]
+        try:
+            spec = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise InvalidParameterError(f"study: not JSON ({exc})") from None
+        if isinstance(spec, dict) and not self._allow_files:
+            for key in ("system", "problem"):
+                value = spec.get(key)
+                if isinstance(value, str) and convert._is_file(value):
+                    raise InvalidParameterError(
+                        f"study: {key}: files are not served here (parameter allow_files is "
+                        f"false), got {value!r}")
+        study = Study.from_spec(spec, where="study")
+        self._studies[text] = (study, study.points())
+        while len(self._studies) > 4:
+            self._studies.popitem(last=False)
+        return self._studies[text]
+
+    def _on_study_point(self, request: Any, response: Any) -> Any:
+        from biped_opt.nodes.coordinator import encode_rows
+        from biped_opt.study import evaluate_point
+
+        start = time.perf_counter()
+        try:
+            study, points = self._study(request.study)
+            if not request.index < len(points):
+                raise InvalidParameterError(
+                    f"index: {request.index} is not a point of the study ({len(points)} points)")
+            rows = evaluate_point(study, request.index, points[request.index])
+        except Exception as exc:  # bad request, or a bug: one refused request either way
+            return refuse(self, self.study_service_name, response, exc)
+        response.success, response.rows = True, encode_rows(rows)
+        response.seconds = time.perf_counter() - start
+        return response
+
+
+def default_worker_name() -> str:
+    """``<host>_<pid>`` with anything but letters, digits and _ replaced: unique on a domain."""
+    host = re.sub(r"\W", "_", socket.gethostname()) or "host"
+    return f"{'h_' if host[0].isdigit() else ''}{host}_{os.getpid()}"
 
 
 @dataclass(frozen=True)

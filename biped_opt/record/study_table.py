@@ -26,7 +26,7 @@ from pathlib import Path
 from biped_opt.errors import InvalidInputError
 from biped_opt.study import COLUMNS, Study, StudyRow, evaluate_point
 
-__all__ = ["run_study", "read_table", "StudySummary", "spec_path"]
+__all__ = ["run_study", "read_table", "StudySummary", "StudyTable", "spec_path"]
 
 
 @dataclass(frozen=True)
@@ -113,34 +113,65 @@ def _evaluate(args: tuple[Study, int, dict[str, float]]) -> list[StudyRow]:
     return evaluate_point(study, index, values)
 
 
+class StudyTable:
+    """An open study table: the points already complete in it (``done``, after dropping torn
+    rows, see the module docstring) and :meth:`append`, which writes a point's rows in one
+    flushed write, and only the first time that point comes (every point exactly once)."""
+
+    def __init__(self, study: Study, path: Path) -> None:
+        path = Path(path)
+        if not path.parent.is_dir():
+            raise InvalidInputError(f"--out: directory {str(path.parent)!r} does not exist")
+        self.study, self.path = study, path
+        self.points = study.points()
+        self.done = _resume(study, path)
+        self.resumed = len(self.done)
+        self.computed = 0
+
+    def pending(self) -> list[int]:
+        """The points not yet in the table, in order."""
+        return [i for i in range(len(self.points)) if i not in self.done]
+
+    def append(self, rows: list[StudyRow]) -> bool:
+        """Write the rows of one point (all of the same ``point``); False, writing nothing,
+        when that point is in the table already."""
+        index = rows[0].point
+        if any(r.point != index for r in rows):
+            raise ValueError("append: the rows of one parameter point at a time")
+        if index in self.done:
+            return False
+        with open(self.path, "a", encoding="utf-8") as fh:
+            fh.write(_text(self.study, rows))
+            fh.flush()
+            os.fsync(fh.fileno())
+        self.done.add(index)
+        self.computed += 1
+        return True
+
+    def summary(self, stopped: bool) -> StudySummary:
+        return StudySummary(path=self.path, points=len(self.points), computed=self.computed,
+                            resumed=self.resumed, rows=len(read_table(self.path)),
+                            stopped=stopped or len(self.done) < len(self.points))
+
+
 def run_study(study: Study, path: Path, *, workers: int = 1,
               progress: Callable[[int, int], None] | None = None,
               stop: Callable[[], bool] | None = None) -> StudySummary:
     """Compute every point of ``study`` not yet in the table at ``path`` (see the module
     docstring) with ``workers`` local processes; ``progress(done, total)`` after each point;
     ``stop()`` true ends the run after the points under way (the table stays resumable)."""
-    path = Path(path)
-    if not path.parent.is_dir():
-        raise InvalidInputError(f"--out: directory {str(path.parent)!r} does not exist")
-    points = study.points()
-    done = _resume(study, path)
-    resumed = len(done)
-    pending = [i for i in range(len(points)) if i not in done]
-    computed = 0
+    table = StudyTable(study, path)
+    points = table.points
+    pending = table.pending()
     stopped = False
 
     def append(rows: list[StudyRow]) -> None:
-        nonlocal computed
-        with open(path, "a", encoding="utf-8") as fh:
-            fh.write(_text(study, rows))
-            fh.flush()
-            os.fsync(fh.fileno())
-        computed += 1
+        table.append(rows)
         if progress is not None:
-            progress(resumed + computed, len(points))
+            progress(len(table.done), len(points))
 
     if progress is not None:
-        progress(resumed, len(points))
+        progress(len(table.done), len(points))
     if workers <= 1:
         for i in pending:
             if stop is not None and stop():
@@ -164,6 +195,4 @@ def run_study(study: Study, path: Path, *, workers: int = 1,
                 if stop is not None and stop() and not stopped:
                     stopped = True
                     queue.clear()
-    total_rows = len(read_table(path))
-    return StudySummary(path=path, points=len(points), computed=computed, resumed=resumed,
-                        rows=total_rows, stopped=stopped or resumed + computed < len(points))
+    return table.summary(stopped)

@@ -2,7 +2,9 @@
 
 ``from biped_opt import ros`` gives the rclpy subset the nodes use (``ros.init``, ``ros.Node``,
 ``ros.spin``, executors, QoS profiles...) plus the interface types
-``ros.msgs.BipedState``, ``ros.srvs.OptimalPolicy`` (with ``.Request``/``.Response``).
+``ros.msgs.BipedState``, ``ros.srvs.OptimalPolicy`` (with ``.Request``/``.Response``),
+``ros.actions.Study`` (with ``.Goal``/``.Result``/``.Feedback``) and rclpy.action's
+``ActionServer``, ``ActionClient``, ``GoalResponse``, ``CancelResponse``.
 The backend is chosen once, at import:
 
 - ``rclpy``: real rclpy and the built ``biped_opt_interfaces`` package are importable;
@@ -21,7 +23,8 @@ import types
 from biped_opt.errors import BipedOptError
 
 __all__ = [
-    "BACKEND", "BackendError", "msgs", "srvs", "std_msgs",
+    "BACKEND", "BackendError", "msgs", "srvs", "actions", "std_msgs",
+    "ActionServer", "ActionClient", "GoalResponse", "CancelResponse",
     "init", "shutdown", "try_shutdown", "ok", "spin", "spin_once", "spin_until_future_complete",
     "Context", "Node", "Future", "Parameter", "SingleThreadedExecutor", "MultiThreadedExecutor",
     "MutuallyExclusiveCallbackGroup", "ReentrantCallbackGroup", "QoSProfile", "HistoryPolicy",
@@ -60,6 +63,7 @@ def _choose() -> str:
 BACKEND = _choose()
 
 if BACKEND == "rclpy":
+    import biped_opt_interfaces.action as actions  # type: ignore[import-not-found, no-redef]
     import biped_opt_interfaces.msg as msgs  # type: ignore[import-not-found, no-redef]
     import biped_opt_interfaces.srv as srvs  # type: ignore[import-not-found, no-redef]
     import std_msgs.msg as std_msgs  # type: ignore[import-not-found, no-redef]
@@ -71,6 +75,12 @@ if BACKEND == "rclpy":
         spin_once,
         spin_until_future_complete,
         try_shutdown,
+    )
+    from rclpy.action import (  # type: ignore[import-not-found, no-redef]
+        ActionClient,
+        ActionServer,
+        CancelResponse,
+        GoalResponse,
     )
     from rclpy.callback_groups import (  # type: ignore[import-not-found, no-redef]
         MutuallyExclusiveCallbackGroup,
@@ -104,9 +114,13 @@ if BACKEND == "rclpy":
                                                        _InvalidType)
 else:
     from .dds import (
+        ActionClient,
+        ActionServer,
+        CancelResponse,
         Context,
         DurabilityPolicy,
         Future,
+        GoalResponse,
         HistoryPolicy,
         MultiThreadedExecutor,
         MutuallyExclusiveCallbackGroup,
@@ -137,5 +151,7 @@ else:
         name.rsplit("/", 1)[1]: _ifc.message_class(name) for name in _ifc.msg_names})
     srvs = types.SimpleNamespace(**{
         name.rsplit("/", 1)[1]: svc for name, svc in _ifc.services.items()})
+    actions = types.SimpleNamespace(**{
+        name.rsplit("/", 1)[1]: action for name, action in _ifc.actions.items()})
     std_msgs = types.SimpleNamespace(Header=_ifc.message_class("std_msgs/msg/Header"))
     del _ifc, PACKAGE

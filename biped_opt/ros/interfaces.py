@@ -22,6 +22,7 @@ import re
 import sys
 import sysconfig
 import threading
+import types
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -36,9 +37,11 @@ __all__ = [
     "InterfaceError",
     "Interfaces",
     "ServiceType",
+    "ActionType",
     "RequestHeader",
     "find_msg_defs",
     "srv_to_idl",
+    "action_to_idl",
     "load_interfaces",
     "dds_type_name",
 ]
@@ -188,6 +191,40 @@ def srv_to_idl(text: str, pkg: str, name: str) -> str:
     return f"module {pkg} {{ module srv {{ {body} }}; }};\n"
 
 
+#: ``action_msgs/srv/CancelGoal`` (rosbags' typestore has action_msgs' messages, not its service)
+CANCEL_GOAL_SRV = """\
+action_msgs/GoalInfo goal_info
+---
+int8 ERROR_NONE = 0
+int8 ERROR_REJECTED = 1
+int8 ERROR_UNKNOWN_GOAL_ID = 2
+int8 ERROR_GOAL_TERMINATED = 3
+int8 return_code
+action_msgs/GoalInfo[] goals_canceling
+"""
+
+
+def action_to_idl(text: str, pkg: str, name: str) -> str:
+    """IDL text for an ``.action`` definition: ``Name_Goal``, ``Name_Result``,
+    ``Name_Feedback`` and the structs rosidl derives from them (``Name_SendGoal_Request`` /
+    ``_Response``, ``Name_GetResult_Request`` / ``_Response``, ``Name_FeedbackMessage``)."""
+    parts = re.split(r"^\s*---\s*$", text, flags=re.MULTILINE)
+    if len(parts) != 3:
+        raise InterfaceError(f"{pkg}/action/{name}: expected exactly two '---' separators")
+    body = [_half_to_idl(part, pkg, f"{name}_{suffix}")
+            for part, suffix in zip(parts, ("Goal", "Result", "Feedback"))]
+    uuid, own = "unique_identifier_msgs::msg::UUID", f"{pkg}::action::{name}"
+    body += [
+        f"struct {name}_SendGoal_Request {{ {uuid} goal_id; {own}_Goal goal; }};",
+        f"struct {name}_SendGoal_Response {{ boolean accepted; "
+        "builtin_interfaces::msg::Time stamp; };",
+        f"struct {name}_GetResult_Request {{ {uuid} goal_id; }};",
+        f"struct {name}_GetResult_Response {{ int8 status; {own}_Result result; }};",
+        f"struct {name}_FeedbackMessage {{ {uuid} goal_id; {own}_Feedback feedback; }};",
+    ]
+    return f"module {pkg} {{ module action {{ {' '.join(body)} }}; }};\n"
+
+
 # ---------------------------------------------------------------------------------------------
 # rosbags definitions -> Cyclone IdlStructs
 # ---------------------------------------------------------------------------------------------
@@ -258,6 +295,23 @@ class ServiceType:
         return f"<service type {self.name}>"
 
 
+@dataclass(frozen=True)
+class ActionType:
+    """An action type of the built-in backend, shaped like an rclpy action class: ``Goal``,
+    ``Result``, ``Feedback`` and ``Impl`` with the services and messages on the wire
+    (``SendGoalService``, ``GetResultService``, ``CancelGoalService``, ``FeedbackMessage``,
+    ``GoalStatusMessage``)."""
+
+    name: str
+    Goal: type
+    Result: type
+    Feedback: type
+    Impl: Any
+
+    def __repr__(self) -> str:
+        return f"<action type {self.name}>"
+
+
 def _checked_setattr(self: Any, name: str, value: Any) -> None:
     """Reject unknown fields, as rclpy's ``__slots__`` messages do (no silent data loss)."""
     if name not in self.__dataclass_fields__ and name != "sample_info":
@@ -297,13 +351,30 @@ class Interfaces:
             except Exception as exc:
                 raise InterfaceError(f"{path.name}: {exc}") from exc
             self.srv_names.append(f"{PACKAGE}/srv/{path.stem}")
+        self.action_names: list[str] = []
+        action_paths = sorted((root / "action").glob("*.action"))
+        if action_paths:
+            defs.update(get_types_from_idl(srv_to_idl(CANCEL_GOAL_SRV, "action_msgs",
+                                                      "CancelGoal")))
+        for path in action_paths:
+            try:
+                defs.update(get_types_from_idl(action_to_idl(path.read_text(), PACKAGE,
+                                                             path.stem)))
+            except InterfaceError:
+                raise
+            except Exception as exc:
+                raise InterfaceError(f"{path.name}: {exc}") from exc
+            self.action_names.append(f"{PACKAGE}/action/{path.stem}")
         self.typestore.register(defs)
         self._classes: dict[str, type] = {}
         self.services: dict[str, ServiceType] = {}
+        self.actions: dict[str, ActionType] = {}
         for ros_name in self.msg_names:
             self.message_class(ros_name)
         for ros_name in self.srv_names:
             self._service(ros_name)
+        for ros_name in self.action_names:
+            self._action(ros_name)
 
     def message_class(self, ros_name: str) -> type:
         """IdlStruct class of the ROS type ``pkg/msg/Name`` (generated on first use)."""
@@ -318,8 +389,8 @@ class Interfaces:
         for fname, desc in fields:
             annotations[fname], defaults[fname] = self._field(desc)
         pkg, kind, short = ros_name.split("/")
-        if kind == "msg":
-            typename = dds_type_name(ros_name)
+        if kind == "msg" or short.endswith("_FeedbackMessage"):  # (a topic's type)
+            typename = f"{pkg}::{kind}::dds_::{short}_"
         else:
             # User-facing service halves; the wire type with rmw's name is the wrapper.
             typename = f"{pkg}::{kind}::{short}"
@@ -363,12 +434,12 @@ class Interfaces:
         raise InterfaceError(f"unsupported field description {desc!r}")
 
     def _service(self, ros_name: str) -> ServiceType:
-        pkg, _, short = ros_name.split("/")
+        pkg, kind, short = ros_name.split("/")
         req = self.message_class(f"{ros_name}_Request")
         rsp = self.message_class(f"{ros_name}_Response")
         wires = []
         for half, cls in (("Request", req), ("Response", rsp)):
-            typename = f"{pkg}::srv::dds_::{short}_{half}_"
+            typename = f"{pkg}::{kind}::dds_::{short}_{half}_"
             namespace = IdlMeta.__prepare__(f"{short}_{half}_", (IdlStruct,), typename=typename)
             namespace["__annotations__"].update({"header": RequestHeader, "body": cls})
             namespace["header"] = dataclasses.field(default_factory=RequestHeader)
@@ -378,6 +449,20 @@ class Interfaces:
         svc = ServiceType(ros_name, req, rsp, wires[0], wires[1])
         self.services[ros_name] = svc
         return svc
+
+    def _action(self, ros_name: str) -> ActionType:
+        impl = types.SimpleNamespace(
+            SendGoalService=self._service(f"{ros_name}_SendGoal"),
+            GetResultService=self._service(f"{ros_name}_GetResult"),
+            CancelGoalService=self.services.get("action_msgs/srv/CancelGoal")
+            or self._service("action_msgs/srv/CancelGoal"),
+            FeedbackMessage=self.message_class(f"{ros_name}_FeedbackMessage"),
+            GoalStatusMessage=self.message_class("action_msgs/msg/GoalStatusArray"))
+        action = ActionType(ros_name, self.message_class(f"{ros_name}_Goal"),
+                            self.message_class(f"{ros_name}_Result"),
+                            self.message_class(f"{ros_name}_Feedback"), impl)
+        self.actions[ros_name] = action
+        return action
 
 
 _LOCK = threading.Lock()

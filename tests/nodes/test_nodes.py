@@ -275,7 +275,8 @@ def _stop(proc, sig, ready):
 
 
 def test_node_in_a_subprocess_exits_cleanly_on_sigint(domain_id):
-    proc = _node_process(domain_id, "optimiser", "-p", "touchdown.theta_star:=-0.05")
+    proc = _node_process(domain_id, "optimiser", "-p", "touchdown.theta_star:=-0.05",
+                         "-p", "worker:=w1")
     try:
         with _outside_probe(domain_id) as (node, executor):
             client = node.create_client(ros.srvs.OptimalPolicy, "/biped/optimal_policy")
@@ -288,7 +289,7 @@ def test_node_in_a_subprocess_exits_cleanly_on_sigint(domain_id):
         # the parameter given on the command line reached the node
         expected = optimal_policy(get_problem("touchdown", theta_star=-0.05), 0.05)
         assert reply.success and reply.value == expected.value
-        _stop(proc, signal.SIGINT, "ready: serving /biped/optimal_policy")
+        _stop(proc, signal.SIGINT, "ready: serving /biped/optimal_policy, /optimiser/study/w1")
     finally:
         proc.kill()
 

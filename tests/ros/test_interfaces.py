@@ -26,12 +26,40 @@ def test_every_definition_parses(ifc):
     msgs = sorted(p.stem for p in (root / "msg").glob("*.msg"))
     srvs = sorted(p.stem for p in (root / "srv").glob("*.srv"))
     assert msgs == ["BipedState", "ContactMode", "SweepPoint", "SystemInfo", "SystemState"]
-    assert srvs == ["OptimalPolicy", "Simulate"]
+    assert srvs == ["OptimalPolicy", "Simulate", "StudyPoint"]
+    actions = sorted(p.stem for p in (root / "action").glob("*.action"))
+    assert actions == ["Study"]
     for name in msgs:
         assert f"{PKG}/msg/{name}" in ifc.typestore.fielddefs
     for name in srvs:
         for half in ("Request", "Response"):
             assert f"{PKG}/srv/{name}_{half}" in ifc.typestore.fielddefs
+    for name in actions:
+        for part in ("Goal", "Result", "Feedback", "SendGoal_Request", "SendGoal_Response",
+                     "GetResult_Request", "GetResult_Response", "FeedbackMessage"):
+            assert f"{PKG}/action/{name}_{part}" in ifc.typestore.fielddefs
+
+
+def test_action_types_follow_rosidl(ifc):
+    """The structs rosidl derives from Study.action, with rmw_cyclonedds' DDS type names."""
+    study = ifc.actions[f"{PKG}/action/Study"]
+    impl = study.Impl
+    assert impl.SendGoalService.RequestWire.__idl_typename__ == \
+        f"{PKG}::action::dds_::Study_SendGoal_Request_"
+    assert impl.GetResultService.ResponseWire.__idl_typename__ == \
+        f"{PKG}::action::dds_::Study_GetResult_Response_"
+    assert impl.CancelGoalService.RequestWire.__idl_typename__ == \
+        "action_msgs::srv::dds_::CancelGoal_Request_"
+    assert impl.FeedbackMessage.__idl_typename__ == f"{PKG}::action::dds_::Study_FeedbackMessage_"
+    assert impl.GoalStatusMessage.__idl_typename__ == "action_msgs::msg::dds_::GoalStatusArray_"
+    send = impl.SendGoalService.Request()
+    assert list(send.__dataclass_fields__) == ["goal_id", "goal"]
+    assert list(send.goal_id.uuid) == [0] * 16 and list(send.goal.__dataclass_fields__) == [
+        "study", "out"]
+    assert list(impl.GetResultService.Response.__dataclass_fields__) == ["status", "result"]
+    assert list(impl.CancelGoalService.Response.__dataclass_fields__) == [
+        "return_code", "goals_canceling"]
+    assert impl.CancelGoalService.Response.ERROR_GOAL_TERMINATED == 3
 
 
 def test_srv_idl_matches_msg_parser(ifc):
@@ -176,12 +204,13 @@ def test_interface_package_files():
     pkg = ET.parse(root / "package.xml").getroot()
     assert pkg.get("format") == "3" and pkg.findtext("name") == PKG
     assert pkg.findtext("member_of_group") == "rosidl_interface_packages"
-    assert "std_msgs" in [e.text for e in pkg.findall("depend")]
+    assert {"std_msgs", "action_msgs"} <= {e.text for e in pkg.findall("depend")}
     assert pkg.find("export").findtext("build_type") == "ament_cmake"
     cmake = (root / "CMakeLists.txt").read_text()
     assert f"project({PKG})" in cmake and "rosidl_generate_interfaces(" in cmake
-    assert "DEPENDENCIES std_msgs" in cmake
+    assert "DEPENDENCIES std_msgs action_msgs" in cmake
     files = sorted(str(p.relative_to(root)) for p in root.glob("[ms][sr][gv]/*.[ms][sr][gv]"))
+    files = sorted(files + [str(p.relative_to(root)) for p in root.glob("action/*.action")])
     listed = sorted(line.strip().strip('"') for line in cmake.splitlines()
                     if line.strip().startswith('"'))
     assert files == listed

@@ -6,6 +6,7 @@ visible to and callable from a ROS 2 graph running Cyclone DDS.
 
 from __future__ import annotations
 
+from .actions import ActionClient, ActionServer, CancelResponse, GoalResponse, GoalStatus
 from .context import (
     Context,
     NotInitializedError,
@@ -52,6 +53,7 @@ from .qos import (
 from .services import Client, MalformedMessageError, Service
 
 __all__ = [
+    "ActionClient", "ActionServer", "CancelResponse", "GoalResponse", "GoalStatus",
     "Context", "NotInitializedError", "get_default_context", "init", "localhost_only",
     "loopback_config", "ok", "shutdown", "try_shutdown", "Executor", "MultiThreadedExecutor",
     "SingleThreadedExecutor", "spin", "spin_once", "spin_until_future_complete", "Future",

@@ -115,6 +115,7 @@ class Context:
         self._on_shutdown: list[Any] = []
         self._graph_writer: DataWriter | None = None
         self._graph_topic: Topic | None = None
+        self._services: graph.ServiceDirectory | None = None
         self.domain_id: int | None = None
         self.args: list[str] = []
 
@@ -167,6 +168,9 @@ class Context:
             guard.set(True)  # executors waiting on this context wake up and stop
         for callback in list(self._on_shutdown):
             callback()
+        if self._services is not None:
+            self._services.delete()
+            self._services = None
         writer, topic = self._graph_writer, self._graph_topic
         self._graph_writer = self._graph_topic = None
         guards, self._guards = list(self._guards), []
@@ -184,6 +188,13 @@ class Context:
         if self._participant is None:
             raise NotInitializedError("context is not initialized (call init() first)")
         return self._participant
+
+    def service_names_and_types(self) -> list[tuple[str, list[str]]]:
+        """Every service on the domain (:class:`.graph.ServiceDirectory`)."""
+        with self._lock:
+            if self._services is None:
+                self._services = graph.ServiceDirectory(self.participant)
+            return self._services.services()
 
     def new_guard(self) -> GuardCondition:
         guard = GuardCondition(self.participant)

@@ -15,7 +15,7 @@ from typing import Any
 from cyclonedds.idl import IdlMeta, IdlStruct
 from cyclonedds.idl import types as dt
 
-__all__ = ["GRAPH_TOPIC", "graph_layout", "graph_types", "gid_bytes"]
+__all__ = ["GRAPH_TOPIC", "ServiceDirectory", "graph_layout", "graph_types", "gid_bytes"]
 
 GRAPH_TOPIC = "ros_discovery_info"
 _ENV_LAYOUT = "BIPED_OPT_GRAPH_LAYOUT"
@@ -69,3 +69,37 @@ def gid_bytes(guid_bytes: bytes, layout: str | None = None) -> list[int]:
     """A 16-byte DDS GUID as the ``data`` of a ``Gid`` (zero-padded on Humble)."""
     size = _SIZES[layout or graph_layout()]
     return list(guid_bytes[:16]) + [0] * (size - 16)
+
+
+class ServiceDirectory:
+    """The services on the domain, as rmw_cyclonedds derives them from discovery: every
+    request reader ``rq<name>Request`` of type ``pkg::srv::dds_::Name_Request_`` is a service
+    ``<name>`` of type ``pkg/srv/Name`` (also one of another participant or host, and gone as soon
+    as DDS disposes of the reader: its node destroyed it, or its participant's lease expired)."""
+
+    def __init__(self, participant: Any) -> None:
+        from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsSubscription
+        from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState
+
+        self._reader = BuiltinDataReader(participant, BuiltinTopicDcpsSubscription)
+        self._alive = ReadCondition(self._reader,
+                                    SampleState.Any | ViewState.Any | InstanceState.Alive)
+
+    def services(self) -> list[tuple[str, list[str]]]:
+        """``[(name, [type, ...]), ...]`` sorted by name, as rclpy's
+        ``Node.get_service_names_and_types``."""
+        found: dict[str, set[str]] = {}
+        for sample in self._reader.read(N=1_000_000, condition=self._alive):
+            topic, type_name = sample.topic_name, sample.type_name
+            if not (topic.startswith("rq/") and topic.endswith("Request")
+                    and type_name.endswith("_Request_") and "::dds_::" in type_name):
+                continue
+            pkg_kind, short = type_name.rsplit("::dds_::", 1)
+            ros_type = pkg_kind.replace("::", "/") + "/" + short[: -len("_Request_")]
+            found.setdefault(topic[2: -len("Request")], set()).add(ros_type)
+        return [(name, sorted(kinds)) for name, kinds in sorted(found.items())]
+
+    def delete(self) -> None:
+        from .entities import delete_dds
+
+        delete_dds(self._alive, self._reader)

@@ -206,7 +206,7 @@ def parse_ros_args(args: Iterable[str] | None, node_name: str | None = None) -> 
 
 # -- names -----------------------------------------------------------------------------------
 
-_NAME_RE = re.compile(r"^[~/]?[A-Za-z_][\w]*(/[A-Za-z_][\w]*)*$")
+_NAME_RE = re.compile(r"^(?:~/|[~/])?[A-Za-z_][\w]*(/[A-Za-z_][\w]*)*$")
 
 
 def _expand(name: str, namespace: str, node_name: str) -> str:
@@ -278,6 +278,10 @@ class Node:
 
     def get_clock(self) -> Clock:
         return self._clock
+
+    def get_service_names_and_types(self) -> list[tuple[str, list[str]]]:
+        """Every service on the domain and its types, as rclpy's (from DDS discovery)."""
+        return self.context.service_names_and_types()
 
     # internals
     def _topic(self, dds_name: str, dds_type: type) -> Topic:

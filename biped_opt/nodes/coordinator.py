@@ -1,0 +1,367 @@
+"""``study_coordinator`` node: a parameter study fanned out over the optimiser nodes of the domain.
+
+A work item is one parameter point of a :class:`~biped_opt.study.Study`. Every optimiser node
+serves them on a service of its own, ``~/study/<worker>`` of type ``StudyPoint`` (the study as
+JSON and the point's index in; the point's rows as JSON out). The coordinator finds those services
+through DDS discovery (:meth:`StudyCoordinator.workers`: any node, any host of the domain, also
+one that starts mid-study), keeps ``in_flight`` items at each (the next item waits in the node's
+queue while it computes one, so no node idles for a round trip), and writes each point's rows to
+the same CSV table as a local run (:class:`biped_opt.record.study_table.StudyTable`: resumable,
+every point exactly once).
+
+An item comes back to the queue, for another node, when its node disappears from discovery (it
+was stopped, or its DDS lease expired) or does not answer within ``item_timeout`` seconds; such a
+node gets no more items until it answers one. A late answer to an item done meanwhile is ignored.
+A refused item (``success = false``: a bad study, or a point the core cannot compute) ends the
+study with the node's message: every node would refuse it.
+
+The study is served as the ROS 2 action ``/biped/study`` (``Study.action``: goal the study and the
+table, feedback points done/total and the last point, result the paths and a summary; cancel ends
+it after the items under way), and :meth:`StudyCoordinator.run_study` runs one from Python.
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import dataclasses
+import json
+import math
+import queue
+import threading
+import time
+from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
+from typing import Any
+
+from biped_opt import ros
+from biped_opt.errors import BipedOptError, InvalidParameterError
+from biped_opt.nodes.run import announce_ready
+from biped_opt.record.study_table import StudySummary, StudyTable, spec_path
+from biped_opt.study import Study, StudyRow
+
+__all__ = ["StudyCoordinator", "StudyFailedError", "WORK_ITEM_TYPE", "encode_rows",
+           "decode_rows", "coordinator_on_domain", "run_on_domain", "main"]
+
+#: the ROS type of the work-item services the coordinator looks for
+WORK_ITEM_TYPE = "biped_opt_interfaces/srv/StudyPoint"
+#: defaults of the parameters item_timeout [s], in_flight, discovery_period [s]
+ITEM_TIMEOUT_S, IN_FLIGHT, DISCOVERY_PERIOD_S = 300.0, 2, 0.5
+
+
+class StudyFailedError(BipedOptError, RuntimeError):
+    """A node refused a work item (its message says why); the study stops there."""
+
+
+def encode_rows(rows: Iterable[StudyRow]) -> str:
+    """A point's rows as JSON (NaN as the ``NaN`` token Python's json reads back)."""
+    return json.dumps([dataclasses.asdict(r) for r in rows])
+
+
+def decode_rows(text: str, index: int) -> list[StudyRow]:
+    """The rows :func:`encode_rows` wrote, checked to be of point ``index``."""
+    try:
+        rows = [StudyRow(**{**d, "parameters": tuple((str(k), float(v))
+                                                      for k, v in d["parameters"])})
+                for d in json.loads(text)]
+    except (ValueError, TypeError, KeyError) as exc:
+        raise StudyFailedError(f"point {index}: the node's rows do not decode ({exc})") from None
+    if not rows or any(r.point != index for r in rows):
+        raise StudyFailedError(f"point {index}: the node answered with rows of another point")
+    return rows
+
+
+@dataclasses.dataclass
+class _Worker:
+    """One work-item service: its client, the items sent to it (index -> time sent)."""
+
+    name: str
+    client: Any
+    items: dict[int, float] = dataclasses.field(default_factory=dict)
+    ready: bool = False
+    stalled: bool = False  #: an item timed out: no new items until it answers one
+
+
+class StudyCoordinator(ros.Node):
+    """Runs studies on the optimiser nodes of the domain (see the module docstring)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__("study_coordinator", **kwargs)
+        self.declare_parameter("item_timeout", ITEM_TIMEOUT_S)
+        self.declare_parameter("in_flight", IN_FLIGHT)
+        self.declare_parameter("discovery_period", DISCOVERY_PERIOD_S)
+        self.item_timeout = float(self.get_parameter("item_timeout").value)
+        self.in_flight = int(self.get_parameter("in_flight").value)
+        self.discovery_period = float(self.get_parameter("discovery_period").value)
+        if not self.item_timeout > 0 or self.in_flight < 1 or not self.discovery_period > 0:
+            raise InvalidParameterError(
+                "item_timeout and discovery_period must be > 0 and in_flight >= 1, got "
+                f"{self.item_timeout}, {self.discovery_period}, {self.in_flight}")
+        self._group = ros.ReentrantCallbackGroup()
+        self._busy = threading.Lock()  # one study at a time
+        #: dispatches per point in the last study (a re-dispatched point counts twice), and the
+        #: points each work-item service computed for the table
+        self.dispatches: collections.Counter[int] = collections.Counter()
+        self.served: dict[str, list[int]] = {}
+        #: the compute time the nodes reported for the points written [s]
+        self.node_seconds = 0.0
+        self._action: Any = ros.ActionServer(
+            self, ros.actions.Study, "/biped/study", self._execute,
+            goal_callback=self._on_goal, cancel_callback=lambda _: ros.CancelResponse.ACCEPT,
+            callback_group=self._group)
+        announce_ready(self, serves=("/biped/study",),
+                       calls=("~/study/* of the optimiser nodes",))
+
+    def workers(self) -> list[str]:
+        """The work-item services on the domain now."""
+        return [name for name, kinds in self.get_service_names_and_types()
+                if WORK_ITEM_TYPE in kinds]
+
+    def run_study(self, study: Study, path: Path, *,
+                  progress: Callable[[int, int, int], None] | None = None,
+                  stop: Callable[[], bool] | None = None) -> StudySummary:
+        """Compute every point of ``study`` not yet in the table at ``path`` on the optimiser
+        nodes; ``progress(done, total, index)`` after each point written; ``stop()`` true ends
+        the run (the table stays resumable). Another thread must spin this node (a
+        multi-threaded executor when called from one of its callbacks)."""
+        if not self._busy.acquire(blocking=False):
+            raise StudyFailedError("this coordinator is running another study")
+        try:
+            return _Run(self, study, path, progress, stop).run()
+        finally:
+            self._busy.release()
+
+    # -- the action ----------------------------------------------------------------------------
+    def _on_goal(self, goal: Any) -> Any:
+        if self._busy.locked():
+            self.get_logger().warning("rejected a study goal: a study is running")
+            return ros.GoalResponse.REJECT
+        return ros.GoalResponse.ACCEPT
+
+    def _execute(self, goal_handle: Any) -> Any:
+        """A goal: the study (JSON or YAML) into the table ``out``; feedback after each point;
+        a cancel ends it after the points under way (the table stays resumable)."""
+        import yaml
+
+        result = ros.actions.Study.Result()
+        goal = goal_handle.request
+        try:
+            try:
+                spec = yaml.safe_load(goal.study)
+            except yaml.YAMLError as exc:
+                raise InvalidParameterError(f"study: neither JSON nor YAML ({exc})") from None
+            study = Study.from_spec(spec, where="study")
+            points = study.points()
+
+            def progress(done: int, total: int, index: int) -> None:
+                goal_handle.publish_feedback(ros.actions.Study.Feedback(
+                    done=done, total=total, current_point=index,
+                    current=point_values(points, index)))
+
+            summary = self.run_study(study, Path(goal.out), progress=progress,
+                                     stop=lambda: goal_handle.is_cancel_requested)
+        except BipedOptError as exc:
+            self.get_logger().warning(f"study goal failed: {exc}")
+            result.success, result.message = False, str(exc)
+            goal_handle.abort()
+            return result
+        result.success = not summary.stopped
+        result.message = "done" if result.success else "stopped before every point was done"
+        result.table, result.spec = str(summary.path), str(spec_path(summary.path))
+        result.points, result.computed = summary.points, summary.computed
+        result.resumed, result.rows, result.stopped = summary.resumed, summary.rows, \
+            summary.stopped
+        if goal_handle.is_cancel_requested:
+            goal_handle.canceled()
+        else:
+            goal_handle.succeed()
+        return result
+
+    def destroy_node(self) -> None:
+        if self._action is not None:
+            self._action.destroy()
+            self._action = None
+        super().destroy_node()
+
+
+class _Run:
+    """One study on the coordinator (the dispatch loop of the module docstring)."""
+
+    def __init__(self, node: StudyCoordinator, study: Study, path: Path,
+                 progress: Callable[[int, int, int], None] | None,
+                 stop: Callable[[], bool] | None) -> None:
+        self.node, self.study = node, study
+        self.table = StudyTable(study, Path(path))
+        self.spec = json.dumps(study.as_dict())
+        self.queue: collections.deque[int] = collections.deque(self.table.pending())
+        self.events: queue.SimpleQueue[tuple[str, int, Any]] = queue.SimpleQueue()
+        self.workers: dict[str, _Worker] = {}
+        self.progress, self.stop = progress, stop
+        node.dispatches, node.served, node.node_seconds = collections.Counter(), {}, 0.0
+        self._waiting_logged = False
+
+    def run(self) -> StudySummary:
+        total = len(self.table.points)
+        stopped = False
+        next_discovery = 0.0
+        try:
+            while len(self.table.done) < total:
+                if self.stop is not None and self.stop():
+                    stopped = True
+                    break
+                now = time.monotonic()
+                if now >= next_discovery:
+                    self._discover()
+                    next_discovery = now + self.node.discovery_period
+                self._expire(now)
+                self._dispatch()
+                try:
+                    event = self.events.get(timeout=min(0.05, self.node.discovery_period))
+                except queue.Empty:
+                    continue
+                self._handle(*event)
+                while True:  # everything else that arrived meanwhile
+                    try:
+                        event = self.events.get_nowait()
+                    except queue.Empty:
+                        break
+                    self._handle(*event)
+        finally:
+            for worker in self.workers.values():
+                self.node.destroy_client(worker.client)
+        return self.table.summary(stopped)
+
+    # -- the nodes -----------------------------------------------------------------------------
+    def _discover(self) -> None:
+        names = set(self.node.workers())
+        for name in sorted(set(self.workers) - names):
+            worker = self.workers.pop(name)
+            if worker.items:
+                self.node.get_logger().warning(
+                    f"{name} disappeared with {len(worker.items)} item(s): sent to other nodes")
+            for index in worker.items:
+                self._requeue(index)
+            self.node.destroy_client(worker.client)
+        for name in sorted(names - set(self.workers)):
+            client = self.node.create_client(ros.srvs.StudyPoint, name,
+                                             callback_group=self.node._group)
+            self.workers[name] = _Worker(name, client)
+        if not self.workers and not self._waiting_logged:
+            self.node.get_logger().info("waiting for optimiser nodes (none on the domain yet)")
+            self._waiting_logged = True
+
+    def _expire(self, now: float) -> None:
+        for worker in self.workers.values():
+            for index, sent in list(worker.items.items()):
+                if now - sent > self.node.item_timeout:
+                    del worker.items[index]
+                    worker.stalled = True
+                    self.node.get_logger().warning(
+                        f"{worker.name}: no answer for point {index} in "
+                        f"{self.node.item_timeout:g} s: sent to another node")
+                    self._requeue(index)
+
+    def _requeue(self, index: int) -> None:
+        if index in self.table.done or index in self.queue:
+            return
+        if any(index in w.items for w in self.workers.values()):
+            return
+        self.queue.appendleft(index)
+
+    def _dispatch(self) -> None:
+        # round robin by load: the least loaded ready node gets the next item
+        while self.queue:
+            ready = [w for w in self.workers.values()
+                     if not w.stalled and len(w.items) < self.node.in_flight and self._ready(w)]
+            if not ready:
+                return
+            worker = min(ready, key=lambda w: len(w.items))
+            index = self.queue.popleft()
+            if index in self.table.done:
+                continue
+            request = ros.srvs.StudyPoint.Request(study=self.spec, index=index)
+            worker.items[index] = time.monotonic()
+            self.node.dispatches[index] += 1
+            future = worker.client.call_async(request)
+            future.add_done_callback(
+                lambda f, n=worker.name, i=index: self.events.put((n, i, f)))
+
+    @staticmethod
+    def _ready(worker: _Worker) -> bool:
+        if not worker.ready:
+            worker.ready = worker.client.service_is_ready()
+        return worker.ready
+
+    # -- answers -------------------------------------------------------------------------------
+    def _handle(self, name: str, index: int, future: Any) -> None:
+        worker = self.workers.get(name)
+        if worker is not None:
+            worker.items.pop(index, None)
+            worker.stalled = False
+        if future.cancelled() or future.exception() is not None:
+            self._requeue(index)  # its client was destroyed (node gone) or the reply was bad
+            return
+        response = future.result()
+        if index in self.table.done:
+            return  # a late answer to an item another node did meanwhile
+        if not response.success:
+            raise StudyFailedError(f"point {index} failed on {name}: {response.message}")
+        if self.table.append(decode_rows(response.rows, index)):
+            self.node.served.setdefault(name, []).append(index)
+            self.node.node_seconds += response.seconds
+            if self.progress is not None:
+                self.progress(len(self.table.done), len(self.table.points), index)
+
+
+def point_values(study_points: list[dict[str, float]], index: int) -> str:
+    """The parameter values of point ``index`` as JSON (the action's feedback)."""
+    if not 0 <= index < len(study_points):
+        return "{}"
+    return json.dumps({k: (v if math.isfinite(v) else None)
+                       for k, v in study_points[index].items()})
+
+
+@contextlib.contextmanager
+def coordinator_on_domain(domain_id: int | None = None,
+                          parameters: dict[str, Any] | None = None
+                          ) -> Iterator[StudyCoordinator]:
+    """A coordinator of its own (a context, the node with ``parameters``, an executor thread)
+    for the ``with`` block, torn down at its end."""
+    context = ros.Context()
+    ros.init(args=[], context=context, domain_id=domain_id)
+    try:
+        node = StudyCoordinator(context=context, parameter_overrides=[
+            ros.Parameter(k, value=v) for k, v in (parameters or {}).items()])
+    except BaseException:
+        ros.try_shutdown(context=context)
+        raise
+    executor = ros.MultiThreadedExecutor(num_threads=2, context=context)
+    executor.add_node(node)
+    thread = threading.Thread(target=executor.spin, name="study-coordinator", daemon=True)
+    thread.start()
+    try:
+        yield node
+    finally:
+        executor.shutdown(timeout_sec=10)
+        thread.join(10)
+        node.destroy_node()
+        ros.try_shutdown(context=context)
+
+
+def run_on_domain(study: Study, path: Path, *, domain_id: int | None = None,
+                  parameters: dict[str, Any] | None = None,
+                  progress: Callable[[int, int, int], None] | None = None,
+                  stop: Callable[[], bool] | None = None) -> StudySummary:
+    """Run ``study`` on the optimiser nodes of the domain from a coordinator of its own."""
+    with coordinator_on_domain(domain_id, parameters) as node:
+        return node.run_study(study, path, progress=progress, stop=stop)
+
+
+def main(args: list[str] | None = None) -> None:
+    from biped_opt.nodes.run import run_node
+
+    run_node(StudyCoordinator, args, threads=4)
+
+
+if __name__ == "__main__":
+    main()
