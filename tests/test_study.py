@@ -160,3 +160,31 @@ def test_cli_bad_study_file(tmp_path: Path, capsys, text: str, message: str) -> 
     status, _, err = _run(["study", str(spec), "--out", str(tmp_path / "x.csv")], capsys)
     assert status == 2 and not (tmp_path / "x.csv").exists()
     assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_table_as_mcap_read_back_by_mcap_ros2(tmp_path: Path, capsys) -> None:
+    """The table's rows as /biped/study StudyRow messages, decoded by mcap-ros2-support (an
+    independent reader of the .msg definition): the same numbers and strings, in point order,
+    with the study in the metadata."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    spec = tmp_path / "bar.yaml"
+    spec.write_text("system: rocking_bar\nmaneuver: drop\ngrid: {gamma: [0.3, 0.5]}\nnum: 61\n")
+    out, mcap_path = tmp_path / "bar.csv", tmp_path / "bar.mcap"
+    status, printed, _ = _run(["study", str(spec), "--out", str(out), "--mcap", str(mcap_path),
+                               "--no-progress"], capsys)
+    assert status == 0 and "/biped/study rows" in printed
+    table = sorted(read_table(out), key=lambda r: int(r["point"]))
+    with open(mcap_path, "rb") as fh:
+        reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+        decoded = [m for _, _, _, m in reader.iter_decoded_messages(topics=["/biped/study"])]
+        (meta,) = [m for m in reader.iter_metadata() if m.name == "biped_opt.study"]
+    assert len(decoded) == len(table) == 3 + 5  # gamma 0.3: three jumps; 0.5: five
+    for msg, row in zip(decoded, table):
+        assert msg.point == int(row["point"]) and msg.kind == row["kind"]
+        assert list(msg.parameter_names) == ["gamma"]
+        assert msg.parameter_values[0] == float(row["gamma"])
+        assert msg.s == float(row["s"]) and msg.size == float(row["size"])
+        assert msg.cause == row["cause"] and msg.rows == int(row["rows"])
+    assert json.loads(meta.metadata["study"])["grid"] == {"gamma": [0.3, 0.5]}

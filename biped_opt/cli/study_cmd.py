@@ -26,6 +26,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the table; if it exists with the same study, the run continues it")
     p.add_argument("--workers", type=int_at_least("--workers", 1), default=1,
                    help="local processes (default 1)")
+    p.add_argument("--mcap", type=Path, default=None, metavar="FILE.mcap",
+                   help="also write the table as /biped/study StudyRow messages to an MCAP file")
     p.add_argument("--figures", type=Path, default=None, metavar="DIR",
                    help="draw the table's figures (heat maps over the first two parameters, "
                         "policy switch locations) into DIR")
@@ -64,6 +66,10 @@ def run(args: argparse.Namespace) -> int:
     study = load_study(args.spec)
     if args.figures is not None:
         output_directory("--figures", args.figures)
+    if args.mcap is not None:
+        from biped_opt.cli.args import output_file
+
+        output_file("--mcap", args.mcap, overwrite=True)
     bar = Progress(1, f"{study.name}", enabled=progress_from_args(args))
     if args.ros and args.workers > 1:
         raise InvalidInputError("--workers: not with --ros (the optimiser nodes do the work)")
@@ -83,6 +89,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"{summary.path}: {summary.points} parameter points, {summary.computed} computed now, "
           f"{summary.resumed} resumed, {summary.rows} rows"
           + ("; stopped early, run again to continue" if summary.stopped else ""))
+    if args.mcap is not None:
+        from biped_opt.record.study_table import write_study_mcap
+
+        print(f"  {args.mcap}: {write_study_mcap(study, args.out, args.mcap)} /biped/study rows")
     if args.figures is not None:
         from biped_opt.plots.study import study_figures
         from biped_opt.record.study_table import read_table

@@ -26,7 +26,8 @@ from pathlib import Path
 from biped_opt.errors import InvalidInputError
 from biped_opt.study import COLUMNS, Study, StudyRow, evaluate_point
 
-__all__ = ["run_study", "read_table", "StudySummary", "StudyTable", "spec_path"]
+__all__ = ["run_study", "read_table", "StudySummary", "StudyTable", "spec_path",
+           "write_study_mcap"]
 
 
 @dataclass(frozen=True)
@@ -196,3 +197,28 @@ def run_study(study: Study, path: Path, *, workers: int = 1,
                     stopped = True
                     queue.clear()
     return table.summary(stopped)
+
+
+def write_study_mcap(study: Study, table: Path, output: Path) -> int:
+    """The complete rows of the table at ``table`` as ``/biped/study`` StudyRow messages in an
+    MCAP file (ROS 2 profile, like the sweeps; log time = row number in point order), the study
+    in a ``biped_opt.study`` metadata record. Returns the number of rows written."""
+    from biped_opt.record.writer import STUDY_TOPICS, SweepWriter
+
+    rows = sorted(read_table(table), key=lambda r: int(r["point"]))
+    names = list(study.parameter_names)
+
+    def number(text: str) -> float:
+        return math.nan if text == "" else float(text)
+
+    with SweepWriter(output, metadata={"study": json.dumps(study.as_dict())},
+                     topics=STUDY_TOPICS, metadata_name="biped_opt.study") as writer:
+        for k, r in enumerate(rows):
+            writer.write("/biped/study", {
+                "point": int(r["point"]), "parameter_names": names,
+                "parameter_values": [float(r[n]) for n in names], "table": r["table"],
+                "quantity": r["quantity"], "input": r["input"], "kind": r["kind"],
+                "s": number(r["s"]), "left": number(r["left"]), "right": number(r["right"]),
+                "size": number(r["size"]), "cause": r["cause"], "rows": int(r["rows"]),
+            }, k)
+    return len(rows)

@@ -49,6 +49,7 @@ __all__ = [
     "TOPICS",
     "BIPED_TOPICS",
     "SYSTEM_TOPICS",
+    "STUDY_TOPICS",
     "SYSTEM_METADATA",
     "SweepWriter",
     "qos_yaml",
@@ -81,10 +82,16 @@ TOPICS: dict[str, tuple[str, dict[str, int]]] = {
         "biped_opt_interfaces/msg/SystemInfo",
         {"history": 1, "depth": 1, "reliability": 1, "durability": 1},
     ),
+    "/biped/study": (
+        "biped_opt_interfaces/msg/StudyRow",
+        {"history": 1, "depth": 10, "reliability": 1, "durability": 2},
+    ),
 }
 #: the topics of a recording of the biped, and of any other system
 BIPED_TOPICS = ("/biped/state", "/biped/contact_mode", "/biped/sweep")
 SYSTEM_TOPICS = ("/biped/system_info", "/biped/system_state", "/biped/sweep")
+#: the topic of a parameter study's table (:mod:`biped_opt.record.study_table`)
+STUDY_TOPICS = ("/biped/study",)
 #: name of the metadata record describing a non-biped system (SystemInfo's fields)
 SYSTEM_METADATA = "biped_opt.system"
 
@@ -124,6 +131,8 @@ class SweepWriter:
         chunk_size: int = 1 << 20,
         compression: str = "zstd",
         system: Mapping[str, Any] | None = None,
+        topics: tuple[str, ...] | None = None,
+        metadata_name: str = "biped_opt.sweep",
     ) -> None:
         try:
             kind = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
@@ -150,7 +159,8 @@ class SweepWriter:
         self._channels: dict[str, int] = {}
         self._layouts: dict[tuple[Any, ...], FixedLayout] = {}
         self.system = dict(system) if system is not None else None
-        topics = BIPED_TOPICS if system is None else SYSTEM_TOPICS
+        if topics is None:
+            topics = BIPED_TOPICS if system is None else SYSTEM_TOPICS
         self.counts: dict[str, int] = {topic: 0 for topic in topics}
         self._sequence = 0
         self.finished = False
@@ -170,7 +180,7 @@ class SweepWriter:
                 },
             )
         if metadata:
-            self._writer.add_metadata("biped_opt.sweep", {k: str(v) for k, v in metadata.items()})
+            self._writer.add_metadata(metadata_name, {k: str(v) for k, v in metadata.items()})
         if self.system is not None:
             self._writer.add_metadata(SYSTEM_METADATA, {
                 k: v if isinstance(v, str) else json.dumps(v) for k, v in self.system.items()})
