@@ -73,12 +73,14 @@ def run(args: argparse.Namespace) -> int:
     print("\nNonsmooth points of outcomes, optimal policies and values (left | right)\n")
     print(result.table())
     experiment = control_experiment(args.out / "figures")
+    study_figures = two_node_study(args.out)
     piece_counts()
     gradient_methods(args.out / "figures")
     print("\nSummary")
     for s in recorded:
         print(f"  {s.path}  {sum(s.counts.values())} messages, {s.failed} failed points")
-    for path in (*offline.figures, *result.figures, result.captions, experiment):
+    for path in (*offline.figures, *result.figures, result.captions, experiment,
+                 *study_figures):
         print(f"  {path}")
     print(f"  total {time.perf_counter() - start:.1f} s")
     failed = sum(s.failed for s in recorded)
@@ -155,3 +157,44 @@ def gradient_methods(folder: Path) -> None:
     print(report(study, SAMPLE_COUNTS))
     for name in study.curves:
         print(f"  {gradient_figure(study, name, folder / f'gradients_{name}.png')}")
+
+
+#: the demo's parameter study: the liftoff jump over leg stiffness and body inertia (5 x 5)
+DEMO_STUDY = {"name": "demo", "system": "biped", "maneuver": "liftoff",
+              "inputs": {"u1": 1.5, "u2": 3.0},
+              "grid": {"k": [20.0, 23.5, 27.0, 31.0, 35.0], "Ib": [0.3, 0.4, 0.5, 0.6, 0.7]},
+              "s_range": [-0.02, 0.02], "num": 41}
+
+
+def two_node_study(out: Path) -> list[Path]:
+    """A small parameter study computed by two optimiser nodes on the DDS domain, handed out by
+    the coordinator (as on several machines): where the liftoff jump persists."""
+    from biped_opt import ros
+    from biped_opt.nodes.coordinator import hosted, run_on_domain
+    from biped_opt.nodes.optimiser import OptimiserNode
+    from biped_opt.plots.study import study_figures
+    from biped_opt.record.study_table import read_table
+    from biped_opt.study import Study
+
+    def optimiser(name: str):
+        return hosted(lambda context: OptimiserNode(
+            context=context, namespace=f"/demo_{name}", parameter_overrides=[
+                ros.Parameter("warm_up", value=False),
+                ros.Parameter("worker", value=f"demo_{name}")]), name=f"optimiser-{name}")
+
+    study = Study.from_spec(DEMO_STUDY)
+    table = out / "study_liftoff_jump.csv"
+    for stale in (table, table.with_name(table.name + ".study.json")):
+        stale.unlink(missing_ok=True)
+    print("\nA parameter study through two optimiser nodes (5 x 5 over k and Ib, the "
+          "/biped/study coordinator hands out the points)\n", flush=True)
+    t0 = time.perf_counter()
+    with optimiser("a"), optimiser("b"):
+        summary = run_on_domain(study, table)
+    rows = read_table(table)
+    jumps = {(float(r["k"]), float(r["Ib"])): float(r["size"]) for r in rows
+             if r["kind"] == "jump" and r["s"] and abs(float(r["s"])) <= 1e-9}
+    print(f"  {summary.points} points in {time.perf_counter() - t0:.1f} s -> {table}")
+    print(f"  the liftoff outcome jumps at th0 = 0 at {len(jumps)} of {summary.points} points; "
+          f"size (right - left) from {min(jumps.values()):+.4f} to {max(jumps.values()):+.4f}")
+    return study_figures(out / "figures", rows, study.parameter_names)

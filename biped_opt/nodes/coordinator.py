@@ -322,22 +322,20 @@ def point_values(study_points: list[dict[str, float]], index: int) -> str:
 
 
 @contextlib.contextmanager
-def coordinator_on_domain(domain_id: int | None = None,
-                          parameters: dict[str, Any] | None = None
-                          ) -> Iterator[StudyCoordinator]:
-    """A coordinator of its own (a context, the node with ``parameters``, an executor thread)
-    for the ``with`` block, torn down at its end."""
+def hosted(make: Callable[[Any], Any], domain_id: int | None = None, *, threads: int = 2,
+           name: str = "node") -> Iterator[Any]:
+    """The node ``make(context)`` on a DDS participant and executor thread of its own (what
+    another machine would run) for the ``with`` block, torn down at its end."""
     context = ros.Context()
     ros.init(args=[], context=context, domain_id=domain_id)
     try:
-        node = StudyCoordinator(context=context, parameter_overrides=[
-            ros.Parameter(k, value=v) for k, v in (parameters or {}).items()])
+        node = make(context)
     except BaseException:
         ros.try_shutdown(context=context)
         raise
-    executor = ros.MultiThreadedExecutor(num_threads=2, context=context)
+    executor = ros.MultiThreadedExecutor(num_threads=threads, context=context)
     executor.add_node(node)
-    thread = threading.Thread(target=executor.spin, name="study-coordinator", daemon=True)
+    thread = threading.Thread(target=executor.spin, name=name, daemon=True)
     thread.start()
     try:
         yield node
@@ -346,6 +344,15 @@ def coordinator_on_domain(domain_id: int | None = None,
         thread.join(10)
         node.destroy_node()
         ros.try_shutdown(context=context)
+
+
+def coordinator_on_domain(domain_id: int | None = None,
+                          parameters: dict[str, Any] | None = None
+                          ) -> contextlib.AbstractContextManager[StudyCoordinator]:
+    """A coordinator of its own (:func:`hosted`) with ``parameters``."""
+    return hosted(lambda context: StudyCoordinator(context=context, parameter_overrides=[
+        ros.Parameter(k, value=v) for k, v in (parameters or {}).items()]),
+        domain_id, threads=2, name="study-coordinator")
 
 
 def run_on_domain(study: Study, path: Path, *, domain_id: int | None = None,
