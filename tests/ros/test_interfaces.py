@@ -25,7 +25,8 @@ def test_every_definition_parses(ifc):
     root = find_msg_defs()
     msgs = sorted(p.stem for p in (root / "msg").glob("*.msg"))
     srvs = sorted(p.stem for p in (root / "srv").glob("*.srv"))
-    assert msgs == ["BipedState", "ContactMode", "SweepPoint", "SystemInfo", "SystemState"]
+    assert msgs == ["BipedState", "ContactMode", "StudyRow", "SweepPoint", "SystemInfo",
+                    "SystemState"]
     assert srvs == ["OptimalPolicy", "Simulate", "StudyPoint"]
     actions = sorted(p.stem for p in (root / "action").glob("*.action"))
     assert actions == ["Study"]
