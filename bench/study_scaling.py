@@ -47,8 +47,11 @@ def in_process(st: Study) -> float:
     return time.perf_counter() - start
 
 
+EXTRA_ENV: dict[str, str] = {}
+
+
 def start_nodes(count: int, domain: int) -> list[subprocess.Popen]:
-    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "PYTHONPATH": str(ROOT)}
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "PYTHONPATH": str(ROOT), **EXTRA_ENV}
     return [subprocess.Popen(
         [sys.executable, "-m", "biped_opt.cli.main", "node", "optimiser", "--ros-args",
          "-p", "warm_up:=false", "-p", f"worker:=bench{k}"],
