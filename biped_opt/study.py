@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -220,6 +221,10 @@ def _size(kind: str, left: float, right: float) -> float:
     return right - left if kind != "none" else 0.0
 
 
+_LOCK = threading.Lock()
+_COMPILED: dict[str, Any] = {}
+
+
 def evaluate_point(study: Study, index: int, values: Mapping[str, float]) -> list[StudyRow]:
     """The rows of parameter point ``index`` (``values`` from :meth:`Study.points`)."""
     from biped_opt.systems.compiled import CompiledSystem
@@ -230,9 +235,13 @@ def evaluate_point(study: Study, index: int, values: Mapping[str, float]) -> lis
     model = {k: v for k, v in values.items() if k in system.defaults}
     found: list[tuple[str, Any]] = []
     if study.maneuver is not None:
-        compiled = CompiledSystem(system, **model)
-        grid = _grid(compiled, study.maneuver, study.num, study.s_range)
-        report = find_nonsmooth(compiled, study.maneuver, dict(study.inputs), s=grid)
+        with _LOCK:  # one compiled system per process and system, its parameters set per point
+            compiled = _COMPILED.get(study.system)
+            if compiled is None:
+                compiled = _COMPILED[study.system] = CompiledSystem(system)
+            compiled.set_parameters(**model)
+            grid = _grid(compiled, study.maneuver, study.num, study.s_range)
+            report = find_nonsmooth(compiled, study.maneuver, dict(study.inputs), s=grid)
         found += [("fixed", p) for p in report.points] or [("fixed", None)]
     if study.problem is not None:
         from biped_opt.systems.optimal import compiled_for
