@@ -21,6 +21,7 @@ does not change the source, so it does not recompile.
 from __future__ import annotations
 
 import hashlib
+import re
 from pathlib import Path
 
 import sympy as sp
@@ -33,7 +34,7 @@ __all__ = ["render", "source_key", "KERNEL_BODY"]
 
 KERNEL_BODY = Path(__file__).with_name("_kernel_body.py")
 #: bump when the generated code's form changes (the cache key includes it)
-FORMAT = 1
+FORMAT = 3
 
 
 class _Printer(PythonCodePrinter):
@@ -68,6 +69,7 @@ class _Emitter:
         self.indent = indent
         self.count = 0
         self.printer = _Printer({"fully_qualified_modules": True})
+        self.trig: dict[sp.Expr, tuple[sp.Symbol, sp.Symbol]] = {}
 
     def line(self, text: str) -> None:
         self.lines.append(self.indent + text)
@@ -82,6 +84,8 @@ class _Emitter:
     def assign(self, prefix: str, text: str) -> str:
         if _is_zero(text):
             return "0.0"
+        if _LITERAL.fullmatch(text):
+            return text  # a number needs no name (and a hoisted one no slot)
         name = self.fresh(prefix)
         self.line(f"{name} = {text}")
         return name
@@ -89,10 +93,30 @@ class _Emitter:
     def exprs(self, values: list[sp.Expr], prefix: str) -> list[str]:
         """Assign each expression (common subexpressions once) and return the names, or
         "0.0" for the ones that are zero."""
+        values = self._sincos(values)
         subs, reduced = sp.cse(values, symbols=sp.numbered_symbols(f"_s{prefix}{self.count}_"))
         for sym, sub in subs:
             self.line(f"{sym} = {self.expr(sub)}")
         return [self.assign(prefix, self.expr(r)) if r != 0 else "0.0" for r in reduced]
+
+
+    def _sincos(self, values: list[sp.Expr]) -> list[sp.Expr]:
+        """``values`` with sin(a) and cos(a) replaced by the names of one ``sincos(a)`` call
+        per angle and function body (polynomials for |a| <= pi/4 where libm's sin and cos
+        would sit on the evaluation's critical path: see model/biped.py)."""
+        found = set().union(*(sp.sympify(v).atoms(sp.sin, sp.cos) for v in values))
+        if not found:
+            return values
+        for angle in sorted({f.args[0] for f in found}, key=sp.default_sort_key):
+            if angle not in self.trig:
+                sin, cos = self.fresh("sin"), self.fresh("cos")
+                self.line(f"{sin}, {cos} = _sincos({self.expr(angle)})")
+                self.trig[angle] = (sp.Symbol(sin), sp.Symbol(cos))
+        swap = {f: self.trig[f.args[0]][0 if isinstance(f, sp.sin) else 1] for f in found}
+        return [sp.sympify(v).xreplace(swap) for v in values]
+
+
+_LITERAL = re.compile(r"-?[0-9]+\.[0-9]*(e[-+]?[0-9]+)?")
 
 
 def _is_zero(text: str) -> bool:
@@ -191,17 +215,64 @@ def _schur(br: _Emitter, L: list[list[str]], Da: list[list[str]], active: list[i
 
 
 def _mode_factors(em: _Emitter, n: int, masks: set[int]) -> dict[int, str]:
-    """0.0/1.0 factors "mode == J" for the modes in ``masks`` and "constraint j active"."""
+    """0.0/1.0 factors "mode == J" for the modes in ``masks``."""
     out = {}
     for mask in sorted(masks):
         out[mask] = em.assign("o", f"1.0 * (mode == {mask})")
     return out
 
 
+def _patch(base: sp.Expr, other: sp.Expr) -> tuple[sp.Expr, sp.Expr] | None:
+    """(node, extra) when ``other`` is ``base`` with one sum ``node`` of it extended by the
+    terms ``extra`` (an input added to a leg's force in the modes it acts in), else None."""
+    if base == other:
+        return None
+    if isinstance(base, sp.Add) and isinstance(other, sp.Add):
+        mine, theirs = set(base.args), set(other.args)
+        if mine < theirs:
+            return base, sp.Add(*(theirs - mine))
+    if base.is_Atom or base.func != other.func or len(base.args) != len(other.args):
+        raise ValueError
+    only_base = [a for a in base.args if a not in other.args]
+    only_other = [a for a in other.args if a not in base.args]
+    if len(only_base) != 1 or len(only_other) != 1:
+        raise ValueError
+    return _patch(only_base[0], only_other[0])
+
+
+def _gated(variants: dict[sp.Expr, list[int]], gates: dict[tuple[int, ...], sp.Symbol]
+           ) -> sp.Expr | None:
+    """One expression for every variant of a force entry: the variant of the most modes with
+    each other variant's extra terms added times its 0/1 mode factor, or None when the variants
+    are not of that form. For finite values it is exact per mode (e + 0.0 * t is e), cheaper
+    than mixing whole variants, and it is how a hand-written model adds its gated inputs."""
+    ordered = sorted(variants.items(), key=lambda kv: -len(kv[1]))
+    base = ordered[0][0]
+    extra: dict[sp.Expr, sp.Expr] = {}
+    try:
+        for expr, masks in ordered[1:]:
+            found = _patch(base, expr)
+            if found is None:
+                return None
+            node, terms = found
+            extra[node] = extra.get(node, sp.S.Zero) + gates[tuple(masks)] * terms
+    except ValueError:
+        return None
+    merged = base.xreplace({node: sp.Add(node, terms) for node, terms in extra.items()})
+    for expr, masks in ordered:  # each mode's variant comes back exactly
+        for mask in masks:
+            values = {g: sp.S.One if mask in key else sp.S.Zero for key, g in gates.items()}
+            if merged.xreplace(values) != expr:
+                return None
+    return merged
+
+
 def _mode_mixed(em: _Emitter, derived: DerivedSystem) -> list[str]:
-    """f_J(q, q', u) of the current mode without a branch: per entry, each distinct expression
-    (over the modes) times the 0/1 factor of the modes that have it. Exact: 1.0 * e + 0.0 * e'
-    is e for finite values (the inputs are checked finite on entry)."""
+    """f_J(q, q', u) of the current mode without a branch. Per entry, one expression with the
+    extra terms of some modes gated by their 0/1 factors (see :func:`_gated`), or else each
+    distinct expression (over the modes) times the 0/1 factor of the modes that have it.
+    Exact: 1.0 * e + 0.0 * e' is e for finite values (the inputs are checked finite on
+    entry)."""
     d, n = derived.ndof, derived.nconstraints
     variants: list[dict[sp.Expr, list[int]]] = []
     for i in range(d):
@@ -209,31 +280,81 @@ def _mode_mixed(em: _Emitter, derived: DerivedSystem) -> list[str]:
         for mask in range(1 << n):
             by_expr.setdefault(derived.forces[mask][i], []).append(mask)
         variants.append(by_expr)
-    flat = [e for by_expr in variants for e in by_expr]
-    names = em.exprs(flat, "f")
     needed = {m for by_expr in variants if len(by_expr) > 1 for ms in by_expr.values()
               for m in ms}
     factor = _mode_factors(em, n, needed)
-    out, k = [], 0
+    gates: dict[tuple[int, ...], sp.Symbol] = {}
     for by_expr in variants:
-        if len(by_expr) == 1:
+        for masks in by_expr.values():
+            key = tuple(masks)
+            if len(by_expr) > 1 and key not in gates:
+                weight = " + ".join(factor[m] for m in masks)
+                gates[key] = sp.Symbol(weight if len(masks) == 1 else em.assign("o", weight))
+    entries: list[list[sp.Expr]] = []
+    for by_expr in variants:
+        merged = _gated(by_expr, gates) if len(by_expr) > 1 else None
+        entries.append([merged] if merged is not None else list(by_expr))
+    names = em.exprs([e for entry in entries for e in entry], "f")
+    out, k = [], 0
+    for by_expr, entry in zip(variants, entries):
+        if len(entry) == 1:
             out.append(names[k])
             k += 1
             continue
         terms = []
         for masks in by_expr.values():
-            weight = " + ".join(factor[m] for m in masks)
-            terms.append(_mul(names[k], f"({weight})" if len(masks) > 1 else weight))
+            g = gates[tuple(masks)]
+            terms.append(_mul(names[k], str(g)))
             k += 1
         out.append(em.assign("f", _sum(terms)))
     return out
 
 
-def _vector_field(derived: DerivedSystem) -> list[str]:
+class _Hoisted:
+    """Quantities of the vector field that depend on the parameters alone (a constant mass
+    matrix's factor, constant constraint rows, their Schur complement), computed once per
+    parameter vector by ``prepare_parameters`` and read from p[NPARAM:] instead of being
+    recomputed at every evaluation: ~2% of a simulation, mostly divisions."""
+
+    def __init__(self, derived: DerivedSystem, em: _Emitter) -> None:
+        self.em = em
+        self.pre = _Emitter()
+        self.pre.count = 10**6  # its names live in the vector field's scope too
+        self.offset = len(derived.system.p)
+        self.slots: dict[str, int] = {}
+        self.params = {derived.system.p[name] for name in derived.system.p.names()}
+
+    def constant(self, matrix: sp.Matrix) -> bool:
+        return matrix.free_symbols <= self.params
+
+    def load(self, name: str) -> str:
+        """``name`` (computed in ``pre``) made available to the vector field."""
+        if _is_zero(name) or _LITERAL.fullmatch(name) or name in self.slots:
+            return name
+        self.slots[name] = len(self.slots)
+        self.em.line(f"{name} = p[{self.offset + self.slots[name]}]")
+        return name
+
+    def load_all(self, names):
+        return [self.load_all(v) if isinstance(v, list) else self.load(v) for v in names]
+
+    def function(self, derived: DerivedSystem) -> list[str]:
+        out = ["def prepare_parameters(p):",
+               '    """The parameter vector the compiled functions take: the values p (in the',
+               "    declared order), then the quantities that depend on them alone (computed once",
+               '    here, in Python, instead of at every evaluation)."""']
+        system = derived.system
+        out += [f"    {system.p[name]} = p[{k}]" for k, name in enumerate(system.p.names())]
+        return out + self.pre.lines + ["    return np.array([", "        *p,"] + [
+            f"        {v}," for v in self.slots] + ["    ], dtype=np.float64)"]
+
+
+def _vector_field(derived: DerivedSystem) -> tuple[list[str], list[str]]:
     """Eq. (1a) for the current mode, branch-free: the forces mixed by 0/1 mode factors, and
     the reactions from the Schur complement of *all* constraints with the inactive ones' rows
     and columns replaced by the identity (their reactions come out 0). Without branches Numba
-    can drop the reference counting around an inlined call (see model/biped.py)."""
+    can drop the reference counting around an inlined call (see model/biped.py). Also returns
+    ``prepare_parameters`` (see :class:`_Hoisted`)."""
     d, n = derived.ndof, derived.nconstraints
     out = ["@nb.njit(**HOT_PATH, inline=\"always\")",
            "def vector_field(p, mode, y, yo, u, out, off, lam, lo):",
@@ -241,7 +362,19 @@ def _vector_field(derived: DerivedSystem) -> list[str]:
            '    reactions to lam[lo:lo + n] (0 for inactive constraints), Eq. (1a)."""']
     em = _Emitter()
     _bindings(derived, em, velocities=True, inputs=True)
-    L, Da = _factors(derived, em)
+    hoist = _Hoisted(derived, em)
+    const_m = hoist.constant(derived.mass_matrix)
+    const_da = n == 0 or hoist.constant(derived.jacobian)
+    m_em = hoist.pre if const_m else em
+    m = m_em.exprs([derived.mass_matrix[i, j] for i in range(d) for j in range(d)], "m")
+    L = _cholesky(m_em, [[m[i * d + j] for j in range(d)] for i in range(d)], "c")
+    if const_m:
+        L = _Inverse(hoist.load_all(L)) if isinstance(L, _Inverse) else hoist.load_all(L)
+    da_em = hoist.pre if const_da else em
+    da = da_em.exprs(list(derived.jacobian), "a") if n else []
+    Da = [[da[j * d + i] for i in range(d)] for j in range(n)]
+    if const_da:
+        Da = hoist.load_all(Da)
     rate = em.exprs(list(derived.jacobian_rate), "r") if n else []
     for i in range(d):
         em.line(f"out[off + {i}] = y[yo + {d + i}]")
@@ -251,22 +384,34 @@ def _vector_field(derived: DerivedSystem) -> list[str]:
     if n:
         on = [em.assign("n", f"float(mode >> {j} & 1)") for j in range(n)]
         off = [em.assign("n", f"1.0 - {on[j]}") for j in range(n)]
-        cols = _columns(em, L, Da, list(range(n)))
-        S = [[em.assign("s", _sum([_mul(Da[a][i], cols[b][i]) for i in range(d)]))
+        s_em = hoist.pre if const_m and const_da else em
+        cols = _columns(s_em, L, Da, list(range(n)))
+        S = [[s_em.assign("s", _sum([_mul(Da[a][i], cols[b][i]) for i in range(d)]))
               for b in range(n)] for a in range(n)]
-        masked = [[em.assign("s", _sum([_mul(_mul(on[a], on[b]), S[a][b]),
-                                        off[a] if a == b else "0.0"]))
-                   for b in range(n)] for a in range(n)]
         rhs = [em.assign("b", _mul(on[a], "(-(" + _sum(
             [*(_mul(Da[a][i], x[i]) for i in range(d)), rate[a]]) + "))")) for a in range(n)]
-        lam = _solve(em, _cholesky(em, masked, "k"), rhs, "l")
+        diagonal = all(_is_zero(S[a][b]) for a in range(n) for b in range(n) if a != b)
+        if s_em is hoist.pre and diagonal:
+            # the masked matrix is diagonal with entries on_j S_jj + off_j (on_j in {0, 1}):
+            # its inverse on_j / S_jj + off_j needs no division per evaluation
+            inv = hoist.load_all([hoist.pre.assign("kv", f"1.0 / {S[j][j]}") for j in range(n)])
+            cols = hoist.load_all(cols)
+            lam = [em.assign("l", _mul(rhs[j], "(" + _sum([_mul(on[j], inv[j]), off[j]]) + ")"))
+                   for j in range(n)]
+        else:
+            if s_em is hoist.pre:
+                cols, S = hoist.load_all(cols), hoist.load_all(S)
+            masked = [[em.assign("s", _sum([_mul(_mul(on[a], on[b]), S[a][b]),
+                                            off[a] if a == b else "0.0"]))
+                       for b in range(n)] for a in range(n)]
+            lam = _solve(em, _cholesky(em, masked, "k"), rhs, "l")
         acc = [em.assign("q", _sum([x[i], *(_mul(cols[j][i], lam[j]) for j in range(n))]))
                for i in range(d)]
         for j in range(n):
             em.line(f"lam[lo + {j}] = {lam[j]} + 0.0")
     for i in range(d):
         em.line(f"out[off + {d + i}] = {acc[i]}")
-    return out + em.lines
+    return out + em.lines, hoist.function(derived)
 
 
 def _columns(em: _Emitter, L: list[list[str]], Da: list[list[str]], active: list[int]
@@ -419,9 +564,14 @@ def _probe(derived: DerivedSystem, *, values: bool = False) -> list[str]:
                "def guard_values(p, mode, u, code, y, yo, lam, lo, out):",
                '    """Every guard at the state y[yo:] with known reactions lam[lo:]."""']
     else:
+        # (underscored: a system's own symbols, bound by name below, never start with one;
+        # a damping parameter "c" once shadowed the stage abscissa here)
+        cs = ", ".join(f"_c{i}" for i in range(n + 1))
         out = ["@nb.njit(**HOT_PATH, inline=\"always\")",
-               "def probe_stage(p, mode, u, code, y, yo, lam, lo, c, probe):",
-               '    """probe[i] lowered to c for each guard i <= 0 at the stage state y[yo:]."""']
+               f"def probe_stage(p, mode, u, code, y, yo, lam, lo, _c, {cs}):",
+               '    """(c0, c1, ...) with ci lowered to the abscissa _c for each guard i <= 0 at',
+               '    the stage state y[yo:] (values, not an array: the step keeps them in',
+               '    registers)."""']
     em = _Emitter()
     _bindings(derived, em, velocities=True, inputs=True)
     a = em.exprs(list(derived.constraints), "a") if n else []
@@ -429,12 +579,12 @@ def _probe(derived: DerivedSystem, *, values: bool = False) -> list[str]:
     for j in range(n):
         on = em.assign("n", f"float(mode >> {j} & 1)")
         g = em.assign("g", f"{on} * lam[lo + {j}] + (1.0 - {on}) * {a[j]}")
-        em.line(f"out[{j}] = {g}" if values
-                else f"probe[{j}] = min(probe[{j}], c + 2.0 * ({g} > 0.0))")
+        em.line(f"out[{j}] = {g}" if values else f"_c{j} = min(_c{j}, _c + 2.0 * ({g} > 0.0))")
     mixed = _sum([_mul(t, f"(code == {k})") for k, t in enumerate(terms)])
     g = em.assign("g", mixed)
-    em.line(f"out[{n}] = {g}" if values
-            else f"probe[{n}] = min(probe[{n}], c + 2.0 * ({g} > 0.0))")
+    em.line(f"out[{n}] = {g}" if values else f"_c{n} = min(_c{n}, _c + 2.0 * ({g} > 0.0))")
+    if not values:
+        em.line(f"return {cs}")
     return out + em.lines
 
 
@@ -461,6 +611,7 @@ def render(derived: DerivedSystem) -> str:
         "import numpy as np",
         "",
         "from biped_opt._jit import HOT_PATH",
+        "from biped_opt.model.biped import sincos as _sincos",
         "",
         f"NDOF = {d}",
         f"NSTATE = {2 * d}",
@@ -473,9 +624,11 @@ def render(derived: DerivedSystem) -> str:
         f"INITIAL_MODE = {_int_array([m.mode for m in maneuvers])}",
         "",
     ]
+    vector_field, prepare = _vector_field(derived)
     parts = [
         head,
-        _vector_field(derived),
+        prepare,
+        vector_field,
         _impact(derived),
         _scalar_function("constraint_rates", "Da(q) q' into out[:n].",
                          "p, y, yo, out", derived, list(derived.jacobian * sp.Matrix(system.dq))
@@ -489,7 +642,8 @@ def render(derived: DerivedSystem) -> str:
     ]
     text = "\n\n\n".join("\n".join(part) for part in parts) + "\n"
     step = _dop853_gen.render(n=2 * d, imports="", rhs="vector_field", probe="probe_stage",
-                              nlam=max(n, 1), registers=False)
+                              nlam=max(n, 1), registers=True, nguards=n + 1,
+                              probe_head="p, mode, u, term_sign")
     step = step[step.index("\nSTRIDE = ") + 1:]
     body = KERNEL_BODY.read_text()
     body = body[body.index("\n# --- kernel ---\n") + 1:]

@@ -138,8 +138,16 @@ class CompiledSystem:
                     f"{self.system.where()}: parameter {key!r} must be a finite number, "
                     f"got {value!r}")
             values[key] = float(value)
+        raw = np.array([values[k] for k in self.system.p.names()], dtype=np.float64)
+        try:  # the values and what depends on them alone (see codegen._Hoisted)
+            with np.errstate(divide="raise", invalid="raise", over="raise"):
+                prepared = self.module.prepare_parameters(raw)
+        except (ArithmeticError, ValueError, FloatingPointError) as exc:
+            raise InvalidParameterError(
+                f"{self.system.where()}: these parameters give no invertible mass matrix "
+                f"({exc})") from None
         self.parameters = values
-        self._p = np.array([values[k] for k in self.system.p.names()], dtype=np.float64)
+        self._p = prepared
 
     def initial_mode(self, maneuver: str) -> int:
         """The contact mode (bit mask) ``maneuver`` starts in."""
