@@ -34,7 +34,7 @@ __all__ = ["render", "source_key", "KERNEL_BODY"]
 
 KERNEL_BODY = Path(__file__).with_name("_kernel_body.py")
 #: bump when the generated code's form changes (the cache key includes it)
-FORMAT = 3
+FORMAT = 4
 
 
 class _Printer(PythonCodePrinter):
@@ -70,6 +70,7 @@ class _Emitter:
         self.count = 0
         self.printer = _Printer({"fully_qualified_modules": True})
         self.trig: dict[sp.Expr, tuple[sp.Symbol, sp.Symbol]] = {}
+        self.named: dict[str, str] = {}
 
     def line(self, text: str) -> None:
         self.lines.append(self.indent + text)
@@ -84,11 +85,12 @@ class _Emitter:
     def assign(self, prefix: str, text: str) -> str:
         if _is_zero(text):
             return "0.0"
-        if _LITERAL.fullmatch(text):
-            return text  # a number needs no name (and a hoisted one no slot)
-        name = self.fresh(prefix)
-        self.line(f"{name} = {text}")
-        return name
+        if _LITERAL.fullmatch(text) or text.isidentifier():
+            return text  # a number or a name needs no new name (and a hoisted one no slot)
+        if text not in self.named:  # the same value twice is named once
+            self.named[text] = self.fresh(prefix)
+            self.line(f"{self.named[text]} = {text}")
+        return self.named[text]
 
     def exprs(self, values: list[sp.Expr], prefix: str) -> list[str]:
         """Assign each expression (common subexpressions once) and return the names, or
@@ -124,7 +126,9 @@ def _is_zero(text: str) -> bool:
 
 
 def _mul(a: str, b: str) -> str:
-    return "0.0" if _is_zero(a) or _is_zero(b) else f"{a} * {b}"
+    if _is_zero(a) or _is_zero(b):
+        return "0.0"
+    return b if a == "1.0" else a if b == "1.0" else f"{a} * {b}"  # (1.0 * v is v, exactly)
 
 
 def _sum(terms: list[str]) -> str:
@@ -258,7 +262,9 @@ def _gated(variants: dict[sp.Expr, list[int]], gates: dict[tuple[int, ...], sp.S
             extra[node] = extra.get(node, sp.S.Zero) + gates[tuple(masks)] * terms
     except ValueError:
         return None
+    whole = extra.pop(base, sp.S.Zero)  # terms added to the entry itself (a body torque)
     merged = base.xreplace({node: sp.Add(node, terms) for node, terms in extra.items()})
+    merged = sp.Add(merged, whole)
     for expr, masks in ordered:  # each mode's variant comes back exactly
         for mask in masks:
             values = {g: sp.S.One if mask in key else sp.S.Zero for key, g in gates.items()}
@@ -392,12 +398,11 @@ def _vector_field(derived: DerivedSystem) -> tuple[list[str], list[str]]:
             [*(_mul(Da[a][i], x[i]) for i in range(d)), rate[a]]) + "))")) for a in range(n)]
         diagonal = all(_is_zero(S[a][b]) for a in range(n) for b in range(n) if a != b)
         if s_em is hoist.pre and diagonal:
-            # the masked matrix is diagonal with entries on_j S_jj + off_j (on_j in {0, 1}):
-            # its inverse on_j / S_jj + off_j needs no division per evaluation
+            # the masked matrix is diagonal with entries on_j S_jj + off_j (on_j in {0, 1}), and
+            # rhs_j carries the factor on_j: lambda_j = rhs_j / S_jj, no division per evaluation
             inv = hoist.load_all([hoist.pre.assign("kv", f"1.0 / {S[j][j]}") for j in range(n)])
             cols = hoist.load_all(cols)
-            lam = [em.assign("l", _mul(rhs[j], "(" + _sum([_mul(on[j], inv[j]), off[j]]) + ")"))
-                   for j in range(n)]
+            lam = [em.assign("l", _mul(rhs[j], inv[j])) for j in range(n)]
         else:
             if s_em is hoist.pre:
                 cols, S = hoist.load_all(cols), hoist.load_all(S)
