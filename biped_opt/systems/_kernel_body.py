@@ -119,7 +119,13 @@ def _guard_rate(p, mode, u, code, y, f, i, tmp, dy, lam):
 @nb.njit(**HOT_PATH)
 def _root_on_dense(p, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, dy, lam):
     """Root in (xa, xb] of guard i on the dense output (ga > 0 >= gb), by regula falsi with
-    the Anderson-Bjorck modification, to a bracket below _ROOT_XTOL of the step."""
+    the Anderson-Bjorck modification, to a bracket below _ROOT_XTOL of the step. A guard that
+    is one state component (see ``guard_component``) iterates on that component's eight
+    coefficients, read once; only other guards interpolate the whole state per iterate."""
+    k, sign = guard_component(mode, code, i)
+    c = max(k, 0)  # (read but unused when the guard is not one component)
+    y0, f0, f1, f2, f3 = y[c], F[0, c], F[1, c], F[2, c], F[3, c]
+    f4, f5, f6 = F[4, c], F[5, c], F[6, c]
     side = 0
     for _ in range(200):
         if xb - xa <= _ROOT_XTOL:
@@ -128,7 +134,13 @@ def _root_on_dense(p, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, dy, lam):
         if not xa < x < xb:
             x = 0.5 * (xa + xb)
         x = min(max(x, xa + 0.5 * _ROOT_XTOL), xb - 0.5 * _ROOT_XTOL)
-        gx = _guard_on_dense(p, mode, u, code, F, y, x, i, tmp, dy, lam)
+        if k >= 0:
+            xm = 1.0 - x
+            gx = sign * (y0 + x * (f0 + xm * (f1 + x * (f2 + xm * (f3 + x * (f4 + xm * (
+                f5 + x * f6)))))))
+        else:
+            _dense_eval(F, y, x, tmp)
+            gx = _guard_at(p, mode, u, code, tmp, i, dy, lam)
         if gx > 0.0:
             if side == 1:
                 m = 1.0 - gx / ga

@@ -34,7 +34,7 @@ __all__ = ["render", "source_key", "KERNEL_BODY"]
 
 KERNEL_BODY = Path(__file__).with_name("_kernel_body.py")
 #: bump when the generated code's form changes (the cache key includes it)
-FORMAT = 4
+FORMAT = 5
 
 
 class _Printer(PythonCodePrinter):
@@ -544,7 +544,7 @@ def _components(derived: DerivedSystem) -> list[str]:
     """``guard_component(mode, code, i)``: (k, sign) when guard i in this mode and maneuver is
     sign * y[k] (event roots then interpolate one component), else (-1, 1.0)."""
     n = derived.nconstraints
-    out = ["@nb.njit(**HOT_PATH)", "def guard_component(mode, code, i):",
+    out = ["@nb.njit(**HOT_PATH, inline=\"always\")", "def guard_component(mode, code, i):",
            '    """(k, sign) of a guard that is one state component, else (-1, 1.0)."""']
     for j in range(n):
         one = _as_component(derived, derived.constraints[j])

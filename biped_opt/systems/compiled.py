@@ -91,16 +91,28 @@ class SystemTrajectory:
     t_final: float
     outcome: float
     y_final: Array
-    modes: tuple[int, ...]  #: the contact modes in order, from the initial one
-    event_times: tuple[float, ...]  #: times of the contact events
     events: Array  #: rows [t, kind, touchdown, liftoff, mode_before, mode_after, y-, y+]
     samples: Array  #: rows [t, y, mode, lambda]
     nfev: int
     nsteps: int
+    n_events: int  #: contact events (the first rows of ``events``; a terminal row may follow)
+    initial_mode: int
 
     @property
     def success(self) -> bool:
         return self.status == "OK"
+
+    # (read from the event rows when asked for: converting them on every simulation cost a
+    # tenth of a trajectory, and an optimiser reads only the outcome)
+    @property
+    def modes(self) -> tuple[int, ...]:
+        """The contact modes in order, from the initial one."""
+        return (self.initial_mode, *map(int, self.events[: self.n_events, 5].tolist()))
+
+    @property
+    def event_times(self) -> tuple[float, ...]:
+        """Times of the contact events."""
+        return tuple(self.events[: self.n_events, 0].tolist())
 
 
 class CompiledSystem:
@@ -229,12 +241,10 @@ class CompiledSystem:
         y_out = np.empty(m.NSTATE)
         status, t_f, _mode_f, n_ev, n_s, nfev, nsteps, _nrej, outcome = m.simulate_maneuver(
             self._p, code, s, u, cfg, samples, events, y_out)
-        kept = events[: n_ev + (status == 0)]
-        rows = kept[:n_ev].tolist()  # one conversion for the modes and the event times
         return SystemTrajectory(
             self.name, maneuver, s, tuple(u.tolist()[: self._ninputs]), STATUS_NAMES[status],
-            t_f, outcome, y_out, (self._initial_modes[code], *[int(r[5]) for r in rows]),
-            tuple([r[0] for r in rows]), kept, samples[: min(n_s, capacity)], nfev, nsteps)
+            t_f, outcome, y_out, events[: n_ev + (status == 0)], samples[: min(n_s, capacity)],
+            nfev, nsteps, n_ev, self._initial_modes[code])
 
     def simulate_batch(self, maneuver: str, s: npt.ArrayLike, inputs: npt.ArrayLike | None = None,
                        *, options: SimulatorOptions = DEFAULT_OPTIONS) -> dict[str, Array]:
