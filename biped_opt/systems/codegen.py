@@ -34,7 +34,7 @@ __all__ = ["render", "source_key", "KERNEL_BODY"]
 
 KERNEL_BODY = Path(__file__).with_name("_kernel_body.py")
 #: bump when the generated code's form changes (the cache key includes it)
-FORMAT = 5
+FORMAT = 6
 
 
 class _Printer(PythonCodePrinter):
@@ -593,6 +593,30 @@ def _probe(derived: DerivedSystem, *, values: bool = False) -> list[str]:
     return out + em.lines
 
 
+_ASSIGNMENT = re.compile(r"\s+(\w+) = [^=]+")
+
+
+def _prune(lines: list[str]) -> list[str]:
+    """``lines`` without the assignments to names that their function never reads (bindings
+    of symbols it does not use, ``x = y[yo + 0]``, and values no output needs): Numba types
+    every statement of every inlined copy, so unread ones cost compile time (the stage probes,
+    inlined eleven times, read three of the biped's 26 symbols). Every such assignment is a
+    pure expression of the generated code, so dropping it changes nothing else."""
+    starts = [k for k, line in enumerate(lines) if line.startswith("def ")] + [len(lines)]
+    out = lines[: starts[0]]
+    for a, b in zip(starts, starts[1:]):
+        body = lines[a:b]
+        while True:
+            words = [set(re.findall(r"\w+", line)) for line in body]
+            unread = {k for k, line in enumerate(body) if (m := _ASSIGNMENT.fullmatch(line))
+                      and not any(m[1] in w for j, w in enumerate(words) if j != k)}
+            if not unread:
+                break
+            body = [line for k, line in enumerate(body) if k not in unread]
+        out += body
+    return out
+
+
 def _int_array(values: list[int]) -> str:
     return f"np.array({values!r}, dtype=np.int64)"
 
@@ -645,7 +669,7 @@ def render(derived: DerivedSystem) -> str:
         _initial(derived),
         _guards(derived),
     ]
-    text = "\n\n\n".join("\n".join(part) for part in parts) + "\n"
+    text = "\n\n\n".join("\n".join(_prune(part)) for part in parts) + "\n"
     step = _dop853_gen.render(n=2 * d, imports="", rhs="vector_field", probe="probe_stage",
                               nlam=max(n, 1), registers=True, nguards=n + 1,
                               probe_head="p, mode, u, term_sign")
