@@ -34,7 +34,7 @@ __all__ = ["render", "source_key", "KERNEL_BODY"]
 
 KERNEL_BODY = Path(__file__).with_name("_kernel_body.py")
 #: bump when the generated code's form changes (the cache key includes it)
-FORMAT = 6
+FORMAT = 7
 
 
 class _Printer(PythonCodePrinter):
@@ -64,13 +64,14 @@ class _Printer(PythonCodePrinter):
 class _Emitter:
     """Lines of one function body with fresh scalar names and structural zeros folded."""
 
-    def __init__(self, indent: str = "    ") -> None:
+    def __init__(self, indent: str = "    ", *, sincos: bool = False) -> None:
         self.lines: list[str] = []
         self.indent = indent
         self.count = 0
         self.printer = _Printer({"fully_qualified_modules": True})
         self.trig: dict[sp.Expr, tuple[sp.Symbol, sp.Symbol]] = {}
         self.named: dict[str, str] = {}
+        self.sincos = sincos
 
     def line(self, text: str) -> None:
         self.lines.append(self.indent + text)
@@ -95,7 +96,8 @@ class _Emitter:
     def exprs(self, values: list[sp.Expr], prefix: str) -> list[str]:
         """Assign each expression (common subexpressions once) and return the names, or
         "0.0" for the ones that are zero."""
-        values = self._sincos(values)
+        if self.sincos:
+            values = self._sincos(values)
         subs, reduced = sp.cse(values, symbols=sp.numbered_symbols(f"_s{prefix}{self.count}_"))
         for sym, sub in subs:
             self.line(f"{sym} = {self.expr(sub)}")
@@ -105,7 +107,9 @@ class _Emitter:
     def _sincos(self, values: list[sp.Expr]) -> list[sp.Expr]:
         """``values`` with sin(a) and cos(a) replaced by the names of one ``sincos(a)`` call
         per angle and function body (polynomials for |a| <= pi/4 where libm's sin and cos
-        would sit on the evaluation's critical path: see model/biped.py)."""
+        would sit on the evaluation's critical path: see model/biped.py). Only the vector
+        field uses them: elsewhere the ~30 inlined operations would cost more compile time
+        than they save at run time, and the guards keep one definition of sin and cos."""
         found = set().union(*(sp.sympify(v).atoms(sp.sin, sp.cos) for v in values))
         if not found:
             return values
@@ -366,7 +370,7 @@ def _vector_field(derived: DerivedSystem) -> tuple[list[str], list[str]]:
            "def vector_field(p, mode, y, yo, u, out, off, lam, lo):",
            '    """(q\', q\'\') of mode ``mode`` at y[yo:yo + 2d] to out[off:off + 2d], the',
            '    reactions to lam[lo:lo + n] (0 for inactive constraints), Eq. (1a)."""']
-    em = _Emitter()
+    em = _Emitter(sincos=True)
     _bindings(derived, em, velocities=True, inputs=True)
     hoist = _Hoisted(derived, em)
     const_m = hoist.constant(derived.mass_matrix)
