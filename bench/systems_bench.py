@@ -87,6 +87,17 @@ def _best_times(call, cases, rounds: int):
     return best, values
 
 
+def _alternated(first, second, cases, rounds: int):
+    """Best times of two calls on ``cases``, alternated in blocks so that drifting load hits
+    both alike."""
+    a = np.full(len(cases), np.inf)
+    b = np.full(len(cases), np.inf)
+    for _ in range(rounds):
+        a = np.minimum(a, _best_times(first, cases, 1)[0])
+        b = np.minimum(b, _best_times(second, cases, 1)[0])
+    return a, b
+
+
 def _kernel_calls(compiled, cases):
     """The generated and the hand-written compiled kernels alone on ``cases`` (by index), their
     arguments prepared once: each returns the outcome."""
@@ -177,12 +188,7 @@ def run_systems_benchmark(systems=SYSTEMS, *, n_cases: int = 40, rounds: int = 3
             def hand(case):
                 return simulate(case[0], case[1], case[2]).outcome
             _best_times(hand, cases[:2], 1)
-            # alternate the two in blocks so that drifting load hits both alike
-            hand_t = np.full(len(cases), np.inf)
-            gen2_t = np.full(len(cases), np.inf)
-            for _ in range(rounds):
-                hand_t = np.minimum(hand_t, _best_times(hand, cases, 1)[0])
-                gen2_t = np.minimum(gen2_t, _best_times(generated, cases, 1)[0])
+            hand_t, gen2_t = _alternated(hand, generated, cases, rounds)
             row["hand_written_per_trajectory_s"] = float(np.median(hand_t))
             row["generated_over_hand_written"] = float(np.median(gen2_t) / np.median(hand_t))
             row["max_abs_difference_to_hand_written"] = float(np.max(np.abs(
@@ -191,11 +197,7 @@ def run_systems_benchmark(systems=SYSTEMS, *, n_cases: int = 40, rounds: int = 3
             index = list(range(len(cases)))
             _best_times(kernel_gen, index[:2], 1)
             _best_times(kernel_hand, index[:2], 1)
-            k_gen = np.full(len(cases), np.inf)
-            k_hand = np.full(len(cases), np.inf)
-            for _ in range(rounds):
-                k_hand = np.minimum(k_hand, _best_times(kernel_hand, index, 1)[0])
-                k_gen = np.minimum(k_gen, _best_times(kernel_gen, index, 1)[0])
+            k_hand, k_gen = _alternated(kernel_hand, kernel_gen, index, rounds)
             row["kernel_per_trajectory_s"] = {"generated": float(np.median(k_gen)),
                                               "hand_written": float(np.median(k_hand))}
             row["kernel_generated_over_hand_written"] = float(np.median(k_gen)
