@@ -183,7 +183,7 @@ class CompiledSystem:
             # refuses what is not a number, and its sum is finite only if every term is
             try:
                 finite = math.isfinite(math.fsum(inputs))
-            except (TypeError, OverflowError):
+            except (TypeError, ValueError, OverflowError):  # (ValueError: inf - inf)
                 finite = False
             if finite:
                 return np.array(inputs, dtype=np.float64)
