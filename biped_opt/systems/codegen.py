@@ -4,10 +4,14 @@
 Python module that Numba compiles (and caches on disk, keyed by that file):
 
 - ``vector_field(p, mode, y, yo, u, out, off, lam, lo)``: (q', q'') and the reactions lambda of
-  mode J at the state y[yo:yo + 2d], Eq. (1a). Per mode, straight-line code on scalars: the
-  forces f_J (common subexpressions shared), an unrolled Cholesky factorisation of M(q) that
-  skips the entries known to be zero (a diagonal M costs d divisions), the active constraints'
-  Schur complement Da_J M^-1 Da_J^T solved the same way. Nothing allocates.
+  mode J at the state y[yo:yo + 2d], Eq. (1a). Straight-line code on scalars, without
+  branches on the mode: the forces f_J (common subexpressions shared, inputs gated by 0/1 mode
+  factors), an unrolled Cholesky factorisation of M(q) that skips the entries known to be zero
+  (a diagonal M costs d divisions), the active constraints' Schur complement Da_J M^-1 Da_J^T
+  solved the same way. Nothing allocates.
+- ``prepare_parameters(p)`` (plain Python): the parameter vector the compiled functions take,
+  p followed by what depends on the parameters alone (a constant M's factor, the Schur
+  complement of constant constraint rows), so that no evaluation recomputes it.
 - ``apply_impact(p, mode, y)``: q'+ = Delta_J q'- on entering J, Eq. (1b).
 - the constraints a(q) and their rates Da q', the maneuvers' initial states, terminal guards and
   outcomes, and the guards of every mode (a_j in the air, lambda_j in contact, the terminal one);
@@ -15,7 +19,8 @@ Python module that Numba compiles (and caches on disk, keyed by that file):
   event-driven kernel (:mod:`biped_opt.systems._kernel_body`, appended verbatim).
 
 Parameters and inputs are arguments (``p``, ``u``), never constants: changing a parameter value
-does not change the source, so it does not recompile.
+does not change the source, so it does not recompile. Assignments a function never reads are
+dropped (:func:`_prune`): Numba types every statement of every inlined copy.
 """
 
 from __future__ import annotations
