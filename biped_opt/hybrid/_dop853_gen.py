@@ -88,6 +88,8 @@ def render(
     probe: str = "probe_stage",
     nlam: int = 2,
     registers: bool = True,
+    nguards: int = 3,
+    probe_head: str = "mode, term_sign",
 ) -> str:
     """Source of the generated module for state dimension ``n``.
 
@@ -101,7 +103,11 @@ def render(
     A system with ``nlam`` constraints (any number of guards) keeps ``nlam`` reactions per slot
     and, with ``registers=False``, probes through an array:
     ``probe(p, mode, u, term_sign, y, yo, lam, lo, c, out)`` lowers out[i] to c for each guard
-    i <= 0 at the stage state (``term_sign`` then carries the maneuver's code).
+    i <= 0 at the stage state (``term_sign`` then carries the maneuver's code). With
+    ``registers=True`` the ``nguards`` probe values stay in local variables c0, c1, ... (the
+    probe takes and returns them) and are stored once, after the last stage: a store to an
+    array between stages would make the compiler reload the workspace. ``probe_head``: the
+    probe's arguments before the state (a generated system's passes ``p, mode, u, term_sign``).
     """
     A, B, C = _tableau.A, _tableau.B, _tableau.C
     E3, E5, D = _tableau.E3, _tableau.E5, _tableau.D
@@ -124,10 +130,10 @@ def render(
     w("    abscissa at which guard i was <= 0 on a stage state (2.0 if none): the stages")
     w("    sample the step's interior.")
     w('    """')
+    cs = ", ".join(f"c{i}" for i in range(nguards))
     if registers:
-        w("    c0 = 2.0")
-        w("    c1 = 2.0")
-        w("    c2 = 2.0")
+        for i in range(nguards):
+            w(f"    c{i} = 2.0")
     else:
         w("    for i in range(probe.shape[0]):")
         w("        probe[i] = 2.0")
@@ -140,8 +146,8 @@ def render(
         out.extend(_assign(stage, start, A[s, :s], st, "        "))
         w(f"    {rhs}(p, mode, W, {xs}, u, W, {st * s}, W, {st * s + n})")
         if registers:
-            w(f"    c0, c1, c2 = {probe}(")
-            w(f"        mode, term_sign, W, {xs}, W, {st * s + n}, {_literal(C[s])}, c0, c1, c2")
+            w(f"    {cs} = {probe}(")
+            w(f"        {probe_head}, W, {xs}, W, {st * s + n}, {_literal(C[s])}, {cs}")
             w("    )")
         else:
             w(f"    {probe}(p, mode, u, term_sign, W, {xs}, W, {st * s + n}, {_literal(C[s])}, "
@@ -151,9 +157,8 @@ def render(
     out.extend(_assign(stage, start, B, st, "        "))
     w(f"    {rhs}(p, mode, W, {xs}, u, W, {kf}, W, {kf + n})")
     if registers:
-        w("    probe[0] = c0")
-        w("    probe[1] = c1")
-        w("    probe[2] = c2")
+        for i in range(nguards):
+            w(f"    probe[{i}] = c{i}")
     for j in range(nlam):
         w(f"    lam[{j}] = W[{kf + n + j}]")
     w("    # embedded 5th- and 3rd-order error estimates, combined as in Hairer's dop853")

@@ -60,6 +60,14 @@ CFG_SIZE = 6
 
 
 @nb.njit(**HOT_PATH)
+def _field(p, mode, y, u, dy, lam):
+    """The vector field as a call, for the paths outside the step (the start, events, samples,
+    guards off the step's grid): each inlined copy of it costs compile time, a call only a few
+    nanoseconds, and these run a few times per trajectory."""
+    vector_field(p, mode, y, 0, u, dy, 0, lam, 0)
+
+
+@nb.njit(**HOT_PATH)
 def _inverse_eighth_root(err):
     return 1.0 / math.sqrt(math.sqrt(math.sqrt(err)))
 
@@ -77,7 +85,7 @@ def _dense_eval(F, y, x, out):
 def _guard_at(p, mode, u, code, y, i, dy, lam):
     """Guard i at a state y whose reactions are not known yet (dy, lam: scratch)."""
     if i < NCON and mode >> i & 1:
-        vector_field(p, mode, y, 0, u, dy, 0, lam, 0)
+        _field(p, mode, y, u, dy, lam)
     return guard_value(p, mode, u, code, y, 0, lam, 0, i)
 
 
@@ -111,7 +119,13 @@ def _guard_rate(p, mode, u, code, y, f, i, tmp, dy, lam):
 @nb.njit(**HOT_PATH)
 def _root_on_dense(p, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, dy, lam):
     """Root in (xa, xb] of guard i on the dense output (ga > 0 >= gb), by regula falsi with
-    the Anderson-Bjorck modification, to a bracket below _ROOT_XTOL of the step."""
+    the Anderson-Bjorck modification, to a bracket below _ROOT_XTOL of the step. A guard that
+    is one state component (see ``guard_component``) iterates on that component's eight
+    coefficients, read once; only other guards interpolate the whole state per iterate."""
+    k, sign = guard_component(mode, code, i)
+    c = max(k, 0)  # (read but unused when the guard is not one component)
+    y0, f0, f1, f2, f3 = y[c], F[0, c], F[1, c], F[2, c], F[3, c]
+    f4, f5, f6 = F[4, c], F[5, c], F[6, c]
     side = 0
     for _ in range(200):
         if xb - xa <= _ROOT_XTOL:
@@ -120,7 +134,13 @@ def _root_on_dense(p, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, dy, lam):
         if not xa < x < xb:
             x = 0.5 * (xa + xb)
         x = min(max(x, xa + 0.5 * _ROOT_XTOL), xb - 0.5 * _ROOT_XTOL)
-        gx = _guard_on_dense(p, mode, u, code, F, y, x, i, tmp, dy, lam)
+        if k >= 0:
+            xm = 1.0 - x
+            gx = sign * (y0 + x * (f0 + xm * (f1 + x * (f2 + xm * (f3 + x * (f4 + xm * (
+                f5 + x * f6)))))))
+        else:
+            _dense_eval(F, y, x, tmp)
+            gx = _guard_at(p, mode, u, code, tmp, i, dy, lam)
         if gx > 0.0:
             if side == 1:
                 m = 1.0 - gx / ga
@@ -166,7 +186,7 @@ def _initial_step(p, mode, u, y, f, rtol, atol, h_max, tmp, ftmp, lam):
     h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
     for i in range(n):
         tmp[i] = y[i] + h0 * f[i]
-    vector_field(p, mode, tmp, 0, u, ftmp, 0, lam, 0)
+    _field(p, mode, tmp, u, ftmp, lam)
     d2 = 0.0
     for i in range(n):
         scale = atol + rtol * abs(y[i])
@@ -240,7 +260,7 @@ def simulate_kernel(p, code, y0, mode0, u, cfg, samples, events, y_out):
     sampling = sample_dt > 0.0
     next_sample = 0
 
-    vector_field(p, mode, y, 0, u, f, 0, lam, 0)
+    _field(p, mode, y, u, f, lam)
     nfev += 1
     _all_guards(p, mode, u, code, y, lam, gv)
     for i in range(NGUARDS):
@@ -333,7 +353,7 @@ def simulate_kernel(p, code, y0, mode0, u, cfg, samples, events, y_out):
                 if ts > t_stop or (first >= 0 and ts >= t_stop):
                     break
                 _dense_eval(F, y, (ts - t) / h_step, tmp)
-                vector_field(p, mode, tmp, 0, u, tmp2, 0, lam_tmp, 0)
+                _field(p, mode, tmp, u, tmp2, lam_tmp)
                 nfev += 1
                 ns = _record_sample(samples, ns, ts, tmp, mode, lam_tmp)
                 next_sample += 1
@@ -360,7 +380,7 @@ def simulate_kernel(p, code, y0, mode0, u, cfg, samples, events, y_out):
         _dense_eval(F, y, x_first, tmp)
         for k in range(n):
             y[k] = tmp[k]
-        vector_field(p, mode, y, 0, u, f, 0, lam, 0)
+        _field(p, mode, y, u, f, lam)
         nfev += 1
         _all_guards(p, mode, u, code, y, lam, gv_new)
         for i in range(NGUARDS):
@@ -397,7 +417,7 @@ def simulate_kernel(p, code, y0, mode0, u, cfg, samples, events, y_out):
                     if touchdown >> j & 1 and rates[j] > SEPARATION_TOL:
                         separated |= 1 << j
                 mode = mode & ~separated
-            vector_field(p, mode, y, 0, u, f, 0, lam, 0)
+            _field(p, mode, y, u, f, lam)
             nfev += 1
             row[5] = mode
             for k in range(n):

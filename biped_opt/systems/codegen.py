@@ -4,10 +4,14 @@
 Python module that Numba compiles (and caches on disk, keyed by that file):
 
 - ``vector_field(p, mode, y, yo, u, out, off, lam, lo)``: (q', q'') and the reactions lambda of
-  mode J at the state y[yo:yo + 2d], Eq. (1a). Per mode, straight-line code on scalars: the
-  forces f_J (common subexpressions shared), an unrolled Cholesky factorisation of M(q) that
-  skips the entries known to be zero (a diagonal M costs d divisions), the active constraints'
-  Schur complement Da_J M^-1 Da_J^T solved the same way. Nothing allocates.
+  mode J at the state y[yo:yo + 2d], Eq. (1a). Straight-line code on scalars, without
+  branches on the mode: the forces f_J (common subexpressions shared, inputs gated by 0/1 mode
+  factors), an unrolled Cholesky factorisation of M(q) that skips the entries known to be zero
+  (a diagonal M costs d divisions), the active constraints' Schur complement Da_J M^-1 Da_J^T
+  solved the same way. Nothing allocates.
+- ``prepare_parameters(p)`` (plain Python): the parameter vector the compiled functions take,
+  p followed by what depends on the parameters alone (a constant M's factor, the Schur
+  complement of constant constraint rows), so that no evaluation recomputes it.
 - ``apply_impact(p, mode, y)``: q'+ = Delta_J q'- on entering J, Eq. (1b).
 - the constraints a(q) and their rates Da q', the maneuvers' initial states, terminal guards and
   outcomes, and the guards of every mode (a_j in the air, lambda_j in contact, the terminal one);
@@ -15,12 +19,14 @@ Python module that Numba compiles (and caches on disk, keyed by that file):
   event-driven kernel (:mod:`biped_opt.systems._kernel_body`, appended verbatim).
 
 Parameters and inputs are arguments (``p``, ``u``), never constants: changing a parameter value
-does not change the source, so it does not recompile.
+does not change the source, so it does not recompile. Assignments a function never reads are
+dropped (:func:`_prune`): Numba types every statement of every inlined copy.
 """
 
 from __future__ import annotations
 
 import hashlib
+import re
 from pathlib import Path
 
 import sympy as sp
@@ -33,7 +39,7 @@ __all__ = ["render", "source_key", "KERNEL_BODY"]
 
 KERNEL_BODY = Path(__file__).with_name("_kernel_body.py")
 #: bump when the generated code's form changes (the cache key includes it)
-FORMAT = 1
+FORMAT = 7
 
 
 class _Printer(PythonCodePrinter):
@@ -63,11 +69,14 @@ class _Printer(PythonCodePrinter):
 class _Emitter:
     """Lines of one function body with fresh scalar names and structural zeros folded."""
 
-    def __init__(self, indent: str = "    ") -> None:
+    def __init__(self, indent: str = "    ", *, sincos: bool = False) -> None:
         self.lines: list[str] = []
         self.indent = indent
         self.count = 0
         self.printer = _Printer({"fully_qualified_modules": True})
+        self.trig: dict[sp.Expr, tuple[sp.Symbol, sp.Symbol]] = {}
+        self.named: dict[str, str] = {}
+        self.sincos = sincos
 
     def line(self, text: str) -> None:
         self.lines.append(self.indent + text)
@@ -82,17 +91,43 @@ class _Emitter:
     def assign(self, prefix: str, text: str) -> str:
         if _is_zero(text):
             return "0.0"
-        name = self.fresh(prefix)
-        self.line(f"{name} = {text}")
-        return name
+        if _LITERAL.fullmatch(text) or text.isidentifier():
+            return text  # a number or a name needs no new name (and a hoisted one no slot)
+        if text not in self.named:  # the same value twice is named once
+            self.named[text] = self.fresh(prefix)
+            self.line(f"{self.named[text]} = {text}")
+        return self.named[text]
 
     def exprs(self, values: list[sp.Expr], prefix: str) -> list[str]:
         """Assign each expression (common subexpressions once) and return the names, or
         "0.0" for the ones that are zero."""
+        if self.sincos:
+            values = self._sincos(values)
         subs, reduced = sp.cse(values, symbols=sp.numbered_symbols(f"_s{prefix}{self.count}_"))
         for sym, sub in subs:
             self.line(f"{sym} = {self.expr(sub)}")
         return [self.assign(prefix, self.expr(r)) if r != 0 else "0.0" for r in reduced]
+
+
+    def _sincos(self, values: list[sp.Expr]) -> list[sp.Expr]:
+        """``values`` with sin(a) and cos(a) replaced by the names of one ``sincos(a)`` call
+        per angle and function body (polynomials for |a| <= pi/4 where libm's sin and cos
+        would sit on the evaluation's critical path: see model/biped.py). Only the vector
+        field uses them: elsewhere the ~30 inlined operations would cost more compile time
+        than they save at run time, and the guards keep one definition of sin and cos."""
+        found = set().union(*(sp.sympify(v).atoms(sp.sin, sp.cos) for v in values))
+        if not found:
+            return values
+        for angle in sorted({f.args[0] for f in found}, key=sp.default_sort_key):
+            if angle not in self.trig:
+                sin, cos = self.fresh("sin"), self.fresh("cos")
+                self.line(f"{sin}, {cos} = _sincos({self.expr(angle)})")
+                self.trig[angle] = (sp.Symbol(sin), sp.Symbol(cos))
+        swap = {f: self.trig[f.args[0]][0 if isinstance(f, sp.sin) else 1] for f in found}
+        return [sp.sympify(v).xreplace(swap) for v in values]
+
+
+_LITERAL = re.compile(r"-?[0-9]+\.[0-9]*(e[-+]?[0-9]+)?")
 
 
 def _is_zero(text: str) -> bool:
@@ -100,7 +135,9 @@ def _is_zero(text: str) -> bool:
 
 
 def _mul(a: str, b: str) -> str:
-    return "0.0" if _is_zero(a) or _is_zero(b) else f"{a} * {b}"
+    if _is_zero(a) or _is_zero(b):
+        return "0.0"
+    return b if a == "1.0" else a if b == "1.0" else f"{a} * {b}"  # (1.0 * v is v, exactly)
 
 
 def _sum(terms: list[str]) -> str:
@@ -191,17 +228,66 @@ def _schur(br: _Emitter, L: list[list[str]], Da: list[list[str]], active: list[i
 
 
 def _mode_factors(em: _Emitter, n: int, masks: set[int]) -> dict[int, str]:
-    """0.0/1.0 factors "mode == J" for the modes in ``masks`` and "constraint j active"."""
+    """0.0/1.0 factors "mode == J" for the modes in ``masks``."""
     out = {}
     for mask in sorted(masks):
         out[mask] = em.assign("o", f"1.0 * (mode == {mask})")
     return out
 
 
+def _patch(base: sp.Expr, other: sp.Expr) -> tuple[sp.Expr, sp.Expr] | None:
+    """(node, extra) when ``other`` is ``base`` with one sum ``node`` of it extended by the
+    terms ``extra`` (an input added to a leg's force in the modes it acts in), else None."""
+    if base == other:
+        return None
+    if isinstance(base, sp.Add) and isinstance(other, sp.Add):
+        mine, theirs = set(base.args), set(other.args)
+        if mine < theirs:
+            return base, sp.Add(*(theirs - mine))
+    if base.is_Atom or base.func != other.func or len(base.args) != len(other.args):
+        raise ValueError
+    only_base = [a for a in base.args if a not in other.args]
+    only_other = [a for a in other.args if a not in base.args]
+    if len(only_base) != 1 or len(only_other) != 1:
+        raise ValueError
+    return _patch(only_base[0], only_other[0])
+
+
+def _gated(variants: dict[sp.Expr, list[int]], gates: dict[tuple[int, ...], sp.Symbol]
+           ) -> sp.Expr | None:
+    """One expression for every variant of a force entry: the variant of the most modes with
+    each other variant's extra terms added times its 0/1 mode factor, or None when the variants
+    are not of that form. For finite values it is exact per mode (e + 0.0 * t is e), cheaper
+    than mixing whole variants, and it is how a hand-written model adds its gated inputs."""
+    ordered = sorted(variants.items(), key=lambda kv: -len(kv[1]))
+    base = ordered[0][0]
+    extra: dict[sp.Expr, sp.Expr] = {}
+    try:
+        for expr, masks in ordered[1:]:
+            found = _patch(base, expr)
+            if found is None:
+                return None
+            node, terms = found
+            extra[node] = extra.get(node, sp.S.Zero) + gates[tuple(masks)] * terms
+    except ValueError:
+        return None
+    whole = extra.pop(base, sp.S.Zero)  # terms added to the entry itself (a body torque)
+    merged = base.xreplace({node: sp.Add(node, terms) for node, terms in extra.items()})
+    merged = sp.Add(merged, whole)
+    for expr, masks in ordered:  # each mode's variant comes back exactly
+        for mask in masks:
+            values = {g: sp.S.One if mask in key else sp.S.Zero for key, g in gates.items()}
+            if merged.xreplace(values) != expr:
+                return None
+    return merged
+
+
 def _mode_mixed(em: _Emitter, derived: DerivedSystem) -> list[str]:
-    """f_J(q, q', u) of the current mode without a branch: per entry, each distinct expression
-    (over the modes) times the 0/1 factor of the modes that have it. Exact: 1.0 * e + 0.0 * e'
-    is e for finite values (the inputs are checked finite on entry)."""
+    """f_J(q, q', u) of the current mode without a branch. Per entry, one expression with the
+    extra terms of some modes gated by their 0/1 factors (see :func:`_gated`), or else each
+    distinct expression (over the modes) times the 0/1 factor of the modes that have it.
+    Exact: 1.0 * e + 0.0 * e' is e for finite values (the inputs are checked finite on
+    entry)."""
     d, n = derived.ndof, derived.nconstraints
     variants: list[dict[sp.Expr, list[int]]] = []
     for i in range(d):
@@ -209,39 +295,101 @@ def _mode_mixed(em: _Emitter, derived: DerivedSystem) -> list[str]:
         for mask in range(1 << n):
             by_expr.setdefault(derived.forces[mask][i], []).append(mask)
         variants.append(by_expr)
-    flat = [e for by_expr in variants for e in by_expr]
-    names = em.exprs(flat, "f")
     needed = {m for by_expr in variants if len(by_expr) > 1 for ms in by_expr.values()
               for m in ms}
     factor = _mode_factors(em, n, needed)
-    out, k = [], 0
+    gates: dict[tuple[int, ...], sp.Symbol] = {}
     for by_expr in variants:
-        if len(by_expr) == 1:
+        for masks in by_expr.values():
+            key = tuple(masks)
+            if len(by_expr) > 1 and key not in gates:
+                weight = " + ".join(factor[m] for m in masks)
+                gates[key] = sp.Symbol(weight if len(masks) == 1 else em.assign("o", weight))
+    entries: list[list[sp.Expr]] = []
+    for by_expr in variants:
+        merged = _gated(by_expr, gates) if len(by_expr) > 1 else None
+        entries.append([merged] if merged is not None else list(by_expr))
+    names = em.exprs([e for entry in entries for e in entry], "f")
+    out, k = [], 0
+    for by_expr, entry in zip(variants, entries):
+        if len(entry) == 1:
             out.append(names[k])
             k += 1
             continue
         terms = []
         for masks in by_expr.values():
-            weight = " + ".join(factor[m] for m in masks)
-            terms.append(_mul(names[k], f"({weight})" if len(masks) > 1 else weight))
+            g = gates[tuple(masks)]
+            terms.append(_mul(names[k], str(g)))
             k += 1
         out.append(em.assign("f", _sum(terms)))
     return out
 
 
-def _vector_field(derived: DerivedSystem) -> list[str]:
+class _Hoisted:
+    """Quantities of the vector field that depend on the parameters alone (a constant mass
+    matrix's factor, constant constraint rows, their Schur complement), computed once per
+    parameter vector by ``prepare_parameters`` and read from p[NPARAM:] instead of being
+    recomputed at every evaluation: ~2% of a simulation, mostly divisions."""
+
+    def __init__(self, derived: DerivedSystem, em: _Emitter) -> None:
+        self.em = em
+        self.pre = _Emitter()
+        self.pre.count = 10**6  # its names live in the vector field's scope too
+        self.offset = len(derived.system.p)
+        self.slots: dict[str, int] = {}
+        self.params = {derived.system.p[name] for name in derived.system.p.names()}
+
+    def constant(self, matrix: sp.Matrix) -> bool:
+        return matrix.free_symbols <= self.params
+
+    def load(self, name: str) -> str:
+        """``name`` (computed in ``pre``) made available to the vector field."""
+        if _is_zero(name) or _LITERAL.fullmatch(name) or name in self.slots:
+            return name
+        self.slots[name] = len(self.slots)
+        self.em.line(f"{name} = p[{self.offset + self.slots[name]}]")
+        return name
+
+    def load_all(self, names):
+        return [self.load_all(v) if isinstance(v, list) else self.load(v) for v in names]
+
+    def function(self, derived: DerivedSystem) -> list[str]:
+        out = ["def prepare_parameters(p):",
+               '    """The parameter vector the compiled functions take: the values p (in the',
+               "    declared order), then the quantities that depend on them alone (computed once",
+               '    here, in Python, instead of at every evaluation)."""']
+        system = derived.system
+        out += [f"    {system.p[name]} = p[{k}]" for k, name in enumerate(system.p.names())]
+        return out + self.pre.lines + ["    return np.array([", "        *p,"] + [
+            f"        {v}," for v in self.slots] + ["    ], dtype=np.float64)"]
+
+
+def _vector_field(derived: DerivedSystem) -> tuple[list[str], list[str]]:
     """Eq. (1a) for the current mode, branch-free: the forces mixed by 0/1 mode factors, and
     the reactions from the Schur complement of *all* constraints with the inactive ones' rows
     and columns replaced by the identity (their reactions come out 0). Without branches Numba
-    can drop the reference counting around an inlined call (see model/biped.py)."""
+    can drop the reference counting around an inlined call (see model/biped.py). Also returns
+    ``prepare_parameters`` (see :class:`_Hoisted`)."""
     d, n = derived.ndof, derived.nconstraints
     out = ["@nb.njit(**HOT_PATH, inline=\"always\")",
            "def vector_field(p, mode, y, yo, u, out, off, lam, lo):",
            '    """(q\', q\'\') of mode ``mode`` at y[yo:yo + 2d] to out[off:off + 2d], the',
            '    reactions to lam[lo:lo + n] (0 for inactive constraints), Eq. (1a)."""']
-    em = _Emitter()
+    em = _Emitter(sincos=True)
     _bindings(derived, em, velocities=True, inputs=True)
-    L, Da = _factors(derived, em)
+    hoist = _Hoisted(derived, em)
+    const_m = hoist.constant(derived.mass_matrix)
+    const_da = n == 0 or hoist.constant(derived.jacobian)
+    m_em = hoist.pre if const_m else em
+    m = m_em.exprs([derived.mass_matrix[i, j] for i in range(d) for j in range(d)], "m")
+    L = _cholesky(m_em, [[m[i * d + j] for j in range(d)] for i in range(d)], "c")
+    if const_m:
+        L = _Inverse(hoist.load_all(L)) if isinstance(L, _Inverse) else hoist.load_all(L)
+    da_em = hoist.pre if const_da else em
+    da = da_em.exprs(list(derived.jacobian), "a") if n else []
+    Da = [[da[j * d + i] for i in range(d)] for j in range(n)]
+    if const_da:
+        Da = hoist.load_all(Da)
     rate = em.exprs(list(derived.jacobian_rate), "r") if n else []
     for i in range(d):
         em.line(f"out[off + {i}] = y[yo + {d + i}]")
@@ -251,22 +399,33 @@ def _vector_field(derived: DerivedSystem) -> list[str]:
     if n:
         on = [em.assign("n", f"float(mode >> {j} & 1)") for j in range(n)]
         off = [em.assign("n", f"1.0 - {on[j]}") for j in range(n)]
-        cols = _columns(em, L, Da, list(range(n)))
-        S = [[em.assign("s", _sum([_mul(Da[a][i], cols[b][i]) for i in range(d)]))
+        s_em = hoist.pre if const_m and const_da else em
+        cols = _columns(s_em, L, Da, list(range(n)))
+        S = [[s_em.assign("s", _sum([_mul(Da[a][i], cols[b][i]) for i in range(d)]))
               for b in range(n)] for a in range(n)]
-        masked = [[em.assign("s", _sum([_mul(_mul(on[a], on[b]), S[a][b]),
-                                        off[a] if a == b else "0.0"]))
-                   for b in range(n)] for a in range(n)]
         rhs = [em.assign("b", _mul(on[a], "(-(" + _sum(
             [*(_mul(Da[a][i], x[i]) for i in range(d)), rate[a]]) + "))")) for a in range(n)]
-        lam = _solve(em, _cholesky(em, masked, "k"), rhs, "l")
+        diagonal = all(_is_zero(S[a][b]) for a in range(n) for b in range(n) if a != b)
+        if s_em is hoist.pre and diagonal:
+            # the masked matrix is diagonal with entries on_j S_jj + off_j (on_j in {0, 1}), and
+            # rhs_j carries the factor on_j: lambda_j = rhs_j / S_jj, no division per evaluation
+            inv = hoist.load_all([hoist.pre.assign("kv", f"1.0 / {S[j][j]}") for j in range(n)])
+            cols = hoist.load_all(cols)
+            lam = [em.assign("l", _mul(rhs[j], inv[j])) for j in range(n)]
+        else:
+            if s_em is hoist.pre:
+                cols, S = hoist.load_all(cols), hoist.load_all(S)
+            masked = [[em.assign("s", _sum([_mul(_mul(on[a], on[b]), S[a][b]),
+                                            off[a] if a == b else "0.0"]))
+                       for b in range(n)] for a in range(n)]
+            lam = _solve(em, _cholesky(em, masked, "k"), rhs, "l")
         acc = [em.assign("q", _sum([x[i], *(_mul(cols[j][i], lam[j]) for j in range(n))]))
                for i in range(d)]
         for j in range(n):
             em.line(f"lam[lo + {j}] = {lam[j]} + 0.0")
     for i in range(d):
         em.line(f"out[off + {d + i}] = {acc[i]}")
-    return out + em.lines
+    return out + em.lines, hoist.function(derived)
 
 
 def _columns(em: _Emitter, L: list[list[str]], Da: list[list[str]], active: list[int]
@@ -394,7 +553,7 @@ def _components(derived: DerivedSystem) -> list[str]:
     """``guard_component(mode, code, i)``: (k, sign) when guard i in this mode and maneuver is
     sign * y[k] (event roots then interpolate one component), else (-1, 1.0)."""
     n = derived.nconstraints
-    out = ["@nb.njit(**HOT_PATH)", "def guard_component(mode, code, i):",
+    out = ["@nb.njit(**HOT_PATH, inline=\"always\")", "def guard_component(mode, code, i):",
            '    """(k, sign) of a guard that is one state component, else (-1, 1.0)."""']
     for j in range(n):
         one = _as_component(derived, derived.constraints[j])
@@ -419,9 +578,14 @@ def _probe(derived: DerivedSystem, *, values: bool = False) -> list[str]:
                "def guard_values(p, mode, u, code, y, yo, lam, lo, out):",
                '    """Every guard at the state y[yo:] with known reactions lam[lo:]."""']
     else:
+        # (underscored: a system's own symbols, bound by name below, never start with one;
+        # a damping parameter "c" once shadowed the stage abscissa here)
+        cs = ", ".join(f"_c{i}" for i in range(n + 1))
         out = ["@nb.njit(**HOT_PATH, inline=\"always\")",
-               "def probe_stage(p, mode, u, code, y, yo, lam, lo, c, probe):",
-               '    """probe[i] lowered to c for each guard i <= 0 at the stage state y[yo:]."""']
+               f"def probe_stage(p, mode, u, code, y, yo, lam, lo, _c, {cs}):",
+               '    """(c0, c1, ...) with ci lowered to the abscissa _c for each guard i <= 0 at',
+               '    the stage state y[yo:] (values, not an array: the step keeps them in',
+               '    registers)."""']
     em = _Emitter()
     _bindings(derived, em, velocities=True, inputs=True)
     a = em.exprs(list(derived.constraints), "a") if n else []
@@ -429,13 +593,37 @@ def _probe(derived: DerivedSystem, *, values: bool = False) -> list[str]:
     for j in range(n):
         on = em.assign("n", f"float(mode >> {j} & 1)")
         g = em.assign("g", f"{on} * lam[lo + {j}] + (1.0 - {on}) * {a[j]}")
-        em.line(f"out[{j}] = {g}" if values
-                else f"probe[{j}] = min(probe[{j}], c + 2.0 * ({g} > 0.0))")
+        em.line(f"out[{j}] = {g}" if values else f"_c{j} = min(_c{j}, _c + 2.0 * ({g} > 0.0))")
     mixed = _sum([_mul(t, f"(code == {k})") for k, t in enumerate(terms)])
     g = em.assign("g", mixed)
-    em.line(f"out[{n}] = {g}" if values
-            else f"probe[{n}] = min(probe[{n}], c + 2.0 * ({g} > 0.0))")
+    em.line(f"out[{n}] = {g}" if values else f"_c{n} = min(_c{n}, _c + 2.0 * ({g} > 0.0))")
+    if not values:
+        em.line(f"return {cs}")
     return out + em.lines
+
+
+_ASSIGNMENT = re.compile(r"\s+(\w+) = [^=]+")
+
+
+def _prune(lines: list[str]) -> list[str]:
+    """``lines`` without the assignments to names that their function never reads (bindings
+    of symbols it does not use, ``x = y[yo + 0]``, and values no output needs): Numba types
+    every statement of every inlined copy, so unread ones cost compile time (the stage probes,
+    inlined eleven times, read three of the biped's 26 symbols). Every such assignment is a
+    pure expression of the generated code, so dropping it changes nothing else."""
+    starts = [k for k, line in enumerate(lines) if line.startswith("def ")] + [len(lines)]
+    out = lines[: starts[0]]
+    for a, b in zip(starts, starts[1:]):
+        body = lines[a:b]
+        while True:
+            words = [set(re.findall(r"\w+", line)) for line in body]
+            unread = {k for k, line in enumerate(body) if (m := _ASSIGNMENT.fullmatch(line))
+                      and not any(m[1] in w for j, w in enumerate(words) if j != k)}
+            if not unread:
+                break
+            body = [line for k, line in enumerate(body) if k not in unread]
+        out += body
+    return out
 
 
 def _int_array(values: list[int]) -> str:
@@ -461,6 +649,7 @@ def render(derived: DerivedSystem) -> str:
         "import numpy as np",
         "",
         "from biped_opt._jit import HOT_PATH",
+        "from biped_opt.model.biped import sincos as _sincos",
         "",
         f"NDOF = {d}",
         f"NSTATE = {2 * d}",
@@ -473,9 +662,11 @@ def render(derived: DerivedSystem) -> str:
         f"INITIAL_MODE = {_int_array([m.mode for m in maneuvers])}",
         "",
     ]
+    vector_field, prepare = _vector_field(derived)
     parts = [
         head,
-        _vector_field(derived),
+        prepare,
+        vector_field,
         _impact(derived),
         _scalar_function("constraint_rates", "Da(q) q' into out[:n].",
                          "p, y, yo, out", derived, list(derived.jacobian * sp.Matrix(system.dq))
@@ -487,9 +678,10 @@ def render(derived: DerivedSystem) -> str:
         _initial(derived),
         _guards(derived),
     ]
-    text = "\n\n\n".join("\n".join(part) for part in parts) + "\n"
+    text = "\n\n\n".join("\n".join(_prune(part)) for part in parts) + "\n"
     step = _dop853_gen.render(n=2 * d, imports="", rhs="vector_field", probe="probe_stage",
-                              nlam=max(n, 1), registers=False)
+                              nlam=max(n, 1), registers=True, nguards=n + 1,
+                              probe_head="p, mode, u, term_sign")
     step = step[step.index("\nSTRIDE = ") + 1:]
     body = KERNEL_BODY.read_text()
     body = body[body.index("\n# --- kernel ---\n") + 1:]

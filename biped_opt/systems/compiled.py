@@ -91,16 +91,28 @@ class SystemTrajectory:
     t_final: float
     outcome: float
     y_final: Array
-    modes: tuple[int, ...]  #: the contact modes in order, from the initial one
-    event_times: tuple[float, ...]  #: times of the contact events
     events: Array  #: rows [t, kind, touchdown, liftoff, mode_before, mode_after, y-, y+]
     samples: Array  #: rows [t, y, mode, lambda]
     nfev: int
     nsteps: int
+    n_events: int  #: contact events (the first rows of ``events``; a terminal row may follow)
+    initial_mode: int
 
     @property
     def success(self) -> bool:
         return self.status == "OK"
+
+    # (read from the event rows when asked for: converting them on every simulation cost a
+    # tenth of a trajectory, and an optimiser reads only the outcome)
+    @property
+    def modes(self) -> tuple[int, ...]:
+        """The contact modes in order, from the initial one."""
+        return (self.initial_mode, *map(int, self.events[: self.n_events, 5].tolist()))
+
+    @property
+    def event_times(self) -> tuple[float, ...]:
+        """Times of the contact events."""
+        return tuple(self.events[: self.n_events, 0].tolist())
 
 
 class CompiledSystem:
@@ -113,8 +125,11 @@ class CompiledSystem:
         self.maneuvers = tuple(self.derived.maneuvers)
         self.inputs = self.system.u.names()
         self._initial_modes = [int(v) for v in self.module.INITIAL_MODE]
+        self._codes = {name: k for k, name in enumerate(self.maneuvers)}
+        self._ninputs = len(self.inputs)
         self._no_samples = np.empty((0, self.module.SAMPLE_WIDTH))
         self._cfgs: dict[tuple[SimulatorOptions, float], Array] = {}
+        self._default_cfg = self._cfg(DEFAULT_OPTIONS, 0.0)
         self.set_parameters(**parameters)
 
     @property
@@ -135,14 +150,25 @@ class CompiledSystem:
                     f"{self.system.where()}: parameter {key!r} must be a finite number, "
                     f"got {value!r}")
             values[key] = float(value)
+        raw = np.array([values[k] for k in self.system.p.names()], dtype=np.float64)
+        try:  # the values and what depends on them alone (see codegen._Hoisted)
+            with np.errstate(divide="raise", invalid="raise", over="raise"):
+                prepared = self.module.prepare_parameters(raw)
+        except (ArithmeticError, ValueError, FloatingPointError) as exc:
+            raise InvalidParameterError(
+                f"{self.system.where()}: these parameters give no invertible mass matrix "
+                f"({exc})") from None
         self.parameters = values
-        self._p = np.array([values[k] for k in self.system.p.names()], dtype=np.float64)
+        self._p = prepared
 
     def initial_mode(self, maneuver: str) -> int:
         """The contact mode (bit mask) ``maneuver`` starts in."""
         return self._initial_modes[self._code(maneuver)]
 
     def _code(self, maneuver: str) -> int:
+        code = self._codes.get(maneuver) if type(maneuver) is str else None
+        if code is not None:
+            return code
         try:
             return self.maneuvers.index(maneuver)
         except ValueError:
@@ -151,9 +177,16 @@ class CompiledSystem:
                 f"(maneuvers: {', '.join(self.maneuvers) or 'none'})") from None
 
     def _inputs(self, inputs: Any) -> Array:
-        if isinstance(inputs, (tuple, list)) and len(inputs) == len(self.inputs) > 0 and all(
-                type(v) is float and math.isfinite(v) for v in inputs):
-            return np.array(inputs)  # the common case, checked in pure Python (cheaper)
+        if type(inputs) is tuple and len(inputs) == self._ninputs > 0:
+            # the common case, a full vector of numbers, checked in one call (per-element
+            # checks and NumPy's would cost as much as a quarter of a trajectory): fsum
+            # refuses what is not a number, and its sum is finite only if every term is
+            try:
+                finite = math.isfinite(math.fsum(inputs))
+            except (TypeError, ValueError, OverflowError):  # (ValueError: inf - inf)
+                finite = False
+            if finite:
+                return np.array(inputs, dtype=np.float64)
         u = np.zeros(max(len(self.inputs), 1))
         if inputs is None:
             return u
@@ -194,23 +227,24 @@ class CompiledSystem:
             raise InvalidInputError(f"{self.system.where()}: s must be finite, got {s}")
         u = self._inputs(inputs)
         m = self.module
-        dt = float(sample_dt) if sample_dt else 0.0
         capacity = 0
-        if dt > 0:
-            capacity = int(options.t_end / dt) + 4 * (options.max_events + 2)
-        samples = np.zeros((capacity, m.SAMPLE_WIDTH)) if capacity else self._no_samples
+        if sample_dt:
+            dt = float(sample_dt)
+            if dt > 0:
+                capacity = int(options.t_end / dt) + 4 * (options.max_events + 2)
+            samples = np.zeros((capacity, m.SAMPLE_WIDTH)) if capacity else self._no_samples
+            cfg = self._cfg(options, dt)
+        else:
+            samples = self._no_samples
+            cfg = self._default_cfg if options is DEFAULT_OPTIONS else self._cfg(options, 0.0)
         events = np.empty((options.max_events + 1, m.EVENT_WIDTH))
         y_out = np.empty(m.NSTATE)
         status, t_f, _mode_f, n_ev, n_s, nfev, nsteps, _nrej, outcome = m.simulate_maneuver(
-            self._p, code, s, u, self._cfg(options, dt), samples, events, y_out)
-        kept = events[: n_ev + (status == 0)]
+            self._p, code, s, u, cfg, samples, events, y_out)
         return SystemTrajectory(
-            system=self.name, maneuver=maneuver, s=s,
-            inputs=tuple(u[: len(self.inputs)].tolist()),
-            status=STATUS_NAMES[status], t_final=t_f, outcome=outcome, y_final=y_out,
-            modes=(self._initial_modes[code], *kept[:n_ev, 5].astype(int).tolist()),
-            event_times=tuple(kept[:n_ev, 0].tolist()), events=kept,
-            samples=samples[: min(n_s, capacity)], nfev=nfev, nsteps=nsteps)
+            self.name, maneuver, s, tuple(u.tolist()[: self._ninputs]), STATUS_NAMES[status],
+            t_f, outcome, y_out, events[: n_ev + (status == 0)], samples[: min(n_s, capacity)],
+            nfev, nsteps, n_ev, self._initial_modes[code])
 
     def simulate_batch(self, maneuver: str, s: npt.ArrayLike, inputs: npt.ArrayLike | None = None,
                        *, options: SimulatorOptions = DEFAULT_OPTIONS) -> dict[str, Array]:

@@ -190,6 +190,27 @@ def test_bad_calls_name_what_is_wrong(bar):
         compile_system("rocking_bar", m=math.inf)
 
 
+def test_the_quick_checks_of_inputs_and_parameters(generated_biped):
+    """The wrapper's one-call input check and the parameters' precomputation take what the
+    full checks took and refuse what they refused."""
+    from biped_opt.errors import InvalidInputError, InvalidParameterError
+
+    floats = generated_biped.simulate("touchdown", 0.1, (0.5, 1.0, 0.0))
+    # NumPy and integer inputs are the same numbers: the same simulation, bit for bit
+    for same in ((np.float64(0.5), np.float64(1.0), 0.0), (0.5, 1, 0), [0.5, 1.0, 0.0]):
+        tr = generated_biped.simulate("touchdown", 0.1, same)
+        assert tr.outcome == floats.outcome and tr.inputs == (0.5, 1.0, 0.0)
+    assert floats.modes == (0, *floats.events[: len(floats.event_times), 5].astype(int))
+    for bad in ((0.5, math.nan, 0.0), (math.inf, -math.inf, 0.0), (math.inf, 0.0, 0.0)):
+        with pytest.raises(InvalidInputError, match="inputs must be finite"):
+            generated_biped.simulate("touchdown", 0.1, bad)
+    # finite inputs whose sum overflows are inputs like any other (taken as given)
+    big = generated_biped.simulate("touchdown", 0.1, (1e308, 1e308, 1e308))
+    assert big.inputs == (1e308, 1e308, 1e308)
+    with pytest.raises(InvalidParameterError, match="no invertible mass matrix"):
+        compile_system("biped", mf=0.0)
+
+
 def test_the_generated_biped_has_the_kink_and_the_jump(generated_biped):
     """The touchdown kink's one-sided slopes and the liftoff jump's one-sided limits at th0 = 0
     (MODEL.md Sec. 6) from the generated simulator equal the hand-written simulator's: limits to
