@@ -137,7 +137,9 @@ def test_liftoff_switch_and_descent_stall(liftoff):
     assert abs(stuck.end[0] - switches[0]) < 1e-4
     good = descend(liftoff, [0.25], "exact", best.value)
     assert good.reached and abs(good.end[0] - best.policy["u12"]) < 1e-3
-    assert good.stop == "converged, on a smooth piece"
+    # at the optimum the cost is flat to its ~1e-14 noise: whether the last step stops on the
+    # gradient test or on a failed line search depends on that noise; where it stops does not
+    assert good.stop.endswith("on a smooth piece")
 
 
 def test_smoothed_model_removes_the_liftoff_jump():
