@@ -1,10 +1,11 @@
 """``study_coordinator`` node: a parameter study fanned out over the optimiser nodes of the domain.
 
-A work item is one parameter point of a :class:`~biped_opt.study.Study`. Every optimiser node
-serves them on a service of its own, ``~/study/<worker>`` of type ``StudyPoint`` (the study as
-JSON and the point's index in; the point's rows as JSON out). The coordinator finds those services
+A work item is a few parameter points of a :class:`~biped_opt.study.Study` (up to
+:data:`BATCH`, fewer as the queue runs short). Every optimiser node serves them on a service of
+its own, ``~/study/<worker>`` of type ``StudyPoint`` (the study as JSON and the points' indices
+in; their rows as JSON out). The coordinator finds those services
 through DDS discovery (:meth:`StudyCoordinator.workers`: any node, any host of the domain, also
-one that starts mid-study), keeps ``in_flight`` items at each (the next item waits in the node's
+one that starts mid-study), keeps ``in_flight`` requests at each (the next waits in the node's
 queue while it computes one, so no node idles for a round trip), and writes each point's rows to
 the same CSV table as a local run (:class:`biped_opt.record.study_table.StudyTable`: resumable,
 every point exactly once).
@@ -47,6 +48,8 @@ __all__ = ["StudyCoordinator", "StudyFailedError", "WORK_ITEM_TYPE", "encode_row
 WORK_ITEM_TYPE = "biped_opt_interfaces/srv/StudyPoint"
 #: defaults of the parameters item_timeout [s], in_flight, discovery_period [s]
 ITEM_TIMEOUT_S, IN_FLIGHT, DISCOVERY_PERIOD_S = 300.0, 2, 0.5
+#: most points in one request
+BATCH = 16
 
 
 class StudyFailedError(BipedOptError, RuntimeError):
@@ -58,17 +61,26 @@ def encode_rows(rows: Iterable[StudyRow]) -> str:
     return json.dumps([dataclasses.asdict(r) for r in rows])
 
 
-def decode_rows(text: str, index: int) -> list[StudyRow]:
-    """The rows :func:`encode_rows` wrote, checked to be of point ``index``."""
+def decode_rows(text: str, indices: Iterable[int]) -> dict[int, list[StudyRow]]:
+    """The rows :func:`encode_rows` wrote, by point, checked to hold every point of
+    ``indices`` and no other."""
+    wanted = list(indices)
     try:
         rows = [StudyRow(**{**d, "parameters": tuple((str(k), float(v))
                                                       for k, v in d["parameters"])})
                 for d in json.loads(text)]
     except (ValueError, TypeError, KeyError) as exc:
-        raise StudyFailedError(f"point {index}: the node's rows do not decode ({exc})") from None
-    if not rows or any(r.point != index for r in rows):
-        raise StudyFailedError(f"point {index}: the node answered with rows of another point")
-    return rows
+        raise StudyFailedError(f"points {wanted}: the node's rows do not decode ({exc})") from None
+    by_point: dict[int, list[StudyRow]] = {i: [] for i in wanted}
+    for row in rows:
+        if row.point not in by_point:
+            raise StudyFailedError(f"points {wanted}: the node answered with rows of point "
+                                   f"{row.point}")
+        by_point[row.point].append(row)
+    missing = [i for i, r in by_point.items() if not r]
+    if missing:
+        raise StudyFailedError(f"points {wanted}: the node's answer has no rows of {missing}")
+    return by_point
 
 
 @dataclasses.dataclass
@@ -78,6 +90,7 @@ class _Worker:
     name: str
     client: Any
     items: dict[int, float] = dataclasses.field(default_factory=dict)
+    requests: int = 0  #: requests sent and not answered
     ready: bool = False
     stalled: bool = False  #: an item timed out: no new items until it answers one
 
@@ -268,23 +281,36 @@ class _Run:
             return
         self.queue.appendleft(index)
 
+    def _batch(self, ready: int) -> int:
+        """Points per request: up to BATCH (the round trip's cost spread over them), fewer as
+        the queue runs short, so that the last points still spread over every node."""
+        share = len(self.queue) // max(1, 2 * self.node.in_flight * ready)
+        return max(1, min(BATCH, share))
+
     def _dispatch(self) -> None:
-        # round robin by load: the least loaded ready node gets the next item
+        # round robin by load: the least loaded ready node gets the next request
         while self.queue:
             ready = [w for w in self.workers.values()
-                     if not w.stalled and len(w.items) < self.node.in_flight and self._ready(w)]
+                     if not w.stalled and w.requests < self.node.in_flight and self._ready(w)]
             if not ready:
                 return
-            worker = min(ready, key=lambda w: len(w.items))
-            index = self.queue.popleft()
-            if index in self.table.done:
+            worker = min(ready, key=lambda w: w.requests)
+            indices = []
+            while self.queue and len(indices) < self._batch(len(ready)):
+                index = self.queue.popleft()
+                if index not in self.table.done:
+                    indices.append(index)
+            if not indices:
                 continue
-            request = ros.srvs.StudyPoint.Request(study=self.spec, index=index)
-            worker.items[index] = time.monotonic()
-            self.node.dispatches[index] += 1
+            request = ros.srvs.StudyPoint.Request(study=self.spec, indices=indices)
+            now = time.monotonic()
+            for index in indices:
+                worker.items[index] = now
+                self.node.dispatches[index] += 1
+            worker.requests += 1
             future = worker.client.call_async(request)
             future.add_done_callback(
-                lambda f, n=worker.name, i=index: self.events.put((n, i, f)))
+                lambda f, n=worker.name, i=tuple(indices): self.events.put((n, i, f)))
 
     @staticmethod
     def _ready(worker: _Worker) -> bool:
@@ -293,24 +319,30 @@ class _Run:
         return worker.ready
 
     # -- answers -------------------------------------------------------------------------------
-    def _handle(self, name: str, index: int, future: Any) -> None:
+    def _handle(self, name: str, indices: tuple[int, ...], future: Any) -> None:
         worker = self.workers.get(name)
         if worker is not None:
-            worker.items.pop(index, None)
+            for index in indices:
+                worker.items.pop(index, None)
+            worker.requests -= 1
             worker.stalled = False
         if future.cancelled() or future.exception() is not None:
-            self._requeue(index)  # its client was destroyed (node gone) or the reply was bad
+            for index in indices:  # its client was destroyed (node gone) or the reply was bad
+                self._requeue(index)
             return
         response = future.result()
-        if index in self.table.done:
-            return  # a late answer to an item another node did meanwhile
+        if all(index in self.table.done for index in indices):
+            return  # a late answer to items other nodes did meanwhile
         if not response.success:
-            raise StudyFailedError(f"point {index} failed on {name}: {response.message}")
-        if self.table.append(decode_rows(response.rows, index)):
-            self.node.served.setdefault(name, []).append(index)
-            self.node.node_seconds += response.seconds
-            if self.progress is not None:
-                self.progress(len(self.table.done), len(self.table.points), index)
+            raise StudyFailedError(f"points {list(indices)} failed on {name}: "
+                                   f"{response.message}")
+        rows = decode_rows(response.rows, indices)
+        self.node.node_seconds += response.seconds
+        for index in indices:
+            if self.table.append(rows[index]):
+                self.node.served.setdefault(name, []).append(index)
+                if self.progress is not None:
+                    self.progress(len(self.table.done), len(self.table.points), index)
 
 
 def point_values(study_points: list[dict[str, float]], index: int) -> str:

@@ -288,10 +288,14 @@ class OptimiserNode(ros.Node):
         start = time.perf_counter()
         try:
             study, points = self._study(request.study)
-            if not request.index < len(points):
-                raise InvalidParameterError(
-                    f"index: {request.index} is not a point of the study ({len(points)} points)")
-            rows = evaluate_point(study, request.index, points[request.index])
+            indices = [int(i) for i in request.indices]
+            if not indices:
+                raise InvalidParameterError("indices: no point asked for")
+            for index in indices:
+                if not index < len(points):
+                    raise InvalidParameterError(
+                        f"indices: {index} is not a point of the study ({len(points)} points)")
+            rows = [r for index in indices for r in evaluate_point(study, index, points[index])]
         except Exception as exc:  # bad request, or a bug: one refused request either way
             return refuse(self, self.study_service_name, response, exc)
         response.success, response.rows = True, encode_rows(rows)

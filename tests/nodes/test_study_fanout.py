@@ -137,7 +137,7 @@ class Hanging(ros.Node):
                             callback_group=ros.ReentrantCallbackGroup())
 
     def _on_request(self, request, response):
-        self.taken.append(request.index)
+        self.taken.extend(int(i) for i in request.indices)
         self.release.wait(30)
         response.success, response.message = False, "too late"
         return response

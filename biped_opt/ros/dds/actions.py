@@ -132,7 +132,8 @@ class ServerGoalHandle:
 
 
 class _ResultService(Service):
-    """``get_result``: a request for a goal still running is answered when the goal ends."""
+    """``get_result``: a request for a goal still running is answered when the goal ends and
+    its execute callback has returned its result."""
 
     server: ActionServer
 
@@ -140,7 +141,9 @@ class _ResultService(Service):
         publication = request.sample_info.publication_handle
         with self.server._lock:
             handle = self.server._goals.get(_key(request.body.goal_id))
-            if handle is not None and handle.is_active:
+            # a goal ends (abort, succeed) inside its execute callback and has its result only
+            # when the callback returns: until then, a request waits (else it got an empty one)
+            if handle is not None and (handle.is_active or handle.result is None):
                 handle._waiting.append((request.header, publication))
                 return
         self._reply(request.header, self.server._result_response(handle), publication)
