@@ -6,13 +6,24 @@ the first call and keeps the machine code next to it (``__pycache__``), so a sec
 instead of compiling. Parameter values are runtime data (an array argument): changing one never
 changes the source, so it never recompiles.
 
+A second process need not derive or render to find that module: after a render, a small index
+entry (``systems/start/<key>.json``) maps a cheap key of the request -- a library name, or a system
+file's path and content, together with a hash of the biped_opt sources and the versions of the
+libraries the generator uses -- to the module's name and the few facts simulating needs (names,
+maneuvers, inputs, parameter defaults). On a hit the module is imported directly and SymPy is not
+touched: :attr:`CompiledSystem.system` and :attr:`CompiledSystem.derived` are built when first
+read. Any change of the file or of the package misses, and the slow path writes a fresh entry.
+
 The cache lives in ``$BIPED_OPT_CACHE`` if set, else ``$XDG_CACHE_HOME/biped_opt`` (by default
 ``~/.cache/biped_opt``), under ``systems/``; deleting that directory is always safe.
 """
 
 from __future__ import annotations
 
+import hashlib
+import importlib.metadata
 import importlib.util
+import json
 import math
 import os
 import sys
@@ -21,17 +32,18 @@ import threading
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
+import biped_opt
 from biped_opt.errors import InvalidInputError, InvalidParameterError
 from biped_opt.hybrid.simulate import DEFAULT_OPTIONS, SimulatorOptions
-from biped_opt.systems.codegen import render, source_key
-from biped_opt.systems.derive import DerivedSystem, derive
-from biped_opt.systems.description import System
-from biped_opt.systems.files import load_system
+
+if TYPE_CHECKING:  # (imported where needed: SymPy and the generator are the slow part of a start)
+    from biped_opt.systems.derive import DerivedSystem
+    from biped_opt.systems.description import System
 
 __all__ = ["CompiledSystem", "SystemTrajectory", "cache_dir", "compile_system", "simulate",
            "simulate_batch", "STATUS_NAMES"]
@@ -54,28 +66,96 @@ def cache_dir() -> Path:
     return Path(xdg) / "biped_opt" / "systems"
 
 
-def _module_for(derived: DerivedSystem) -> ModuleType:
-    text = render(derived)
-    key = source_key(text)
-    name = f"{derived.system.name}_{key}"
-    with _LOCK:
-        if name in _LOADED:
-            return _LOADED[name]
-        folder = cache_dir()
-        folder.mkdir(parents=True, exist_ok=True)
-        path = folder / f"{name}.py"
-        if not path.exists() or path.read_text() != text:
-            # written whole, then renamed: a concurrent process never imports half a file
-            with tempfile.NamedTemporaryFile("w", dir=folder, suffix=".tmp", delete=False) as fh:
-                fh.write(text)
-            os.replace(fh.name, path)
+def _write(folder: Path, path: Path, text: str) -> None:
+    """``text`` into ``path``, written whole then renamed: a concurrent process never reads
+    half a file."""
+    with tempfile.NamedTemporaryFile("w", dir=folder, suffix=".tmp", delete=False) as fh:
+        fh.write(text)
+    os.replace(fh.name, path)
+
+
+def _import(name: str, path: Path) -> ModuleType:
+    """The cached module ``name`` (at ``path``), imported once per process (under _LOCK)."""
+    if name not in _LOADED:
         spec = importlib.util.spec_from_file_location(f"biped_opt_systems_{name}", path)
         assert spec is not None and spec.loader is not None
         module = importlib.util.module_from_spec(spec)
         sys.modules[spec.name] = module
         spec.loader.exec_module(module)
         _LOADED[name] = module
-        return module
+    return _LOADED[name]
+
+
+def _module_for(derived: DerivedSystem) -> tuple[str, ModuleType]:
+    from biped_opt.systems.codegen import render, source_key
+
+    text = render(derived)
+    name = f"{derived.system.name}_{source_key(text)}"
+    folder = cache_dir()
+    path = folder / f"{name}.py"
+    with _LOCK:
+        if name not in _LOADED:
+            folder.mkdir(parents=True, exist_ok=True)
+            if not path.exists() or path.read_text() != text:
+                _write(folder, path, text)
+        return name, _import(name, path)
+
+
+_GENERATOR: list[str] = []
+
+
+def _generator_key() -> str:
+    """A hash of everything a rendered module may depend on besides the request: every source
+    file of biped_opt (the generator, the library, the checks) and the versions of SymPy (its
+    printing and common subexpressions) and SciPy (the DOP853 tableau)."""
+    if not _GENERATOR:
+        digest = hashlib.sha256()
+        root = Path(biped_opt.__file__).parent
+        for path in sorted(root.rglob("*.py")):
+            digest.update(f"{path.relative_to(root).as_posix()}\0".encode())
+            digest.update(path.read_bytes())
+        for dist in ("sympy", "scipy"):
+            digest.update(f"\0{dist} {importlib.metadata.version(dist)}".encode())
+        _GENERATOR.append(digest.hexdigest())
+    return _GENERATOR[0]
+
+
+def _start_entry(spec: object) -> Path | None:
+    """Where the index entry of a library name or a system file lives (None for a System
+    object, or a file that cannot be read: those take the slow path)."""
+    if not isinstance(spec, (str, Path)):
+        return None
+    text = str(spec)
+    request = f"library\0{text}".encode()
+    if text.endswith(".py"):
+        try:
+            content = Path(text).read_bytes()
+        except OSError:
+            return None
+        request = f"file\0{text}\0".encode() + hashlib.sha256(content).digest()
+    key = hashlib.sha256(_generator_key().encode() + b"\0" + request).hexdigest()[:32]
+    return cache_dir() / "start" / f"{key}.json"
+
+
+def _read_entry(entry: Path | None) -> tuple[dict[str, Any], ModuleType] | None:
+    """The facts and the module an index entry names, if both are there."""
+    if entry is None:
+        return None
+    try:
+        facts = json.loads(entry.read_text())
+        name = facts["module"]
+        path = cache_dir() / f"{name}.py"
+        with _LOCK:
+            if name not in _LOADED and not path.is_file():
+                return None
+            return facts, _import(name, path)
+    except (OSError, ValueError, KeyError, TypeError):
+        return None  # absent or unreadable: derive and render instead
+
+
+def _write_entry(entry: Path, facts: dict[str, Any]) -> None:
+    entry.parent.mkdir(parents=True, exist_ok=True)
+    _write(entry.parent, entry, json.dumps(facts))
 
 
 @dataclass(slots=True)
@@ -119,11 +199,22 @@ class CompiledSystem:
     """A system ready to simulate: derived, generated, imported (compiled on first call)."""
 
     def __init__(self, system: System | str, **parameters: float) -> None:
-        self.system = load_system(system)
-        self.derived = derive(self.system)
-        self.module = _module_for(self.derived)
-        self.maneuvers = tuple(self.derived.maneuvers)
-        self.inputs = self.system.u.names()
+        self._spec = system
+        self._system: System | None = None
+        self._derived: DerivedSystem | None = None
+        entry = _start_entry(system)
+        cached = _read_entry(entry)
+        if cached is None:
+            facts = self._build(system)
+            if entry is not None and _start_entry(system) == entry:  # (not edited meanwhile)
+                _write_entry(entry, facts)
+        else:
+            facts, self.module = cached
+        self._name: str = facts["name"]
+        self._where: str = facts["where"]
+        self._defaults: dict[str, float] = dict(facts["parameters"])
+        self.maneuvers: tuple[str, ...] = tuple(facts["maneuvers"])
+        self.inputs: tuple[str, ...] = tuple(facts["inputs"])
         self._initial_modes = [int(v) for v in self.module.INITIAL_MODE]
         self._codes = {name: k for k, name in enumerate(self.maneuvers)}
         self._ninputs = len(self.inputs)
@@ -132,31 +223,62 @@ class CompiledSystem:
         self._default_cfg = self._cfg(DEFAULT_OPTIONS, 0.0)
         self.set_parameters(**parameters)
 
+    def _build(self, spec: System | str) -> dict[str, Any]:
+        """The slow path: load, derive, render, import; the facts an index entry keeps."""
+        from biped_opt.systems.derive import derive
+        from biped_opt.systems.files import load_system
+
+        system = self._system = load_system(spec)
+        derived = self._derived = derive(system)
+        module_name, self.module = _module_for(derived)
+        return {"module": module_name, "name": system.name, "where": system.where(),
+                "parameters": list(system.defaults.items()), "maneuvers": list(derived.maneuvers),
+                "inputs": list(system.u.names())}
+
+    @property
+    def system(self) -> System:
+        """The description (built when first read after a start from the index)."""
+        if self._system is None:
+            from biped_opt.systems.files import load_system
+
+            self._system = load_system(self._spec)
+        return self._system
+
+    @property
+    def derived(self) -> DerivedSystem:
+        """The derived quantities (SymPy; derived when first read after a start from the
+        index)."""
+        if self._derived is None:
+            from biped_opt.systems.derive import derive
+
+            self._derived = derive(self.system)
+        return self._derived
+
     @property
     def name(self) -> str:
-        return self.system.name
+        return self._name
 
     def set_parameters(self, **parameters: float) -> None:
         """Parameter values (defaults overridden); runtime data, no recompilation."""
-        values = dict(self.system.defaults)
+        values = dict(self._defaults)
         for key, value in parameters.items():
             if key not in values:
                 raise InvalidParameterError(
-                    f"{self.system.where()}: unknown parameter {key!r} "
+                    f"{self._where}: unknown parameter {key!r} "
                     f"(parameters: {', '.join(values) or 'none'})")
             if isinstance(value, bool) or not isinstance(value, (int, float)) \
                     or not math.isfinite(value):
                 raise InvalidParameterError(
-                    f"{self.system.where()}: parameter {key!r} must be a finite number, "
+                    f"{self._where}: parameter {key!r} must be a finite number, "
                     f"got {value!r}")
             values[key] = float(value)
-        raw = np.array([values[k] for k in self.system.p.names()], dtype=np.float64)
+        raw = np.array(list(values.values()), dtype=np.float64)  # (the declared order)
         try:  # the values and what depends on them alone (see codegen._Hoisted)
             with np.errstate(divide="raise", invalid="raise", over="raise"):
                 prepared = self.module.prepare_parameters(raw)
         except (ArithmeticError, ValueError, FloatingPointError) as exc:
             raise InvalidParameterError(
-                f"{self.system.where()}: these parameters give no invertible mass matrix "
+                f"{self._where}: these parameters give no invertible mass matrix "
                 f"({exc})") from None
         self.parameters = values
         self._p = prepared
@@ -173,7 +295,7 @@ class CompiledSystem:
             return self.maneuvers.index(maneuver)
         except ValueError:
             raise InvalidInputError(
-                f"{self.system.where()}: unknown maneuver {maneuver!r} "
+                f"{self._where}: unknown maneuver {maneuver!r} "
                 f"(maneuvers: {', '.join(self.maneuvers) or 'none'})") from None
 
     def _inputs(self, inputs: Any) -> Array:
@@ -194,18 +316,18 @@ class CompiledSystem:
             for key, value in inputs.items():
                 if key not in self.inputs:
                     raise InvalidInputError(
-                        f"{self.system.where()}: unknown input {key!r} "
+                        f"{self._where}: unknown input {key!r} "
                         f"(inputs: {', '.join(self.inputs) or 'none'})")
                 u[self.inputs.index(key)] = value
         else:
             values = np.asarray(inputs, dtype=np.float64).ravel()
             if values.size > len(self.inputs):
                 raise InvalidInputError(
-                    f"{self.system.where()}: {values.size} inputs given, the system has "
+                    f"{self._where}: {values.size} inputs given, the system has "
                     f"{len(self.inputs)} ({', '.join(self.inputs) or 'none'})")
             u[: values.size] = values
         if not np.all(np.isfinite(u)):
-            raise InvalidInputError(f"{self.system.where()}: inputs must be finite, got {u}")
+            raise InvalidInputError(f"{self._where}: inputs must be finite, got {u}")
         return u
 
     def _cfg(self, options: SimulatorOptions, sample_dt: float) -> Array:
@@ -224,7 +346,7 @@ class CompiledSystem:
         code = self._code(maneuver)
         s = float(s)
         if not math.isfinite(s):
-            raise InvalidInputError(f"{self.system.where()}: s must be finite, got {s}")
+            raise InvalidInputError(f"{self._where}: s must be finite, got {s}")
         u = self._inputs(inputs)
         m = self.module
         capacity = 0
@@ -253,7 +375,7 @@ class CompiledSystem:
         code = self._code(maneuver)
         ss = np.atleast_1d(np.asarray(s, dtype=np.float64))
         if not np.all(np.isfinite(ss)):
-            raise InvalidInputError(f"{self.system.where()}: s must be finite")
+            raise InvalidInputError(f"{self._where}: s must be finite")
         width = max(len(self.inputs), 1)
         if inputs is None:
             us = np.zeros((ss.size, width))
@@ -283,10 +405,11 @@ _COMPILED: dict[tuple[int, str], CompiledSystem] = {}
 
 def _compiled(system: System | str) -> CompiledSystem:
     """One CompiledSystem per System object or name/path in this process."""
-    key = (id(system), "") if isinstance(system, System) else (0, str(system))
+    named = isinstance(system, (str, Path))
+    key = (0, str(system)) if named else (id(system), "")
     with _LOCK:
         found = _COMPILED.get(key)
-    if found is None or (isinstance(system, System) and found.system is not system):
+    if found is None or (not named and found.system is not system):
         found = CompiledSystem(system)
         with _LOCK:
             _COMPILED[key] = found
