@@ -50,6 +50,7 @@ from collections import OrderedDict
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+import numba
 import numpy as np
 
 from biped_opt import ros
@@ -295,6 +296,9 @@ class OptimiserNode(ros.Node):
                 if not index < len(points):
                     raise InvalidParameterError(
                         f"indices: {index} is not a point of the study ({len(points)} points)")
+            # one core per node for study points (the batch kernels' threads would take the
+            # other cores from the nodes beside it): start one optimiser per core to use them
+            numba.set_num_threads(1)
             rows = [r for index in indices for r in evaluate_point(study, index, points[index])]
         except Exception as exc:  # bad request, or a bug: one refused request either way
             return refuse(self, self.study_service_name, response, exc)
