@@ -222,12 +222,11 @@ def _size(kind: str, left: float, right: float) -> float:
 
 
 _LOCK = threading.Lock()
-_COMPILED: dict[str, Any] = {}
 
 
 def evaluate_point(study: Study, index: int, values: Mapping[str, float]) -> list[StudyRow]:
     """The rows of parameter point ``index`` (``values`` from :meth:`Study.points`)."""
-    from biped_opt.systems.compiled import CompiledSystem
+    from biped_opt.systems.compiled import shared
     from biped_opt.systems.nonsmooth import find_nonsmooth, find_nonsmooth_optimal
     from biped_opt.systems.problems import describe
 
@@ -235,10 +234,8 @@ def evaluate_point(study: Study, index: int, values: Mapping[str, float]) -> lis
     model = {k: v for k, v in values.items() if k in system.defaults}
     found: list[tuple[str, Any]] = []
     if study.maneuver is not None:
-        with _LOCK:  # one compiled system per process and system, its parameters set per point
-            compiled = _COMPILED.get(study.system)
-            if compiled is None:
-                compiled = _COMPILED[study.system] = CompiledSystem(system)
+        with _LOCK:  # the process's compiled system, its parameters set per point
+            compiled = shared(study.system)
             compiled.set_parameters(**model)
             grid = _grid(compiled, study.maneuver, study.num, study.s_range)
             report = find_nonsmooth(compiled, study.maneuver, dict(study.inputs), s=grid)

@@ -170,6 +170,15 @@ def _finite_difference_derivatives(problem: OptimalControlProblem, theta0: float
     return out
 
 
+def print_derivatives(parameter: str, derivatives: dict) -> None:
+    """The one-sided derivatives of :func:`derivatives_json`'s form as text lines."""
+    print(f"{'d/d' + parameter:<10} ({derivatives['method']}; left, right)")
+    print(f"  outcome  {derivatives['outcome'][0]:+.10g}  {derivatives['outcome'][1]:+.10g}")
+    print(f"  value    {derivatives['value'][0]:+.10g}  {derivatives['value'][1]:+.10g}")
+    for k, (lft, rgt) in derivatives["policy"].items():
+        print(f"  {k:<8} {lft:+.10g}  {rgt:+.10g}")
+
+
 def result_json(result: OptimalResult, derivatives: dict | None) -> dict:
     out = result.as_dict()
     out["problem"] = result.problem.describe()
@@ -201,10 +210,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"outcome    th(t_f) = {result.outcome:+.15g}")
     print(f"branch     {result.branch}")
     if derivatives is not None:
-        print(f"d/dth0     ({derivatives['method']}; left, right)")
-        print(f"  outcome  {derivatives['outcome'][0]:+.10g}  {derivatives['outcome'][1]:+.10g}")
-        print(f"  value    {derivatives['value'][0]:+.10g}  {derivatives['value'][1]:+.10g}")
-        for k, (lft, rgt) in derivatives["policy"].items():
-            print(f"  {k:<8} {lft:+.10g}  {rgt:+.10g}")
+        print_derivatives("th0", derivatives)
     print(f"work       simulations = {result.nsim}, nfev = {result.nfev}")
     return 0 if result.success else 1

@@ -147,17 +147,18 @@ def run_optimise(args: argparse.Namespace) -> int:
     derivatives = None
     if r.success:
         try:
-            derivatives = optimal_derivatives(problem, args.s)
+            d = optimal_derivatives(problem, args.s)
         except SimulationError as exc:  # e.g. a grazing terminal event: say so, keep the optimum
             print(f"note: no one-sided derivatives at this s: {exc}", file=sys.stderr)
+        else:  # the form of the biped's optimise --json
+            derivatives = {"outcome": list(d.outcome), "value": list(d.value),
+                           "policy": {k: list(v) for k, v in d.policy.items()},
+                           "method": "variational (Theorem 1)"}
     if args.json:
         out = r.as_dict()
         out["problem"] = problem.as_dict()
         if derivatives is not None:
-            out["derivatives"] = {"outcome": list(derivatives.outcome),
-                                  "value": list(derivatives.value),
-                                  "policy": {k: list(v) for k, v in derivatives.policy.items()},
-                                  "method": "variational (Theorem 1)"}
+            out["derivatives"] = derivatives
         print(strict_json.dumps(out))
         return 0 if r.success else 1
     print(f"problem    {problem.name}  ({problem.description.name}, maneuver "
@@ -169,11 +170,9 @@ def run_optimise(args: argparse.Namespace) -> int:
     print(f"outcome    {r.outcome:+.15g}")
     print(f"branch     {r.branch}")
     if derivatives is not None:
-        print(f"d/d{problem.description.s}  (Theorem 1; left, right)")
-        print(f"  outcome  {derivatives.outcome[0]:+.10g}  {derivatives.outcome[1]:+.10g}")
-        print(f"  value    {derivatives.value[0]:+.10g}  {derivatives.value[1]:+.10g}")
-        for k, (lft, rgt) in derivatives.policy.items():
-            print(f"  {k:<8} {lft:+.10g}  {rgt:+.10g}")
+        from biped_opt.cli.optimise_cmd import print_derivatives
+
+        print_derivatives(str(problem.description.s), derivatives)
     print(f"work       simulations = {r.nsim}")
     return 0 if r.success else 1
 

@@ -45,8 +45,8 @@ if TYPE_CHECKING:  # (imported where needed: SymPy and the generator are the slo
     from biped_opt.systems.derive import DerivedSystem
     from biped_opt.systems.description import System
 
-__all__ = ["CompiledSystem", "SystemTrajectory", "cache_dir", "compile_system", "simulate",
-           "simulate_batch", "STATUS_NAMES"]
+__all__ = ["CompiledSystem", "SystemTrajectory", "cache_dir", "compile_system", "shared",
+           "simulate", "simulate_batch", "STATUS_NAMES"]
 
 Array = npt.NDArray[np.float64]
 
@@ -403,8 +403,9 @@ def compile_system(system: System | str, **parameters: float) -> CompiledSystem:
 _COMPILED: dict[tuple[int, str], CompiledSystem] = {}
 
 
-def _compiled(system: System | str) -> CompiledSystem:
-    """One CompiledSystem per System object or name/path in this process."""
+def shared(system: System | str) -> CompiledSystem:
+    """One CompiledSystem per System object or name/path in this process; callers set its
+    parameters before each use (and serialise uses that may run in parallel threads)."""
     named = isinstance(system, (str, Path))
     key = (0, str(system)) if named else (id(system), "")
     with _LOCK:
@@ -422,7 +423,7 @@ def simulate(system: System | str, maneuver: str, s: float, inputs: Any = None, 
              sample_dt: float | None = None) -> SystemTrajectory:
     """``maneuver`` of ``system`` (a System, a library name or a system file) at s: the
     compiled system is made once per process and its parameters set for this call."""
-    compiled = _compiled(system)
+    compiled = shared(system)
     compiled.set_parameters(**(parameters or {}))
     return compiled.simulate(maneuver, s, inputs, options=options, sample_dt=sample_dt)
 
@@ -432,6 +433,6 @@ def simulate_batch(system: System | str, maneuver: str, s: npt.ArrayLike,
                    parameters: dict[str, float] | None = None,
                    options: SimulatorOptions = DEFAULT_OPTIONS) -> dict[str, Array]:
     """:meth:`CompiledSystem.simulate_batch` of ``system`` (see :func:`simulate`)."""
-    compiled = _compiled(system)
+    compiled = shared(system)
     compiled.set_parameters(**(parameters or {}))
     return compiled.simulate_batch(maneuver, s, inputs, options=options)

@@ -275,8 +275,12 @@ def _refine_joint(problem: Problem, run: _Runner, acting: list[str], start: Arra
     return u, c
 
 
+#: a candidate: (input vector, cost, branch, trajectory)
+_Found = tuple[Array, float, str, SystemTrajectory]
+
+
 def _search(problem: Problem, run: _Runner, acting: list[str], base: Array,
-            grid_points: int | None, xatol: float) -> list[tuple[Array, float, str]]:
+            grid_points: int | None, xatol: float) -> list[_Found]:
     names = problem.description.u.names()
     rows, axes = _grid_rows(problem, acting, base, names, grid_points)
     costs, labels = run.batch(rows)
@@ -290,7 +294,7 @@ def _search(problem: Problem, run: _Runner, acting: list[str], base: Array,
             u[names.index(d)] = value
         else:
             u, c = _refine_joint(problem, run, acting, rows[k], names)
-        found.append((u, c, run(u)[1]))
+        found.append((u, *run(u)))  # (its cost is the refinement's c: same simulation)
     return found
 
 
@@ -314,16 +318,14 @@ def optimal_policy(problem: Problem, s: float, *, grid_points: int | None = None
     base = problem.inputs()
     cost0, label0, tr0 = run(base)
     acting = _acting(problem, compiled, tr0.modes)
-    found: list[tuple[Array, float, str]] = [(base, cost0, label0)]
+    found: list[_Found] = [(base, cost0, label0, tr0)]
     searched: list[str] = []
     while acting and acting != searched:
         searched = acting
         found += _search(problem, run, acting, base, grid_points, xatol)
-        best_u = min(found, key=lambda f: f[1])[0]
-        more = _acting(problem, compiled, run(best_u)[2].modes)
+        more = _acting(problem, compiled, min(found, key=lambda f: f[1])[3].modes)
         acting = [d for d in problem.decision_names if d in set(acting) | set(more)]
-    u, value, _ = min(found, key=lambda f: f[1])
-    _, branch, tr = run(u)
+    u, value, branch, tr = min(found, key=lambda f: f[1])
     policy = {d: float(u[names.index(d)]) for d in problem.decision_names}
     acting_now = _acting(problem, compiled, tr.modes)
     bounds = {d: ("lower" if policy[d] == problem.bound(d)[0] else
@@ -335,7 +337,7 @@ def optimal_policy(problem: Problem, s: float, *, grid_points: int | None = None
         bound = ",".join(f"{d}={b}" for d, b in bounds.items() if b) or None
     candidates = tuple(Candidate(branch=b, policy={d: float(x[names.index(d)])
                                                    for d in problem.decision_names}, value=c)
-                       for x, c, b in found[1:])
+                       for x, c, b, _ in found[1:])
     ok = tr.success and math.isfinite(value)
     message = ("optimum found" if acting_now else
                "no decision acts on the outcome at this s: decisions at their cheapest value")

@@ -50,15 +50,11 @@ NEWTON_STEPS = 3
 
 def cost_gradient(problem: Problem, g: OutcomeGradient, inputs: Array) -> Array:
     """D c over (s, *inputs) from the branch's outcome and final-state gradients."""
-    system = problem.description
-    states = [*system.coordinate_names, *(str(v) for v in system.dq)]
     out = 2.0 * problem.outcome_weight * (g.outcome - problem.target) * g.gradient
-    for k, w, r in problem.final_state:
-        i = states.index(k)
-        out = out + 2.0 * w * (g.y_final[i] - r) * g.state_gradient[i]
-    names = system.u.names()
-    for d, a in zip(problem.decision_names, problem.weights):
-        out[1 + names.index(d)] += 2.0 * a * inputs[names.index(d)]
+    for col, w, r in problem.final_state_columns:
+        out = out + 2.0 * w * (g.y_final[col] - r) * g.state_gradient[col]
+    for col, a in zip(problem.decision_columns, problem.weights):
+        out[1 + col] += 2.0 * a * inputs[col]
     return out
 
 
@@ -133,7 +129,7 @@ def _side(problem: Problem, compiled: CompiledSystem, s: float, side: int, probe
     slope = np.zeros(len(names))
     if free:
         h = MIXED_STEP
-        base = grad_u(s, u)
+        base = dc[[1 + c for c in cols]]  # D_u c at (s, u), from the gradient just taken
         coarse = (grad_u(s + side * h, u) - base) / (side * h)
         fine = (grad_u(s + side * h / 2, u) - base) / (side * h / 2)
         slope[cols] = -np.linalg.solve(hessian, 2.0 * fine - coarse)  # Richardson: O(h^2)

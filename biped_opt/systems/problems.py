@@ -87,6 +87,11 @@ class Problem:
     parameters: tuple[tuple[str, float], ...] = ()
     name: str = ""
     description: System = field(init=False, repr=False, compare=False)
+    #: the decisions' columns in the input vector, and (state column, weight, target) of each
+    #: final-state term: looked up once, the cost is evaluated per simulation
+    decision_columns: tuple[int, ...] = field(init=False, repr=False, compare=False)
+    final_state_columns: tuple[tuple[int, float, float], ...] = field(
+        init=False, repr=False, compare=False)
 
     @classmethod
     def from_spec(cls, spec: Mapping[str, Any], *, system: System | str | None = None,
@@ -179,6 +184,9 @@ class Problem:
                 raise InvalidParameterError(
                     f"{where}: final_state {quoted(k)} is not a coordinate or velocity "
                     f"({', '.join(states)})")
+        object.__setattr__(self, "decision_columns", tuple(inputs.index(d) for d in names))
+        object.__setattr__(self, "final_state_columns", tuple(
+            (states.index(k), w, r) for k, w, r in self.final_state))
         for k, _ in self.parameters:
             if k not in system.defaults:
                 raise InvalidParameterError(
@@ -208,23 +216,20 @@ class Problem:
         u = np.zeros(max(len(names), 1))
         for k, v in self.fixed:
             u[names.index(k)] = v
-        for d in self.decision_names:
-            u[names.index(d)] = (policy or {}).get(d, self.default_decision(d))
+        for d, col in zip(self.decision_names, self.decision_columns):
+            u[col] = (policy or {}).get(d, self.default_decision(d))
         return u
 
     def cost(self, outcome: npt.ArrayLike, y_final: npt.ArrayLike, inputs: npt.ArrayLike
              ) -> Array:
         """c for rows of outcomes, final states and input vectors (broadcasting)."""
-        names = self.description.u.names()
-        states = [*self.description.coordinate_names, *(str(v) for v in self.description.dq)]
-        out = np.asarray(outcome, dtype=np.float64)
         y = np.asarray(y_final, dtype=np.float64)
         u = np.asarray(inputs, dtype=np.float64)
-        c = self.outcome_weight * (out - self.target) ** 2
-        for k, w, r in self.final_state:
-            c = c + w * (y[..., states.index(k)] - r) ** 2
-        for d, a in zip(self.decision_names, self.weights):
-            c = c + a * u[..., names.index(d)] ** 2
+        c = self.outcome_weight * (np.asarray(outcome, dtype=np.float64) - self.target) ** 2
+        for col, w, r in self.final_state_columns:
+            c = c + w * (y[..., col] - r) ** 2
+        for col, a in zip(self.decision_columns, self.weights):
+            c = c + a * u[..., col] ** 2
         return c
 
     def parameter_values(self) -> dict[str, float]:
