@@ -1,7 +1,7 @@
 """The event-driven kernel of every generated system module (MODEL.md Sec. 3, SYSTEMS.md Sec. 1).
 
 :mod:`biped_opt.systems.codegen` appends the code below the ``# --- kernel ---`` marker to each
-system's module, after the system's own functions (``vector_field``, ``apply_impact``,
+system's module, after the system's own functions (``vector_field``, ``reaction``, ``apply_impact``,
 ``guard_value``, ``constraint_rates``, ``terminal_value``, ``outcome_value``, ``initial_state``)
 and its DOP853 step; those names, and ``NSTATE``, ``NCON``, ``NGUARDS``, ``WORKSPACE``,
 ``TERM_AFTER_TOUCHDOWN``, ``FINAL_MODE``, ``INITIAL_MODE``, are defined there, which is why this
@@ -59,12 +59,14 @@ CFG_SAMPLE_DT = 5
 CFG_SIZE = 6
 
 
-@nb.njit(**HOT_PATH)
-def _field(p, mode, y, u, dy, lam):
+@nb.njit("void(f8[::1], i8, f8[::1], i8, f8[::1], f8[::1], i8, f8[::1], i8)", **HOT_PATH)
+def _field_at(p, mode, y, yo, u, out, off, lam, lo):
     """The vector field as a call, for the paths outside the step (the start, events, samples,
-    guards off the step's grid): each inlined copy of it costs compile time, a call only a few
-    nanoseconds, and these run a few times per trajectory."""
-    vector_field(p, mode, y, 0, u, dy, 0, lam, 0)
+    the dense output's extra stages): each inlined copy of it costs compile time (~0.5 s for
+    the biped), a call only a few nanoseconds, and these run a few times per trajectory. The
+    explicit signature compiles it once: called with the literal offsets of the dense stages,
+    Numba would otherwise compile one specialisation per offset."""
+    vector_field(p, mode, y, yo, u, out, off, lam, lo)
 
 
 @nb.njit(**HOT_PATH)
@@ -82,15 +84,15 @@ def _dense_eval(F, y, x, out):
 
 
 @nb.njit(**HOT_PATH)
-def _guard_at(p, mode, u, code, y, i, dy, lam):
-    """Guard i at a state y whose reactions are not known yet (dy, lam: scratch)."""
+def _guard_at(p, mode, u, code, y, i, lam):
+    """Guard i at a state y whose reactions are not known yet (lam: scratch)."""
     if i < NCON and mode >> i & 1:
-        _field(p, mode, y, u, dy, lam)
+        return reaction(p, mode, u, y, i)
     return guard_value(p, mode, u, code, y, 0, lam, 0, i)
 
 
 @nb.njit(**HOT_PATH)
-def _guard_on_dense(p, mode, u, code, F, y, x, i, tmp, dy, lam):
+def _guard_on_dense(p, mode, u, code, F, y, x, i, tmp, lam):
     """Guard i on the interpolant at x: one component when the guard is one (a height in the
     air, a velocity as terminal guard: see ``guard_component``), else the whole state."""
     k, sign = guard_component(mode, code, i)
@@ -99,25 +101,25 @@ def _guard_on_dense(p, mode, u, code, F, y, x, i, tmp, dy, lam):
         return sign * (y[k] + x * (F[0, k] + xm * (F[1, k] + x * (F[2, k] + xm * (
             F[3, k] + x * (F[4, k] + xm * (F[5, k] + x * F[6, k])))))))
     _dense_eval(F, y, x, tmp)
-    return _guard_at(p, mode, u, code, tmp, i, dy, lam)
+    return _guard_at(p, mode, u, code, tmp, i, lam)
 
 
 @nb.njit(**HOT_PATH)
-def _guard_rate(p, mode, u, code, y, f, i, tmp, dy, lam):
+def _guard_rate(p, mode, u, code, y, f, i, tmp, lam):
     """d/dt of guard i along the flow of ``mode`` at y (f = vector field at y), by a central
     difference: only its sign is used, to decide which near-zero guards flip together."""
     eps = 1e-6
     for m in range(y.shape[0]):
         tmp[m] = y[m] + eps * f[m]
-    g_plus = _guard_at(p, mode, u, code, tmp, i, dy, lam)
+    g_plus = _guard_at(p, mode, u, code, tmp, i, lam)
     for m in range(y.shape[0]):
         tmp[m] = y[m] - eps * f[m]
-    g_minus = _guard_at(p, mode, u, code, tmp, i, dy, lam)
+    g_minus = _guard_at(p, mode, u, code, tmp, i, lam)
     return (g_plus - g_minus) / (2.0 * eps)
 
 
 @nb.njit(**HOT_PATH)
-def _root_on_dense(p, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, dy, lam):
+def _root_on_dense(p, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, lam):
     """Root in (xa, xb] of guard i on the dense output (ga > 0 >= gb), by regula falsi with
     the Anderson-Bjorck modification, to a bracket below _ROOT_XTOL of the step. A guard that
     is one state component (see ``guard_component``) iterates on that component's eight
@@ -140,7 +142,7 @@ def _root_on_dense(p, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, dy, lam):
                 f5 + x * f6)))))))
         else:
             _dense_eval(F, y, x, tmp)
-            gx = _guard_at(p, mode, u, code, tmp, i, dy, lam)
+            gx = _guard_at(p, mode, u, code, tmp, i, lam)
         if gx > 0.0:
             if side == 1:
                 m = 1.0 - gx / ga
@@ -186,7 +188,7 @@ def _initial_step(p, mode, u, y, f, rtol, atol, h_max, tmp, ftmp, lam):
     h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
     for i in range(n):
         tmp[i] = y[i] + h0 * f[i]
-    _field(p, mode, tmp, u, ftmp, lam)
+    _field_at(p, mode, tmp, 0, u, ftmp, 0, lam, 0)
     d2 = 0.0
     for i in range(n):
         scale = atol + rtol * abs(y[i])
@@ -260,7 +262,7 @@ def simulate_kernel(p, code, y0, mode0, u, cfg, samples, events, y_out):
     sampling = sample_dt > 0.0
     next_sample = 0
 
-    _field(p, mode, y, u, f, lam)
+    _field_at(p, mode, y, 0, u, f, 0, lam, 0)
     nfev += 1
     _all_guards(p, mode, u, code, y, lam, gv)
     for i in range(NGUARDS):
@@ -330,8 +332,7 @@ def simulate_kernel(p, code, y0, mode0, u, cfg, samples, events, y_out):
                     gb = 0.0
                     for m in range(1, 9):
                         xm = probe[i] * m / 8.0
-                        gm = _guard_on_dense(p, mode, u, code, F, y, xm, i, tmp, tmp2,
-                                             lam_tmp)
+                        gm = _guard_on_dense(p, mode, u, code, F, y, xm, i, tmp, lam_tmp)
                         if gm <= 0.0:
                             xb = xm
                             gb = gm
@@ -340,8 +341,7 @@ def simulate_kernel(p, code, y0, mode0, u, cfg, samples, events, y_out):
                         continue
                 else:
                     continue
-                x = _root_on_dense(p, mode, u, code, F, y, i, 0.0, gv[i], xb, gb, tmp, tmp2,
-                                   lam_tmp)
+                x = _root_on_dense(p, mode, u, code, F, y, i, 0.0, gv[i], xb, gb, tmp, lam_tmp)
                 if x < x_first:
                     x_first = x
                     first = i
@@ -353,7 +353,7 @@ def simulate_kernel(p, code, y0, mode0, u, cfg, samples, events, y_out):
                 if ts > t_stop or (first >= 0 and ts >= t_stop):
                     break
                 _dense_eval(F, y, (ts - t) / h_step, tmp)
-                _field(p, mode, tmp, u, tmp2, lam_tmp)
+                _field_at(p, mode, tmp, 0, u, tmp2, 0, lam_tmp, 0)
                 nfev += 1
                 ns = _record_sample(samples, ns, ts, tmp, mode, lam_tmp)
                 next_sample += 1
@@ -380,14 +380,14 @@ def simulate_kernel(p, code, y0, mode0, u, cfg, samples, events, y_out):
         _dense_eval(F, y, x_first, tmp)
         for k in range(n):
             y[k] = tmp[k]
-        _field(p, mode, y, u, f, lam)
+        _field_at(p, mode, y, 0, u, f, 0, lam, 0)
         nfev += 1
         _all_guards(p, mode, u, code, y, lam, gv_new)
         for i in range(NGUARDS):
             flips[i] = i == first
             if i != first and armed[i]:
                 if abs(gv_new[i]) <= SIMULTANEOUS_TOL:
-                    flips[i] = _guard_rate(p, mode, u, code, y, f, i, tmp, tmp2, lam_tmp) < 0.0
+                    flips[i] = _guard_rate(p, mode, u, code, y, f, i, tmp, lam_tmp) < 0.0
         touchdown = 0
         liftoff = 0
         for j in range(NCON):
@@ -417,7 +417,7 @@ def simulate_kernel(p, code, y0, mode0, u, cfg, samples, events, y_out):
                     if touchdown >> j & 1 and rates[j] > SEPARATION_TOL:
                         separated |= 1 << j
                 mode = mode & ~separated
-            _field(p, mode, y, u, f, lam)
+            _field_at(p, mode, y, 0, u, f, 0, lam, 0)
             nfev += 1
             row[5] = mode
             for k in range(n):
