@@ -10,10 +10,6 @@ SciPy comparators, for the biped, the 3-leg walker and the rocking bar, from one
   (``bench/system_reference.py`` with ``walker_model``/``rocking_bar_model``, written from
   SYSTEMS.md without biped_opt; the biped's is ``bench/solve_ivp_reference.py``);
 - ``max_abs_error``: largest |outcome - comparator outcome| and ``mode_mismatches``;
-- for the biped, ``hand_written_per_trajectory_s`` (:func:`biped_opt.simulate`, timed in the same
-  blocks) and ``generated_over_hand_written``, the ratio the redesign is judged by; and the same
-  for the compiled kernels alone, called with prepared arguments (``kernel_per_trajectory_s``,
-  ``kernel_generated_over_hand_written``): the rest is the Python around them;
 - ``compile_s``: a fresh interpreter compiling the system with an empty cache (cold) and
   loading it from that cache (cached).
 """
@@ -87,48 +83,6 @@ def _best_times(call, cases, rounds: int):
     return best, values
 
 
-def _alternated(first, second, cases, rounds: int):
-    """Best times of two calls on ``cases``, alternated in blocks so that drifting load hits
-    both alike."""
-    a = np.full(len(cases), np.inf)
-    b = np.full(len(cases), np.inf)
-    for _ in range(rounds):
-        a = np.minimum(a, _best_times(first, cases, 1)[0])
-        b = np.minimum(b, _best_times(second, cases, 1)[0])
-    return a, b
-
-
-def _kernel_calls(compiled, cases):
-    """The generated and the hand-written compiled kernels alone on ``cases`` (by index), their
-    arguments prepared once: each returns the outcome."""
-    from biped_opt.hybrid import _kernel as hand
-    from biped_opt.hybrid.simulate import DEFAULT_OPTIONS, DEFAULT_PARAMS, kernel_config
-    from biped_opt.maneuvers import spec
-
-    m = compiled.module
-    rows = DEFAULT_OPTIONS.max_events + 1
-    g_buf = (np.empty((0, m.SAMPLE_WIDTH)), np.empty((rows, m.EVENT_WIDTH)), np.empty(m.NSTATE))
-    h_buf = (np.empty((0, hand.SAMPLE_WIDTH)), np.empty((rows, hand.EVENT_WIDTH)),
-             np.empty(m.NSTATE))
-    p_hand = DEFAULT_PARAMS.as_array()
-    g_args, h_args = [], []
-    for maneuver, s, u in cases:
-        sp = spec(maneuver)
-        g_args.append((compiled._p, compiled._code(maneuver), s, np.array(u, dtype=float),
-                       compiled._default_cfg, *g_buf))
-        h_args.append((p_hand, sp.code, s, sp.mode_code, np.array(u, dtype=float),
-                       kernel_config(sp, DEFAULT_OPTIONS, 0.0), *h_buf))
-
-    def generated(k):
-        return m.simulate_maneuver(*g_args[k])[-1]
-
-    def hand_written(k):
-        hand.simulate_maneuver(*h_args[k])
-        return h_buf[2][2]
-
-    return generated, hand_written
-
-
 def _compile_cost(name: str) -> dict[str, float]:
     out = {}
     with tempfile.TemporaryDirectory(prefix="biped_opt_systems_") as cache:
@@ -146,7 +100,6 @@ def _compile_cost(name: str) -> dict[str, float]:
 def run_systems_benchmark(systems=SYSTEMS, *, n_cases: int = 40, rounds: int = 3,
                           reference_cases: int = 10, seed: int = 20200401,
                           compile_cost: bool = True) -> dict:
-    from biped_opt import simulate
     from biped_opt.systems.compiled import compile_system
 
     rng = np.random.default_rng(seed)
@@ -184,24 +137,6 @@ def run_systems_benchmark(systems=SYSTEMS, *, n_cases: int = 40, rounds: int = 3
             "speedup_vs_reference": float(np.median(ref_t) / np.median(gen_t)),
             "max_abs_error": float(np.max(np.abs(gen_v[: len(ref_cases)] - ref_v))),
         }
-        if name == "biped":
-            def hand(case):
-                return simulate(case[0], case[1], case[2]).outcome
-            _best_times(hand, cases[:2], 1)
-            hand_t, gen2_t = _alternated(hand, generated, cases, rounds)
-            row["hand_written_per_trajectory_s"] = float(np.median(hand_t))
-            row["generated_over_hand_written"] = float(np.median(gen2_t) / np.median(hand_t))
-            row["max_abs_difference_to_hand_written"] = float(np.max(np.abs(
-                gen_v - np.array([hand(c) for c in cases]))))
-            kernel_gen, kernel_hand = _kernel_calls(compiled, cases)
-            index = list(range(len(cases)))
-            _best_times(kernel_gen, index[:2], 1)
-            _best_times(kernel_hand, index[:2], 1)
-            k_hand, k_gen = _alternated(kernel_hand, kernel_gen, index, rounds)
-            row["kernel_per_trajectory_s"] = {"generated": float(np.median(k_gen)),
-                                              "hand_written": float(np.median(k_hand))}
-            row["kernel_generated_over_hand_written"] = float(np.median(k_gen)
-                                                              / np.median(k_hand))
         if compile_cost:
             row["compile_s"] = _compile_cost(name)
         result["systems"][name] = row
@@ -224,15 +159,6 @@ def format_systems_table(r: dict) -> str:
             f"{_us(row['reference_per_trajectory_s']):>12}{row['speedup_vs_reference']:>9.0f}x"
             f"{row['max_abs_error']:>11.1e}"
             f"{comp.get('cold', float('nan')):>7.1f}s{comp.get('cached', float('nan')):>7.1f}s")
-    biped = r["systems"].get("biped")
-    if biped:
-        kernel = biped["kernel_per_trajectory_s"]
-        lines.append(f"generated biped / hand-written: {biped['generated_over_hand_written']:.2f} "
-                     f"({_us(biped['hand_written_per_trajectory_s'])} hand-written); largest "
-                     f"difference {biped['max_abs_difference_to_hand_written']:.1e}")
-        lines.append(f"kernels alone: {biped['kernel_generated_over_hand_written']:.2f} "
-                     f"({_us(kernel['generated'])} generated, {_us(kernel['hand_written'])} "
-                     "hand-written)")
     return "\n".join(lines)
 
 

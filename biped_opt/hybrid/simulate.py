@@ -3,7 +3,9 @@
 :func:`simulate` runs one maneuver and returns a :class:`~biped_opt.hybrid.trajectory.Trajectory`;
 :func:`simulate_batch` runs many (th0, inputs) in parallel compiled threads and returns flat
 arrays, the path sweeps and optimisation grids take. Both validate their inputs once, up front,
-and call the same compiled kernel (:mod:`biped_opt.hybrid._kernel`).
+and call the compiled module that :mod:`biped_opt.systems` generates from the biped's
+description (``systems/library/biped.py``): the biped is simulated by the same kernel as every
+other system (:mod:`biped_opt.systems._kernel_body`), reached here through :func:`kernel`.
 """
 
 from __future__ import annotations
@@ -11,22 +13,22 @@ from __future__ import annotations
 import functools
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from types import ModuleType
 
 import numpy as np
 import numpy.typing as npt
 
 from biped_opt.errors import InvalidInputError, InvalidParameterError, SimulationError
-from biped_opt.hybrid import _kernel as K
 from biped_opt.hybrid.trajectory import Status, Trajectory
-from biped_opt.maneuvers import ManeuverSpec, check_theta0, parse_maneuver, spec
+from biped_opt.maneuvers import Maneuver, check_theta0, parse_maneuver, spec
 from biped_opt.model.biped import NSTATE
 from biped_opt.model.modes import ContactMode
 from biped_opt.model.params import BipedParams
 
 __all__ = [
     "SimulatorOptions", "BatchResult", "simulate", "simulate_batch", "check_inputs", "warm_up",
-    "kernels_cached",
+    "kernels_cached", "kernel",
 ]
 
 Array = npt.NDArray[np.float64]
@@ -94,31 +96,70 @@ def check_inputs(inputs: npt.ArrayLike | None) -> Array:
     return out
 
 
-@functools.lru_cache(maxsize=64)
-def kernel_config(
-    s: ManeuverSpec, options: SimulatorOptions, sample_dt: float = 0.0
-) -> Array:
-    """The ``cfg`` vector of :func:`biped_opt.hybrid._kernel.simulate_kernel` (read-only, cached:
-    a maneuver's configuration is built once, not per trajectory)."""
-    cfg = np.empty(K.CFG_SIZE)
-    cfg[K.CFG_TERM_SIGN] = s.term_sign
-    cfg[K.CFG_TERM_AFTER_TOUCHDOWN] = float(s.term_after_touchdown)
-    cfg[K.CFG_TERM_MODE] = -1.0 if s.term_mode is None else float(s.term_mode)
-    cfg[K.CFG_T_END] = options.t_end
-    cfg[K.CFG_MAX_EVENTS] = options.max_events
-    cfg[K.CFG_RTOL] = options.rtol
-    cfg[K.CFG_ATOL] = options.atol
-    cfg[K.CFG_H_MAX] = options.h_max
-    cfg[K.CFG_SAMPLE_DT] = sample_dt
-    cfg.flags.writeable = False
+@dataclass(frozen=True, eq=False)
+class BipedKernel:
+    """The biped's generated compiled module and how the biped's API addresses it: its
+    maneuver codes (by ManeuverSpec.code), parameter order, and the vectors of the defaults
+    (looked up without hashing parameters and options: this is on every trajectory's path)."""
+
+    module: ModuleType
+    codes: tuple[int, ...]  # the module's maneuver code of each ManeuverSpec.code
+    parameter_names: tuple[str, ...]  # BipedParams fields in the module's parameter order
+    default_p: Array
+    default_cfg: Array
+
+    @functools.lru_cache(maxsize=64)  # noqa: B019 (one kernel per process, few parameter sets)
+    def parameters(self, params: BipedParams) -> Array:
+        """The module's parameter vector for ``params`` (values, then what depends on them)."""
+        return _prepared(self.module, self.parameter_names, params)
+
+
+def _prepared(m: ModuleType, names: tuple[str, ...], params: BipedParams) -> Array:
+    # (kept writeable, as the cfg vector: the compiled kernels are typed for writeable arrays,
+    # and a read-only one would compile them a second time)
+    return m.prepare_parameters(np.array([getattr(params, name) for name in names]))
+
+
+def _config(m: ModuleType, options: SimulatorOptions, sample_dt: float,
+            touched_down: bool) -> Array:
+    cfg = np.empty(m.CFG_SIZE)
+    cfg[m.CFG_T_END] = options.t_end
+    cfg[m.CFG_MAX_EVENTS] = options.max_events
+    cfg[m.CFG_RTOL] = options.rtol
+    cfg[m.CFG_ATOL] = options.atol
+    cfg[m.CFG_H_MAX] = options.h_max
+    cfg[m.CFG_SAMPLE_DT] = sample_dt
+    cfg[m.CFG_TOUCHED_DOWN] = float(touched_down)
     return cfg
 
 
-#: the default-options ``cfg`` vector of each maneuver, by ManeuverSpec.code (looked up
-#: without hashing the spec and options, as kernel_config's cache must)
-_DEFAULT_CFG: dict[int, Array] = {}
-_NO_SAMPLES = np.empty((0, K.SAMPLE_WIDTH))  # nothing is ever written to a zero-row buffer
-_DEFAULT_P = DEFAULT_PARAMS.as_array()
+@functools.cache
+def kernel() -> BipedKernel:
+    """The biped's compiled module (imported, or generated and compiled, on first use)."""
+    from biped_opt.systems.compiled import compile_system
+
+    compiled = compile_system("biped")
+    m = compiled.module
+    names = tuple(compiled.parameters)
+    known = {f.name for f in fields(BipedParams) if f.init}
+    if set(names) != known:
+        raise RuntimeError(f"the biped's description has parameters {names}, BipedParams {known}")
+    by_code = sorted((spec(man) for man in Maneuver), key=lambda sp: sp.code)
+    codes = tuple(compiled.maneuvers.index(sp.maneuver.value) for sp in by_code)
+    return BipedKernel(m, codes, names, _prepared(m, names, DEFAULT_PARAMS),
+                       _config(m, DEFAULT_OPTIONS, 0.0, False))
+
+
+@functools.lru_cache(maxsize=64)
+def kernel_config(options: SimulatorOptions, sample_dt: float = 0.0,
+                  touched_down: bool = False) -> Array:
+    """The ``cfg`` vector of the compiled kernel (layout: the CFG_* indices of
+    :mod:`biped_opt.systems._kernel_body`), cached (not to be written). ``touched_down``: the
+    trajectory continues after a touchdown (the touchdown maneuver's end is armed)."""
+    return _config(kernel().module, options, sample_dt, touched_down)
+
+
+_NO_SAMPLES = np.empty((0, 1 + NSTATE + 3))  # nothing is ever written to a zero-row buffer
 
 
 def simulate(
@@ -140,31 +181,28 @@ def simulate(
     s = spec(maneuver)
     th = check_theta0(s, theta0)
     u = check_inputs(inputs)
-    p = _DEFAULT_P if params is None else params.as_array()
+    k = kernel()
+    p = k.default_p if params is None else k.parameters(params)
+    m = k.module
     if sample_dt is None:
         samples = _NO_SAMPLES
-        if options is DEFAULT_OPTIONS:
-            cfg = _DEFAULT_CFG.get(s.code)
-            if cfg is None:
-                cfg = _DEFAULT_CFG[s.code] = kernel_config(s, options, 0.0)
-        else:
-            cfg = kernel_config(s, options, 0.0)
+        cfg = k.default_cfg if options is DEFAULT_OPTIONS else kernel_config(options)
     else:
         if not (math.isfinite(sample_dt) and sample_dt > 0):
             raise InvalidInputError(f"sample_dt must be a positive number, got {sample_dt!r}")
         capacity = int(options.t_end / sample_dt) + 2 * options.max_events + 8
-        samples = np.empty((capacity, K.SAMPLE_WIDTH))
-        cfg = kernel_config(s, options, float(sample_dt))
-    events = np.empty((options.max_events + 1, K.EVENT_WIDTH))
+        samples = np.empty((capacity, m.SAMPLE_WIDTH))
+        cfg = kernel_config(options, float(sample_dt))
+    events = np.empty((options.max_events + 1, m.EVENT_WIDTH))
     y_out = np.empty(NSTATE)
-    status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej = K.simulate_maneuver(
-        p, s.code, th, s.mode_code, u, cfg, samples, events, y_out
+    status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej, _ = m.simulate_maneuver(
+        p, k.codes[s.code], th, u, cfg, samples, events, y_out
     )
     if n_s > samples.shape[0]:  # cannot happen while capacity covers t_end / sample_dt
         raise SimulationError(f"sample buffer overflow: {n_s} > {samples.shape[0]}")
     return Trajectory.from_kernel(
         s.maneuver.value, th, u, status, t_f, y_out, mode_f,
-        events[: n_ev + 1 if status == K.OK or status == K.APEX_IN_CONTACT else n_ev],
+        events[: n_ev + 1 if status == Status.OK or status == Status.APEX_IN_CONTACT else n_ev],
         None if sample_dt is None else samples[:n_s], nfev, nsteps, nrej,
     )
 
@@ -241,12 +279,13 @@ def simulate_batch(
     bad = np.flatnonzero(~(np.abs(th) <= s.theta0_limit))  # NaN fails the comparison too
     if bad.size:
         check_theta0(s, th[bad[0]])  # raises, naming theta0 and the valid range
-    events = np.zeros((n, options.max_events + 1, K.EVENT_WIDTH))
+    k = kernel()
+    events = np.zeros((n, options.max_events + 1, k.module.EVENT_WIDTH))
     y_out = np.empty((n, NSTATE))
     info = np.empty((n, 8))
-    K.simulate_batch_kernel(
-        params.as_array(), s.code, th, s.mode_code, u_arr, kernel_config(s, options),
-        events, y_out, info,
+    k.module.simulate_batch_kernel(
+        k.parameters(params), k.codes[s.code], th, u_arr, kernel_config(options), events, y_out,
+        np.empty(n), info,
     )
     return BatchResult(
         maneuver=s.maneuver.value,
@@ -263,15 +302,18 @@ def simulate_batch(
 
 
 def kernels_cached() -> bool:
-    """True when Numba's on-disk cache holds the simulator's kernels for the current sources
-    (a start then loads them in about a second instead of compiling for 30-60 s)."""
-    from biped_opt.hybrid import _kernel
+    """True when the biped's compiled module is on disk and Numba's cache holds its kernels
+    for the current sources (a start then loads them in about a second instead of compiling)."""
+    from biped_opt.systems.compiled import cached_module
 
-    for kernel in (_kernel.simulate_maneuver, _kernel.simulate_batch_kernel):
-        if kernel.signatures:
+    m = cached_module("biped")
+    if m is None:
+        return False
+    for fn in (m.simulate_maneuver, m.simulate_batch_kernel):
+        if fn.signatures:
             continue  # compiled (or loaded) in this process already
         try:
-            if not kernel._cache._cache_file._load_index():
+            if not fn._cache._cache_file._load_index():
                 return False
         except (AttributeError, OSError):  # another Numba layout: assume the worst
             return False
@@ -280,7 +322,7 @@ def kernels_cached() -> bool:
 
 def warm_up() -> float:
     """Compile the simulator's kernels now, or load them from Numba's on-disk cache, rather than
-    inside the first call; returns the seconds it took (~30 s in a fresh checkout, well under one
+    inside the first call; returns the seconds it took (~20-30 s in a fresh checkout, well under one
     once cached). The nodes call it before they offer their services, so that a client's first
     request is not held up by a compile longer than its timeout."""
     t0 = time.perf_counter()

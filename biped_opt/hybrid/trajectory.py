@@ -1,7 +1,8 @@
 """Results of the hybrid simulator: trajectories, their events and per-mode segments.
 
 A :class:`Trajectory` is a frozen value built from the flat arrays the compiled kernel fills
-(layouts in :mod:`biped_opt.hybrid._kernel`); events and segments are derived from them on demand.
+(layouts in :mod:`biped_opt.systems._kernel_body`); events and segments are derived from them on
+demand.
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ from functools import cached_property
 import numpy as np
 import numpy.typing as npt
 
-from biped_opt.hybrid import _kernel as K
 from biped_opt.model.biped import NDOF, NSTATE
 from biped_opt.model.modes import ContactMode
 
@@ -22,15 +22,21 @@ __all__ = ["Status", "Event", "Segment", "Trajectory"]
 Array = npt.NDArray[np.float64]
 
 
-class Status(enum.IntEnum):
-    """How a simulation ended. Only ``OK`` is a success."""
+#: kind of an event row: a contact event, or the terminal one (read by the compiled kernel)
+EVENT_CONTACT = 1
+EVENT_TERMINAL = 2
 
-    OK = K.OK
-    HORIZON = K.HORIZON
-    MAX_EVENTS = K.MAX_EVENTS
-    INCONSISTENT = K.INCONSISTENT
-    APEX_IN_CONTACT = K.APEX_IN_CONTACT
-    STEP_FAILURE = K.STEP_FAILURE
+
+class Status(enum.IntEnum):
+    """How a simulation ended (the codes the compiled kernel returns). Only ``OK`` is a
+    success."""
+
+    OK = 0
+    HORIZON = 1
+    MAX_EVENTS = 2
+    INCONSISTENT = 3
+    APEX_IN_CONTACT = 4
+    STEP_FAILURE = 5
 
     @property
     def message(self) -> str:
@@ -149,7 +155,7 @@ class Trajectory:
         out = []
         for row in self.event_rows:
             td, lo = int(row[2]), int(row[3])
-            if int(row[1]) == K.EVENT_TERMINAL:
+            if int(row[1]) == EVENT_TERMINAL:
                 kind = "terminal"
             else:
                 kind = "+".join(k for k, m in (("touchdown", td), ("liftoff", lo)) if m)

@@ -9,10 +9,12 @@ force: u1 acts only in left single stance J = {1}, u2 only in right single stanc
 body torque u12 only in double stance J = {1, 2}. This *force coupling* (paper Sec. II-B) is what
 makes outcomes nonsmooth when the order of contact events changes.
 
-The physics is written once, as compiled functions on flat float arrays (the simulator's hot
-path calls them directly), and wrapped by :class:`Biped` for the generic framework of
-:mod:`biped_opt.model.system`, which the tests use to check the specialised constraint handling
-against Eq. (1) computed with general linear algebra.
+The physics is written here by hand, as compiled functions on flat float arrays, and wrapped by
+:class:`Biped` for the generic framework of :mod:`biped_opt.model.system`: the biped's reference
+model. The simulator runs the module generated from the biped's description
+(``systems/library/biped.py``); the tests check that description's Eq. (1) against this model,
+and this model's constraint handling against Eq. (1) computed with general linear algebra. The
+biped's variational equations (:mod:`biped_opt.optimal.derivatives`) evaluate it directly.
 
 .. [1] B. Banjanin and S. A. Burden, "Nonsmooth optimal value and policy functions in mechanical
    systems subject to unilateral constraints", IEEE Control Systems Letters 4(2), 2020.
@@ -185,17 +187,9 @@ def vector_field(
     the reactions (lambda_1, lambda_2) to ``lam[lo:lo + 2]``.
 
     Eq. (1a): M is diagonal and Da_j = e_{z_j}, so lambda_j = -f_J[z_j] = mf g + F_j n_jz and
-    z_j'' = 0 for every active constraint j; inactive reactions are 0. The offsets let the
-    integrator keep states, stage derivatives and reactions in one flat workspace: the compiler
-    then knows that the stores of one stage do not overwrite the inputs of the next, and keeps
-    the step's arithmetic in registers.
-
-    The contact mode acts through factors 0.0 and 1.0, not branches. Numba inlines this function
-    into every stage of the step, and each inlined array argument gets a reference count
-    (an atomic increment and decrement, ~20 cycles each and a barrier to reordering). Numba
-    removes such a pair only when nothing branches between them. With branches here, ~18 pairs
-    per stage survived; without them a whole simulation is ~11% faster, with bit-identical
-    results (``tests/hybrid/test_dop853.py`` checks that the step has no reference counting).
+    z_j'' = 0 for every active constraint j; inactive reactions are 0. The contact mode acts
+    through factors 0.0 and 1.0, not branches (an inlined function with branches keeps Numba's
+    reference counting of its array arguments).
     """
     fx, fz, fth, f1x, f1z, f2x, f2z = _force_components(p, mode, y, yo, u)
     inv_mb, inv_ib, inv_mf = p[9], p[10], p[11]

@@ -49,12 +49,12 @@ import numpy.typing as npt
 from scipy.integrate import solve_ivp
 
 from biped_opt.errors import InvalidInputError, SimulationError
-from biped_opt.hybrid import _kernel as K
 from biped_opt.hybrid.simulate import (
     DEFAULT_OPTIONS,
     INPUT_NAMES,
     SimulatorOptions,
     check_inputs,
+    kernel,
     kernel_config,
     simulate,
 )
@@ -369,16 +369,17 @@ def _continue(
     flipped), which is exactly the state right after an event; times are shifted by t0.
     """
     s = spec(maneuver)
-    events = np.empty((options.max_events + 1, K.EVENT_WIDTH))
+    k = kernel()
+    m = k.module
+    events = np.empty((options.max_events + 1, m.EVENT_WIDTH))
     y_out = np.empty(NSTATE)
-    cfg = kernel_config(s, options).copy()  # may be a shared read-only array
-    cfg[K.CFG_TERM_AFTER_TOUCHDOWN] = float(s.term_after_touchdown and not touched_down)
-    cfg[K.CFG_T_END] = options.t_end - t0
-    status, t_f, mode_f, n_ev, _, nfev, nsteps, nrej = K.simulate_kernel(
-        params.as_array(), y0.copy(), int(mode0), u, cfg, np.empty((0, K.SAMPLE_WIDTH)),
-        events, y_out,
+    cfg = kernel_config(options, 0.0, touched_down).copy()  # (a shared, cached vector)
+    cfg[m.CFG_T_END] = options.t_end - t0
+    status, t_f, mode_f, n_ev, _, nfev, nsteps, nrej = m.simulate_kernel(
+        k.parameters(params), k.codes[s.code], y0.copy(), int(mode0), u, cfg,
+        np.empty((0, m.SAMPLE_WIDTH)), events, y_out,
     )
-    n_rows = n_ev + (1 if status in (K.OK, K.APEX_IN_CONTACT) else 0)
+    n_rows = n_ev + (1 if status in (Status.OK, Status.APEX_IN_CONTACT) else 0)
     rows = events[:n_rows].copy()
     rows[:, 0] += t0
     return Trajectory(

@@ -15,7 +15,7 @@ Python module that Numba compiles (and caches on disk, keyed by that file):
 - ``apply_impact(p, mode, y)``: q'+ = Delta_J q'- on entering J, Eq. (1b).
 - the constraints a(q) and their rates Da q', the maneuvers' initial states, terminal guards and
   outcomes, and the guards of every mode (a_j in the air, lambda_j in contact, the terminal one);
-- the DOP853 step (:mod:`biped_opt.hybrid._dop853_gen` with this system's dimensions) and the
+- the DOP853 step (:mod:`biped_opt.systems._dop853_gen` with this system's dimensions) and the
   event-driven kernel (:mod:`biped_opt.systems._kernel_body`, appended verbatim).
 
 Parameters and inputs are arguments (``p``, ``u``), never constants: changing a parameter value
@@ -33,7 +33,7 @@ from pathlib import Path
 import sympy as sp
 from sympy.printing.pycode import PythonCodePrinter
 
-from biped_opt.hybrid import _dop853_gen
+from biped_opt.systems import _dop853_gen
 from biped_opt.systems.derive import DerivedSystem
 
 __all__ = ["render", "source_key", "KERNEL_BODY"]
@@ -853,6 +853,7 @@ def render(derived: DerivedSystem) -> str:
         "import numpy as np",
         "",
         "from biped_opt._jit import HOT_PATH",
+        "from biped_opt.hybrid.trajectory import EVENT_CONTACT, EVENT_TERMINAL, Status",
         "from biped_opt.model.biped import sincos as _sincos",
         "",
         f"NDOF = {d}",

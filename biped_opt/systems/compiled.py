@@ -40,6 +40,7 @@ import numpy.typing as npt
 import biped_opt
 from biped_opt.errors import InvalidInputError, InvalidParameterError
 from biped_opt.hybrid.simulate import DEFAULT_OPTIONS, SimulatorOptions
+from biped_opt.hybrid.trajectory import Status
 
 if TYPE_CHECKING:  # (imported where needed: SymPy and the generator are the slow part of a start)
     from biped_opt.systems.derive import DerivedSystem
@@ -51,8 +52,7 @@ __all__ = ["CompiledSystem", "SystemTrajectory", "cache_dir", "compile_system", 
 Array = npt.NDArray[np.float64]
 
 #: the kernel's status codes (as in :class:`biped_opt.hybrid.trajectory.Status`)
-STATUS_NAMES = ("OK", "HORIZON", "MAX_EVENTS", "INCONSISTENT", "APEX_IN_CONTACT",
-                "STEP_FAILURE")
+STATUS_NAMES = tuple(status.name for status in Status)
 _LOCK = threading.Lock()
 _LOADED: dict[str, ModuleType] = {}
 
@@ -151,6 +151,13 @@ def _read_entry(entry: Path | None) -> tuple[dict[str, Any], ModuleType] | None:
             return facts, _import(name, path)
     except (OSError, ValueError, KeyError, TypeError):
         return None  # absent or unreadable: derive and render instead
+
+
+def cached_module(system: str | Path) -> ModuleType | None:
+    """The compiled module of a library system or system file when the index names it (read
+    without deriving anything), else None."""
+    found = _read_entry(_start_entry(system))
+    return None if found is None else found[1]
 
 
 def _write_entry(entry: Path, facts: dict[str, Any]) -> None:
@@ -336,7 +343,7 @@ class CompiledSystem:
         if cfg is None:
             cfg = self._cfgs[key] = np.array(
                 [options.t_end, options.max_events, options.rtol, options.atol, options.h_max,
-                 sample_dt], dtype=np.float64)
+                 sample_dt, 0.0], dtype=np.float64)  # (the layout: _kernel_body's CFG_*)
         return cfg
 
     def simulate(self, maneuver: str, s: float, inputs: Any = None, *,

@@ -1,4 +1,5 @@
-"""The generated DOP853 step: up to date with its generator, and of the orders it claims."""
+"""The generated DOP853 step: of the orders it claims, laid out as documented, and free of
+reference counting in the biped's module."""
 
 from __future__ import annotations
 
@@ -10,11 +11,10 @@ import sys
 import numpy as np
 import pytest
 
-from biped_opt.hybrid import _dop853, _dop853_gen
-from biped_opt.hybrid._kernel import _dense_eval
+from biped_opt.hybrid.simulate import kernel
 from biped_opt.maneuvers import initial_state
-from biped_opt.model.biped import dynamics
 from biped_opt.model.params import BipedParams
+from biped_opt.systems import _dop853_gen
 
 _OSCILLATOR = '''
 import numba as nb
@@ -33,13 +33,6 @@ def oscillator(p, mode, y, yo, u, out, off, lam, lo):
 def no_probe(mode, term_sign, y, yo, lam, lo, c, c0, c1, c2):
     return c0, c1, c2
 '''
-
-
-def test_generated_module_is_up_to_date():
-    """The committed _dop853.py is exactly what the generator writes (regenerate with
-    ``python biped_opt/hybrid/_dop853_gen.py``)."""
-    assert _dop853_gen.TARGET.read_text() == _dop853_gen.render()
-    assert _dop853_gen.main(["--check"]) == 0
 
 
 @pytest.fixture(scope="module")
@@ -71,8 +64,9 @@ def _one_step(mod, h):
     err = mod.step(empty, 0, empty, 1.0, y, f, h, W, y_new, f_new, lam, 1e-10, 1e-10, probe)
     F = np.empty((7, 2))
     mod.dense_coefficients(empty, 0, empty, y, f, h, W, y_new, f_new, F)
-    mid = np.empty(2)
-    _dense_eval(F, y, 0.5, mid)
+    x, xm = 0.5, 0.5  # the interpolant at mid-step (SciPy's Dop853DenseOutput form)
+    mid = y + x * (F[0] + xm * (F[1] + x * (F[2] + xm * (F[3] + x * (F[4] + xm * (
+        F[5] + x * F[6]))))))
     exact_end = np.array([math.cos(h), -math.sin(h)])
     exact_mid = np.array([math.cos(h / 2), -math.sin(h / 2)])
     return err, np.abs(y_new - exact_end).max(), np.abs(mid - exact_mid).max(), f_new
@@ -100,58 +94,61 @@ def test_error_estimate_shrinks_with_the_step(oscillator_step):
 
 def test_biped_workspace_layout():
     """Slots of 14 derivatives + 2 reactions, 16 stage slots, then the stage and initial states;
-    after a biped step slot 12 holds the vector field and reactions at the new point, equal to a
-    separate evaluation there (bit for bit: the same compiled function on the same numbers)."""
-    assert _dop853.STRIDE == 16
-    assert _dop853.WORKSPACE == 18 * 16
-    params = BipedParams()
-    p = params.as_array()
-    y, mode = initial_state("liftoff", 0.1, params)
+    after a step of the biped's module slot 12 holds the vector field and reactions at the new
+    point, equal to a separate evaluation there (bit for bit: the same arithmetic, in the step
+    as text and in the field as a call)."""
+    k = kernel()
+    m, p = k.module, k.default_p
+    assert m.STRIDE == 16
+    assert m.WORKSPACE == 18 * 16
+    y, mode = initial_state("liftoff", 0.1, BipedParams())
     u = np.array([1.5, 3.0, 0.2])
     f, lam0 = np.empty(14), np.empty(2)
-    dynamics(p, int(mode), y, u, f, lam0)
-    W = np.full(_dop853.WORKSPACE, np.nan)
+    m._field_at(p, int(mode), y, 0, u, f, 0, lam0, 0)
+    W = np.full(m.WORKSPACE, np.nan)
     y_new, f_new, lam, probe = np.empty(14), np.empty(14), np.empty(2), np.empty(3)
-    err = _dop853.step(p, int(mode), u, 1.0, y, f, 0.01, W, y_new, f_new, lam, 1e-11, 1e-12, probe)
+    code = k.codes[1]
+    err = m.step(p, int(mode), u, code, y, f, 0.01, W, y_new, f_new, lam, 1e-11, 1e-12, probe)
     assert 0.0 < err < 1.0
-    k12 = 12 * _dop853.STRIDE
+    k12 = 12 * m.STRIDE
     dy_check, lam_check = np.empty(14), np.empty(2)
-    dynamics(p, int(mode), y_new, u, dy_check, lam_check)
+    m._field_at(p, int(mode), y_new, 0, u, dy_check, 0, lam_check, 0)
     np.testing.assert_array_equal(W[k12 : k12 + 14], dy_check)
     np.testing.assert_array_equal(W[k12 + 14 : k12 + 16], lam_check)
     np.testing.assert_array_equal(f_new, dy_check)
     np.testing.assert_array_equal(lam, lam_check)
     assert lam_check.min() > 0.0  # both feet still pressed on the ground: the check means something
-    y_slot = _dop853.SLOT_Y * _dop853.STRIDE
+    y_slot = m.SLOT_Y * m.STRIDE
     np.testing.assert_array_equal(W[y_slot : y_slot + 14], y)
-    np.testing.assert_array_equal(W[_dop853.SLOT_STAGE * _dop853.STRIDE :][:14], y_new)
+    np.testing.assert_array_equal(W[m.SLOT_STAGE * m.STRIDE :][:14], y_new)
 
 
 def test_step_has_no_reference_counting():
-    """The inlined vector field and guard probes leave no array reference counting in the step.
+    """The biped module's step has no array reference counting.
 
     Numba increments and decrements an array's reference count (atomic operations, a barrier to
     reordering) around every inlined function that takes it, and removes the pair only when no
-    branch separates them. With mode-dependent branches in the vector field ~18 pairs per stage
-    survived (a whole simulation ~11% slower); the branch-free form has none. Such a branch in
-    the vector field makes this fail. (The cached step cannot be inspected, so a fresh,
-    uncached copy of it is compiled here.)
+    branch separates them: with a mode-dependent branch in an inlined vector field ~18 pairs per
+    stage survived (a whole simulation ~11% slower). The generated step has the vector field
+    and guard probes written out as text and calls nothing that takes an array. (The cached
+    step cannot be inspected, so a fresh, uncached copy of it is compiled here.)
     """
     import numba as nb
 
-    fresh = nb.njit(error_model="numpy")(_dop853.step.py_func)
-    p = BipedParams().as_array()
+    k = kernel()
+    m, p = k.module, k.default_p
+    fresh = nb.njit(error_model="numpy")(m.step.py_func)
     y, mode = initial_state("liftoff", 0.1, BipedParams())
     u = np.array([1.5, 3.0, 0.2])
     f, lam = np.empty(14), np.empty(2)
-    dynamics(p, int(mode), y, u, f, lam)
-    W = np.zeros(_dop853.WORKSPACE)
+    m._field_at(p, int(mode), y, 0, u, f, 0, lam, 0)
+    W = np.zeros(m.WORKSPACE)
     out = [np.empty(14), np.empty(14), np.empty(2), np.empty(3)]
-    fresh(p, int(mode), u, 1.0, y, f, 0.01, W, out[0], out[1], out[2], 1e-11, 1e-12, out[3])
+    fresh(p, int(mode), u, k.codes[1], y, f, 0.01, W, out[0], out[1], out[2], 1e-11, 1e-12,
+          out[3])
     ir = fresh.inspect_llvm(fresh.signatures[0])
     start = ir.index("define ")  # the step itself comes first, then its Python wrappers
     body = ir[start : ir.index("\n}\n", start)]
-    # inlined (no call to it), or the count below would not see inside the vector field
     assert not re.search(r"call [^(]*@\S*vector_field", body)
     assert body.count("@NRT_incref") == 0
     assert body.count("@NRT_decref") == 0
