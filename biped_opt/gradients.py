@@ -23,9 +23,11 @@ methods make of it:
   D J_sigma(u) = E (c(u + sigma w) - c(u)) w / sigma on a fine grid of w
   (:func:`smoothed_gradient`), variance from the per-sample spread;
 - **stochastic descent** with either estimator (normalised steps, Polyak averaging);
-- **smoothing the model**: the same problems on the biped with a smoothed input switch of
-  width eps (:func:`biped_opt.systems.library.smooth_biped.smooth_biped`): its optimum, and what
-  that optimum costs on the real (unsmoothed) model.
+- **smoothing the model**: the same problems on a smoothed model of width eps, the biped with a
+  smoothed input switch (:func:`biped_opt.systems.library.smooth_biped.smooth_biped`) and the
+  rocking bar with soft contacts
+  (:func:`biped_opt.systems.library.soft_rocking_bar.soft_rocking_bar`): its optimum, and what
+  that optimum costs on the real (rigid, switched) model.
 
 Every random quantity comes from one ``numpy.random.Generator`` seeded by the caller.
 
@@ -433,21 +435,33 @@ def policy_gradient_descent(objective: Objective, start: npt.ArrayLike, estimato
 
 
 # --- the smoothed model -----------------------------------------------------------------------
-_SMOOTH: list[Any] = []
+_SMOOTH: dict[str, Any] = {}
+
+
+def smoothed_system(name: str) -> Any:
+    """The smoothed counterpart of a library system: the biped with its input switch smoothed
+    over eps (:mod:`~biped_opt.systems.library.smooth_biped`), the rocking bar with soft contacts
+    of width eps (:mod:`~biped_opt.systems.library.soft_rocking_bar`); built once."""
+    from biped_opt.systems.library.smooth_biped import smooth_biped
+    from biped_opt.systems.library.soft_rocking_bar import soft_rocking_bar
+
+    factories = {"biped": smooth_biped, "rocking_bar": soft_rocking_bar}
+    if name not in factories:
+        raise InvalidInputError(f"no smoothed model of {name!r} (smoothed models: "
+                                f"{', '.join(factories)})")
+    if name not in _SMOOTH:
+        _SMOOTH[name] = factories[name]()
+    return _SMOOTH[name]
 
 
 def smooth_problem(problem: Problem, eps: float) -> Problem:
-    """``problem`` (a biped problem) on the biped with its input switch smoothed over eps."""
-    from biped_opt.systems.library.smooth_biped import smooth_biped
-
+    """``problem`` on its system's smoothed model (:func:`smoothed_system`) of width eps."""
     if not (isinstance(eps, float) and eps > 0 and math.isfinite(eps)):
         raise InvalidInputError(f"eps must be a positive number, got {eps!r}")
-    if problem.description.name != "biped":
-        raise InvalidInputError(f"the smoothed model is the biped's; {problem.name} is not on it")
-    if not _SMOOTH:
-        _SMOOTH.append(smooth_biped())
+    smooth_system = smoothed_system(problem.description.name)
     name = problem.name.split(":")[-1]
-    smooth = get_problem(_SMOOTH[0], name if name in _SMOOTH[0].problems else problem.maneuver)
+    smooth = get_problem(smooth_system,
+                         name if name in smooth_system.problems else problem.maneuver)
     return replace(smooth, parameters=(*problem.parameters, ("eps", eps)),
                    name=f"{name} (eps={eps:g})")
 
@@ -620,7 +634,7 @@ def run_gradient_study(*, seed: int = 0, quick: bool = False,
                                 obj, start, estimator, sigma, n, opt, rng,
                                 iterations=pg_iterations))
         study.runs[name] = runs
-        if problem.description.name == "biped":
+        if problem.description.name in ("biped", "rocking_bar"):
             study.smoothing[name] = []
             for eps in eps_values:
                 smooth = smooth_problem(problem, float(eps))

@@ -23,9 +23,14 @@ round splits into n events whose order depends on the offsets.
   ``offsets`` maneuver's outcome (the body's pitch at its nadir after touchdown) along the
   offsets, d -> D(d) = lim (o(s d) - o(0)) / s as s -> 0+. It is positively homogeneous and
   linear on each cone of offsets with one touchdown order: one linear piece g_order . d per
-  order. Each g is fitted from n exact derivatives inside its cone
-  (:func:`biped_opt.systems.derivatives.outcome_gradient`) and checked against finite
-  differences (:func:`biped_opt.nonsmooth.one_sided`) along another direction inside it.
+  order. The cone of an order is {d : A d in that order}, A the map from offsets to first-order
+  touchdown time shifts (a raised foot's compressed leg moves every foot through the body, so A
+  is full; it is measured by simulation). Each g is fitted from n exact derivatives inside its
+  cone (:func:`biped_opt.systems.derivatives.outcome_gradient`) and checked against finite
+  differences (:func:`biped_opt.nonsmooth.one_sided`) along another direction inside it. Only
+  the first two feet to land matter to first order (the first one's input acts alone until the
+  second lands, then none does, and the feet's impacts do not couple): at most n (n - 1)
+  distinct pieces.
 
 Why the counts fall short of (n!)^k: the offsets are n numbers, and raising every foot by the
 same amount only delays the whole motion, so the pieces are cones in an (n - 1)-dimensional
@@ -290,13 +295,41 @@ def count_pieces(n: int, k: int, *, samples: int = 400, radius: float = 1e-3, se
                       confirmed=confirmed, tie_gap=gaps)
 
 
-def _cone_point(order: tuple[int, ...], n: int) -> Array:
-    """Offsets d inside the cone of ``order``: the foot that touches down k-th is raised by k
-    (a raised foot lands later), centred, so d is far from every tie d_i = d_j."""
-    d = np.zeros(n)
-    for rank, foot in enumerate(order):
-        d[foot] = rank
-    return d - d.mean() + 0.5 * n  # the common raise keeps every foot's offset positive
+def _touchdown_shifts(compiled: CompiledSystem, d: Array, inputs: list[float], t0: float,
+                      s: float = 1e-6) -> Array:
+    """tau(d): each foot's first touchdown time at offsets s d, minus the simultaneous time t0,
+    over s (the first-order time shifts, good to ~1e-3 of their size at this s)."""
+    _set_offsets(compiled, d)
+    tr = compiled.simulate("offsets", s, inputs, options=OPTIONS)
+    n = d.size
+    tau = np.full(n, np.nan)
+    for row in tr.events:
+        if int(row[1]) == compiled.module.EVENT_CONTACT:
+            for i in range(n):
+                if int(row[2]) >> i & 1 and math.isnan(tau[i]):
+                    tau[i] = (row[0] - t0) / s
+    if np.isnan(tau).any():
+        raise SimulationError(f"pieces: a foot did not touch down at offsets {d.tolist()}")
+    return tau
+
+
+def _shift_map(compiled: CompiledSystem, n: int, inputs: list[float]) -> Array:
+    """A with tau(d) = A d to first order (column j from offset e_j). The offsets perturb the
+    initial state (a raised foot's leg starts compressed), and through the body every foot's
+    fall: a foot's touchdown time depends on all the offsets, so the cone of a touchdown order
+    is {d : A d in that order}, not {d : d in that order}."""
+    _set_offsets(compiled, np.zeros(n))
+    tr = compiled.simulate("offsets", 0.0, inputs, options=OPTIONS)
+    t0 = float(tr.events[0, 0])
+    return np.column_stack([_touchdown_shifts(compiled, np.eye(n)[j], inputs, t0)
+                            for j in range(n)])
+
+
+def _offsets_for(A: Array, tau: Array) -> Array:
+    """Offsets d with A d = tau, raised in common until every offset is at least 0.5 (raising
+    every foot alike delays all touchdowns alike: A 1 = alpha 1, so the order is kept)."""
+    d = np.linalg.solve(A, tau)
+    return d + max(0.0, 0.5 - float(d.min()))
 
 
 def derivative_pieces(n: int, *, seed: int = 0, h0: float = 1e-3,
@@ -321,14 +354,17 @@ def derivative_pieces(n: int, *, seed: int = 0, h0: float = 1e-3,
             raise SimulationError(f"pieces: offsets maneuver at s = {s} ended {tr.status}")
         return tr.outcome
 
+    A = _shift_map(compiled, n, inputs)
     pieces = []
     for order in itertools.permutations(range(n)):
-        centre = _cone_point(order, n)
-        # n independent directions inside the cone (steps of 0.2 keep every gap >= 0.6)
-        basis = centre + 0.2 * np.eye(n)
+        # the cone's centre in time shifts: the foot that touches down k-th, k later; n
+        # independent points around it (steps of 0.2 keep every gap >= 0.6) and a check point
+        tau = np.zeros(n)
+        tau[list(order)] = np.arange(n, dtype=float)
+        basis = np.array([_offsets_for(A, tau + 0.2 * e) for e in np.eye(n)])
         values = np.array([exact(d) for d in basis])
         g = np.linalg.solve(basis, values)
-        direction = centre + rng.uniform(-0.2, 0.2, n)
+        direction = _offsets_for(A, tau + rng.uniform(-0.2, 0.2, n))
         d_exact = exact(direction)
         _set_offsets(compiled, direction)
         fd = one_sided(outcome, 0.0, +1, h0=h0)

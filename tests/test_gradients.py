@@ -157,6 +157,28 @@ def test_smoothed_model_removes_the_liftoff_jump():
         smooth_problem(exact, -1.0)
 
 
+def test_soft_rocking_bar_is_smooth_where_the_rigid_bar_jumps():
+    """The bar with soft contacts of width eps has no jump at s = 0, and as eps shrinks its
+    outcome settles on a different value than the rigid bar's (the soft contact's effective
+    restitution is not gamma): smoothing changes the problem, not only its nonsmooth points."""
+    exact = get_problem("rocking_bar", "drop")
+    u = exact.inputs({"u_th": 0.0})
+    ce = compiled_for(exact)
+    o_exact = [ce.simulate("drop", s, u).outcome for s in (-1e-6, 1e-6)]
+    assert o_exact[0] - o_exact[1] == pytest.approx(2 * 0.1988749738, abs=1e-8)  # SYSTEMS.md
+    far = {}
+    for eps in (0.001, 0.0003):
+        cs = compiled_for(smooth_problem(exact, eps))
+        o_smooth = [cs.simulate("drop", s, u).outcome for s in (-1e-6, 0.0, 1e-6)]
+        # continuous: its slope at 0 (~40 at eps = 1e-3) times 1e-6, far below the jump
+        assert abs(o_smooth[2] - o_smooth[0]) < 1e-3 and o_smooth[1] == pytest.approx(0.0,
+                                                                                      abs=1e-9)
+        far[eps] = cs.simulate("drop", 0.1, u).outcome
+    # the soft limit at s = 0.1: -0.2815 and -0.2790 at the two widths, the rigid bar 2.4105
+    assert far[0.001] == pytest.approx(far[0.0003], abs=0.01)
+    assert abs(far[0.0003] - ce.simulate("drop", 0.1, u).outcome) > 2.0
+
+
 def test_cli_rejects_unknown_problem(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["gradients", "--problem", "nope"])

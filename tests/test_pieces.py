@@ -128,6 +128,21 @@ def test_linear_pieces_of_the_b_derivative_two_legs():
         assert p.gradient @ np.ones(2) == pytest.approx(0.0, abs=1e-8)
 
 
+def test_three_legs_every_touchdown_cone_is_linear():
+    """n = 3: on every order's cone (taken from the touchdown times, A^-1 tau) g . d is the
+    exact derivative (to 1e-8, the variational equation's accuracy) and the finite difference
+    (to 1e-6, see above); 5 distinct pieces: only the first two feet matter, and with the middle
+    foot first (no torque from its hip) not even the second."""
+    pieces = derivative_pieces(3, seed=0)
+    assert len(pieces) == 6
+    for p in pieces:
+        assert p.exact == pytest.approx(p.linear, abs=1e-8)
+        assert p.exact == pytest.approx(p.finite_difference, abs=1e-6)
+    assert distinct_gradients(pieces) == 5
+    by_order = {p.order: p.gradient for p in pieces}
+    np.testing.assert_allclose(by_order[(2, 1, 3)], by_order[(2, 3, 1)], atol=1e-8)
+
+
 def test_cli_table_figure_and_json(tmp_path, capsys):
     figure = tmp_path / "pieces.png"
     assert main(["pieces", "--legs", "1", "2", "--rounds", "3", "--samples", "40",
