@@ -545,8 +545,9 @@ class GradientStudy:
             } for name in self.curves}}
 
     def summary(self, name: str) -> list[dict[str, Any]]:
-        """Per method: runs, fraction reaching the optimum, median iterations, and the
-        failures counted by (stop reason, branch)."""
+        """Per method: runs, fraction reaching the optimum, median iterations, the median
+        final gap c - V* (how far the runs that fall short stop: a stochastic method's step
+        schedule shows here), and the failures counted by (stop reason, branch)."""
         by: dict[str, list[DescentRun]] = {}
         for r in self.runs.get(name, []):
             by.setdefault(r.method, []).append(r)
@@ -557,6 +558,7 @@ class GradientStudy:
                 "method": method, "runs": len(runs),
                 "reached": sum(r.reached for r in runs) / len(runs),
                 "iterations": float(np.median([r.iterations for r in runs])),
+                "gap": float(np.median([r.value - self.optimum[name][r.s] for r in runs])),
                 "failures": Counter(f"{r.stop} on {r.branch}" for r in failed).most_common(3)})
         return rows
 
@@ -674,13 +676,15 @@ def report(study: GradientStudy, sample_counts: Sequence[int] = (4, 64)) -> str:
                     + f" | {e.exact_calls} | {e.failed} |")
     lines += ["", "descent from a grid of starts and s (reached: final cost within "
               f"{VALUE_TOL:g} of the global optimum)", "",
-              "| problem | method | runs | reached | median iterations | failures (count) |",
-              "|---|---|---|---|---|---|"]
+              "| problem | method | runs | reached | median iterations | median c - V* | "
+              "failures (count) |",
+              "|---|---|---|---|---|---|---|"]
     for name in study.runs:
         for row in study.summary(name):
             fails = "; ".join(f"{k} ({v})" for k, v in row["failures"]) or "-"
             lines.append(f"| {name} | {row['method']} | {row['runs']} | "
-                         f"{100 * row['reached']:.0f}% | {row['iterations']:g} | {fails} |")
+                         f"{100 * row['reached']:.0f}% | {row['iterations']:g} | "
+                         f"{row['gap']:.2g} | {fails} |")
     if study.smoothing:
         lines += ["", "the smoothed model's optimum on the real model (loss = c(u*_eps) - V*)", "",
                   "| problem | eps | s | u*_eps | u* | V* | c(u*_eps) | loss |",

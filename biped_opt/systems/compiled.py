@@ -41,6 +41,7 @@ import biped_opt
 from biped_opt.errors import InvalidInputError, InvalidParameterError
 from biped_opt.hybrid.simulate import DEFAULT_OPTIONS, SimulatorOptions
 from biped_opt.hybrid.trajectory import Status
+from biped_opt.systems import precompile
 
 if TYPE_CHECKING:  # (imported where needed: SymPy and the generator are the slow part of a start)
     from biped_opt.systems.derive import DerivedSystem
@@ -74,10 +75,14 @@ def _write(folder: Path, path: Path, text: str) -> None:
     os.replace(fh.name, path)
 
 
+#: the generated modules' names in sys.modules (Numba's cached code refers to them by name)
+_MODULE_PREFIX = "biped_opt_systems_"
+
+
 def _import(name: str, path: Path) -> ModuleType:
     """The cached module ``name`` (at ``path``), imported once per process (under _LOCK)."""
     if name not in _LOADED:
-        spec = importlib.util.spec_from_file_location(f"biped_opt_systems_{name}", path)
+        spec = importlib.util.spec_from_file_location(_MODULE_PREFIX + name, path)
         assert spec is not None and spec.loader is not None
         module = importlib.util.module_from_spec(spec)
         sys.modules[spec.name] = module
@@ -98,6 +103,8 @@ def _module_for(derived: DerivedSystem) -> tuple[str, ModuleType]:
             folder.mkdir(parents=True, exist_ok=True)
             if not path.exists() or path.read_text() != text:
                 _write(folder, path, text)
+                # a new module: its event functions compile in a second process meanwhile
+                precompile.start(path, _MODULE_PREFIX + name)
         return name, _import(name, path)
 
 
