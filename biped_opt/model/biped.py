@@ -78,9 +78,10 @@ def sincos(x: float) -> tuple[float, float]:
     and cosine at every evaluation. The libm calls sit on the evaluation's critical path (and
     force the compiler to spill registers around them); the polynomials' short dependency
     chains make the whole simulation ~8% faster.
+
+    Written with one return and no early exit: the generated systems' DOP853 step has this
+    body expanded as text into each of its stages (:func:`biped_opt.systems.codegen._expand`).
     """
-    if not abs(x) <= _QUARTER_PI:
-        return math.sin(x), math.cos(x)
     x2 = x * x
     x4 = x2 * x2
     x8 = x4 * x4
@@ -88,7 +89,13 @@ def sincos(x: float) -> tuple[float, float]:
     s_hi = (_S11 + _S13 * x2) + x4 * _S15
     c_lo = (_C2 + _C4 * x2) + x4 * (_C6 + _C8 * x2)
     c_hi = (_C10 + _C12 * x2) + x4 * (_C14 + _C16 * x2)
-    return x + x * x2 * (s_lo + x8 * s_hi), 1.0 + x2 * (c_lo + x8 * c_hi)
+    if abs(x) <= _QUARTER_PI:
+        s = x + x * x2 * (s_lo + x8 * s_hi)
+        c = 1.0 + x2 * (c_lo + x8 * c_hi)
+    else:  # (NaN too)
+        s = math.sin(x)
+        c = math.cos(x)
+    return s, c
 
 
 @nb.njit(**HOT_PATH, inline="always")

@@ -26,6 +26,7 @@ dropped (:func:`_prune`): Numba types every statement of every inlined copy.
 from __future__ import annotations
 
 import hashlib
+import inspect
 import re
 from collections import Counter
 from pathlib import Path
@@ -752,14 +753,16 @@ def _prune(lines: list[str]) -> list[str]:
     return out
 
 
+_ASSIGNED = re.compile(r"\s+(\w+(?:, \w+)*) = (.*)")  # (at any depth: a name of the body's)
 _CALL = re.compile(r"( +)(?:([\w, ]+) = )?(\w+)\(\s*([^()]*?)\s*\)$", re.MULTILINE)
 
 
-def _expand(text: str, functions: dict[str, list[str]], invariant: set[str]) -> str:
+def _expand(text: str, functions: dict[str, list[str]], invariant: set[str], tag: str = "") -> str:
     """``text`` with each statement that calls one of ``functions`` (name -> its source lines)
     replaced by the function's body: parameters become the call's arguments, an array read
     at a literal offset ``y[yo + 3]`` with ``yo = 256`` becomes ``W[259]``, the body's own names
-    get a suffix per copy, and a returned tuple is assigned to the call's targets. A value
+    get a suffix per copy (``_<tag><copy>``: a second pass over the expanded text takes another
+    tag), and a returned tuple is assigned to the call's targets. A value
     that depends only on ``invariant`` names (arguments that do not change through ``text``:
     p, u, the mode) is computed once, where the first copy of its function stands.
 
@@ -769,7 +772,8 @@ def _expand(text: str, functions: dict[str, list[str]], invariant: set[str]) -> 
     factors are read once per step instead of once per stage."""
     def body_of(lines: list[str]) -> tuple[list[str], list[str]]:
         k = next(i for i, line in enumerate(lines) if line.startswith("def "))
-        params = lines[k][lines[k].index("(") + 1:lines[k].rindex(")")].split(", ")
+        head = lines[k][lines[k].index("(") + 1:lines[k].index(")")]
+        params = [v.split(":")[0].strip() for v in head.split(", ")]
         k = start = k + 1
         if lines[k].strip().startswith('"""'):  # the docstring, to its closing quotes
             while '"""' not in (lines[k].strip()[3:] if k == start else lines[k]):
@@ -790,11 +794,11 @@ def _expand(text: str, functions: dict[str, list[str]], invariant: set[str]) -> 
         params, body = bodies[name]
         values = dict(zip(params, (a.strip() for a in args.split(","))))
         copies += 1
-        local = {n for line in body if (d := _DEFINITION.fullmatch(line))
+        local = {n for line in body if (d := _ASSIGNED.fullmatch(line))
                  for n in d[1].split(", ")} - set(params)
         first = name not in hoisted
         once = hoisted.setdefault(name, set())
-        tag = f"h{list(bodies).index(name)}"
+        once_tag = f"h{tag}{list(bodies).index(name)}"
 
         def rename(line: str) -> str:
             def at(a: re.Match) -> str:
@@ -802,7 +806,7 @@ def _expand(text: str, functions: dict[str, list[str]], invariant: set[str]) -> 
             line = re.sub(r"\b(\w+)\[(\w+) \+ (\d+)\]",
                           lambda a: at(a) if a[1] in values and a[2] in values else a[0], line)
             return word.sub(lambda w: (
-                f"{w[1]}_{tag}" if w[1] in once else f"{w[1]}_{copies}" if w[1] in local
+                f"{w[1]}_{once_tag}" if w[1] in once else f"{w[1]}_{tag}{copies}" if w[1] in local
                 else values.get(w[1], w[1])), line)
 
         def constant(line: str) -> bool:
@@ -828,6 +832,16 @@ def _expand(text: str, functions: dict[str, list[str]], invariant: set[str]) -> 
         return "\n".join(out)
 
     return _CALL.sub(replace, text)
+
+
+def _sincos_source() -> list[str]:
+    """The source of :func:`biped_opt.model.biped.sincos` (what ``_sincos`` is in a generated
+    module) with its module's constants written as literals, for :func:`_expand`."""
+    from biped_opt.model import biped as model
+
+    lines = inspect.getsource(model.sincos).splitlines()
+    return [re.sub(r"\b_[SC]\d+\b|\b_QUARTER_PI\b",
+                   lambda m: repr(float(getattr(model, m[0]))), line) for line in lines]
 
 
 def _int_array(values: list[int]) -> str:
@@ -892,6 +906,7 @@ def render(derived: DerivedSystem) -> str:
     step = _expand(step, {"vector_field": _prune(vector_field),
                           "probe_stage": _prune(_probe(derived))},
                    invariant={"p", "u", "mode", "term_sign"})
+    step = _expand(step, {"_sincos": _sincos_source()}, invariant=set(), tag="s")
     body = KERNEL_BODY.read_text()
     body = body[body.index("\n# --- kernel ---\n") + 1:]
     return text + "\n\n" + step + "\n\n" + body
