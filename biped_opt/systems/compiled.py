@@ -99,13 +99,18 @@ def _module_for(derived: DerivedSystem) -> tuple[str, ModuleType]:
     folder = cache_dir()
     path = folder / f"{name}.py"
     with _LOCK:
+        fresh = False
         if name not in _LOADED:
             folder.mkdir(parents=True, exist_ok=True)
-            if not path.exists() or path.read_text() != text:
+            fresh = not path.exists() or path.read_text() != text
+            if fresh:
                 _write(folder, path, text)
                 # a new module: its event functions compile in a second process meanwhile
                 precompile.start(path, _MODULE_PREFIX + name)
-        return name, _import(name, path)
+        module = _import(name, path)
+        if fresh:
+            precompile.step_first(module)
+        return name, module
 
 
 _GENERATOR: list[str] = []
