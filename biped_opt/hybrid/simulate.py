@@ -322,7 +322,7 @@ def kernels_cached() -> bool:
 
 def warm_up() -> float:
     """Compile the simulator's kernels now, or load them from Numba's on-disk cache, rather than
-    inside the first call; returns the seconds it took (~20-30 s in a fresh checkout, well under one
+    inside the first call; returns the seconds it took (~15-20 s in a fresh checkout, well under one
     once cached). The nodes call it before they offer their services, so that a client's first
     request is not held up by a compile longer than its timeout."""
     t0 = time.perf_counter()
