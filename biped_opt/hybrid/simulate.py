@@ -160,6 +160,7 @@ def kernel_config(options: SimulatorOptions, sample_dt: float = 0.0,
 
 
 _NO_SAMPLES = np.empty((0, 1 + NSTATE + 3))  # nothing is ever written to a zero-row buffer
+_FROM_S = np.empty(0)  # y0 of simulate_maneuver: start from the maneuver's initial state
 
 
 def simulate(
@@ -196,7 +197,7 @@ def simulate(
     events = np.empty((options.max_events + 1, m.EVENT_WIDTH))
     y_out = np.empty(NSTATE)
     status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej, _ = m.simulate_maneuver(
-        p, k.codes[s.code], th, u, cfg, samples, events, y_out
+        p, k.codes[s.code], th, u, cfg, samples, events, y_out, _FROM_S, 0
     )
     if n_s > samples.shape[0]:  # cannot happen while capacity covers t_end / sample_dt
         raise SimulationError(f"sample buffer overflow: {n_s} > {samples.shape[0]}")

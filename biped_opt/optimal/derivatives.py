@@ -375,9 +375,9 @@ def _continue(
     y_out = np.empty(NSTATE)
     cfg = kernel_config(options, 0.0, touched_down).copy()  # (a shared, cached vector)
     cfg[m.CFG_T_END] = options.t_end - t0
-    status, t_f, mode_f, n_ev, _, nfev, nsteps, nrej = m.simulate_kernel(
-        k.parameters(params), k.codes[s.code], y0.copy(), int(mode0), u, cfg,
-        np.empty((0, m.SAMPLE_WIDTH)), events, y_out,
+    status, t_f, mode_f, n_ev, _, nfev, nsteps, nrej, _ = m.simulate_maneuver(
+        k.parameters(params), k.codes[s.code], 0.0, u, cfg, np.empty((0, m.SAMPLE_WIDTH)),
+        events, y_out, np.ascontiguousarray(y0, dtype=np.float64), int(mode0),
     )
     n_rows = n_ev + (1 if status in (Status.OK, Status.APEX_IN_CONTACT) else 0)
     rows = events[:n_rows].copy()

@@ -221,10 +221,14 @@ def _all_guards(p, mode, u, code, y, lam, out):
 
 
 @nb.njit(**HOT_PATH)
-def simulate_kernel(p, code, y0, mode0, u, cfg, samples, events, y_out):
-    """Integrate maneuver ``code`` from (t = 0, y0, mode0) to its terminal event.
+def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
+    """Integrate maneuver ``code`` from t = 0 to its terminal event: from its initial state at
+    s, or, when y0 has NSTATE entries, from (y0, mode0) (a trajectory continued after an event;
+    s then unused). One compiled call per trajectory, and one function: a wrapper around the
+    kernel cost a second compile, in which LLVM optimises the linked step again (~1 s).
 
-    Returns (status, t_final, mode_final, n_events, n_samples, nfev, nsteps, nrejected).
+    Returns (status, t_final, mode_final, n_events, n_samples, nfev, nsteps, nrejected,
+    outcome at the final state).
     """
     term_after_touchdown = TERM_AFTER_TOUCHDOWN[code] != 0 and cfg[CFG_TOUCHED_DOWN] == 0.0
     term_mode = FINAL_MODE[code]
@@ -261,10 +265,13 @@ def simulate_kernel(p, code, y0, mode0, u, cfg, samples, events, y_out):
     flags = np.zeros(2 * NGUARDS, dtype=np.bool_)
     armed = flags[:NGUARDS]
     flips = flags[NGUARDS:]
-    for k in range(n):
-        y[k] = y0[k]
-
-    mode = mode0
+    if y0.shape[0] == n:
+        for k in range(n):
+            y[k] = y0[k]
+        mode = mode0
+    else:
+        initial_state(code, s, p, y)
+        mode = INITIAL_MODE[code]
     t = 0.0
     nfev = 0
     nsteps = 0
@@ -477,19 +484,8 @@ def simulate_kernel(p, code, y0, mode0, u, cfg, samples, events, y_out):
         ns = _record_sample(samples, ns, t, y, mode, lam)
     for k in range(n):
         y_out[k] = y[k]
-    return status, t, mode, n_events, ns, nfev, nsteps, nrejected
-
-
-@nb.njit(**HOT_PATH)
-def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out):
-    """:func:`simulate_kernel` from maneuver ``code``'s initial state at s; its tuple, then the
-    maneuver's outcome at the final state (one compiled call per trajectory)."""
-    y0 = np.zeros(NSTATE)
-    initial_state(code, s, p, y0)
-    status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej = simulate_kernel(
-        p, code, y0, INITIAL_MODE[code], u, cfg, samples, events, y_out)
     outcome = outcome_value(code, p, y_out, 0)
-    return status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej, outcome
+    return status, t, mode, n_events, ns, nfev, nsteps, nrejected, outcome
 
 
 @nb.njit(**HOT_PATH, parallel=True)
@@ -497,9 +493,12 @@ def simulate_batch_kernel(p, code, ss, us, cfg, events, y_out, outcome, info):
     """:func:`simulate_maneuver` over many s and inputs in parallel threads; ``outcome[k]``
     receives the maneuver's outcome at the final state."""
     no_samples = np.empty((0, SAMPLE_WIDTH))
+    from_s = np.empty(0)
+    mode0 = INITIAL_MODE[code]  # (unused with from_s; a variable, not a literal 0, which Numba
+    # would compile a second specialisation of the whole kernel for)
     for k in nb.prange(ss.shape[0]):
         status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej, value = simulate_maneuver(
-            p, code, ss[k], us[k], cfg, no_samples, events[k], y_out[k]
+            p, code, ss[k], us[k], cfg, no_samples, events[k], y_out[k], from_s, mode0
         )
         outcome[k] = value
         info[k, 0] = status

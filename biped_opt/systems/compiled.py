@@ -75,6 +75,9 @@ def _write(folder: Path, path: Path, text: str) -> None:
     os.replace(fh.name, path)
 
 
+#: the y0 argument of a generated ``simulate_maneuver`` that starts from the maneuver's own
+#: initial state at s (an array of NSTATE entries would be the state to start from)
+_FROM_S = np.empty(0)
 #: the generated modules' names in sys.modules (Numba's cached code refers to them by name)
 _MODULE_PREFIX = "biped_opt_systems_"
 
@@ -381,7 +384,7 @@ class CompiledSystem:
         events = np.empty((options.max_events + 1, m.EVENT_WIDTH))
         y_out = np.empty(m.NSTATE)
         status, t_f, _mode_f, n_ev, n_s, nfev, nsteps, _nrej, outcome = m.simulate_maneuver(
-            self._p, code, s, u, cfg, samples, events, y_out)
+            self._p, code, s, u, cfg, samples, events, y_out, _FROM_S, 0)
         return SystemTrajectory(
             self.name, maneuver, s, tuple(u.tolist()[: self._ninputs]), STATUS_NAMES[status],
             t_f, outcome, y_out, events[: n_ev + (status == 0)], samples[: min(n_s, capacity)],

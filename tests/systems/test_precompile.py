@@ -21,11 +21,9 @@ def test_signatures_are_the_kernels_calls():
     inside, so a fresh, uncached copy of it is compiled here: typing it resolves every call.)"""
     bar = compile_system("rocking_bar")
     m = bar.module
-    fresh = nb.njit(error_model="numpy")(m.simulate_kernel.py_func)
-    y0 = np.zeros(m.NSTATE)
-    m.initial_state(0, 0.1, bar._p, y0)
-    out = fresh(bar._p, 0, y0, int(m.INITIAL_MODE[0]), np.zeros(1), bar._default_cfg,
-                np.empty((0, m.SAMPLE_WIDTH)), np.empty((17, m.EVENT_WIDTH)), np.empty(m.NSTATE))
+    fresh = nb.njit(error_model="numpy")(m.simulate_maneuver.py_func)
+    out = fresh(bar._p, 0, 0.1, np.zeros(1), bar._default_cfg, np.empty((0, m.SAMPLE_WIDTH)),
+                np.empty((17, m.EVENT_WIDTH)), np.empty(m.NSTATE), np.empty(0), 0)
     assert out[0] == 0  # OK
     expected = {**precompile.signatures(),
                 "step": precompile._types(precompile.STEP_SIGNATURE)}
