@@ -107,6 +107,7 @@ class BipedKernel:
     parameter_names: tuple[str, ...]  # BipedParams fields in the module's parameter order
     default_p: Array
     default_cfg: Array
+    no_samples: Array  # a zero-row sample buffer: nothing is ever written to it
 
     @functools.lru_cache(maxsize=64)  # noqa: B019 (one kernel per process, few parameter sets)
     def parameters(self, params: BipedParams) -> Array:
@@ -120,25 +121,12 @@ def _prepared(m: ModuleType, names: tuple[str, ...], params: BipedParams) -> Arr
     return m.prepare_parameters(np.array([getattr(params, name) for name in names]))
 
 
-def _config(m: ModuleType, options: SimulatorOptions, sample_dt: float,
-            touched_down: bool) -> Array:
-    cfg = np.empty(m.CFG_SIZE)
-    cfg[m.CFG_T_END] = options.t_end
-    cfg[m.CFG_MAX_EVENTS] = options.max_events
-    cfg[m.CFG_RTOL] = options.rtol
-    cfg[m.CFG_ATOL] = options.atol
-    cfg[m.CFG_H_MAX] = options.h_max
-    cfg[m.CFG_SAMPLE_DT] = sample_dt
-    cfg[m.CFG_TOUCHED_DOWN] = float(touched_down)
-    return cfg
-
-
 @functools.cache
 def kernel() -> BipedKernel:
     """The biped's compiled module (imported, or generated and compiled, on first use)."""
-    from biped_opt.systems.compiled import compile_system
+    from biped_opt.systems import compiled as generated
 
-    compiled = compile_system("biped")
+    compiled = generated.compile_system("biped")
     m = compiled.module
     names = tuple(compiled.parameters)
     known = {f.name for f in fields(BipedParams) if f.init}
@@ -147,20 +135,18 @@ def kernel() -> BipedKernel:
     by_code = sorted((spec(man) for man in Maneuver), key=lambda sp: sp.code)
     codes = tuple(compiled.maneuvers.index(sp.maneuver.value) for sp in by_code)
     return BipedKernel(m, codes, names, _prepared(m, names, DEFAULT_PARAMS),
-                       _config(m, DEFAULT_OPTIONS, 0.0, False))
+                       generated.kernel_config(m, DEFAULT_OPTIONS),
+                       np.empty((0, m.SAMPLE_WIDTH)))
 
 
 @functools.lru_cache(maxsize=64)
 def kernel_config(options: SimulatorOptions, sample_dt: float = 0.0,
                   touched_down: bool = False) -> Array:
-    """The ``cfg`` vector of the compiled kernel (layout: the CFG_* indices of
-    :mod:`biped_opt.systems._kernel_body`), cached (not to be written). ``touched_down``: the
-    trajectory continues after a touchdown (the touchdown maneuver's end is armed)."""
-    return _config(kernel().module, options, sample_dt, touched_down)
+    """The biped kernel's ``cfg`` vector (:func:`biped_opt.systems.compiled.kernel_config`),
+    cached (not to be written)."""
+    from biped_opt.systems import compiled
 
-
-_NO_SAMPLES = np.empty((0, 1 + NSTATE + 3))  # nothing is ever written to a zero-row buffer
-_FROM_S = np.empty(0)  # y0 of simulate_maneuver: start from the maneuver's initial state
+    return compiled.kernel_config(kernel().module, options, sample_dt, touched_down)
 
 
 def simulate(
@@ -186,7 +172,7 @@ def simulate(
     p = k.default_p if params is None else k.parameters(params)
     m = k.module
     if sample_dt is None:
-        samples = _NO_SAMPLES
+        samples = k.no_samples
         cfg = k.default_cfg if options is DEFAULT_OPTIONS else kernel_config(options)
     else:
         if not (math.isfinite(sample_dt) and sample_dt > 0):
@@ -197,7 +183,7 @@ def simulate(
     events = np.empty((options.max_events + 1, m.EVENT_WIDTH))
     y_out = np.empty(NSTATE)
     status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej, _ = m.simulate_maneuver(
-        p, k.codes[s.code], th, u, cfg, samples, events, y_out, _FROM_S, 0
+        p, k.codes[s.code], th, u, cfg, samples, events, y_out, m.FROM_S, 0
     )
     if n_s > samples.shape[0]:  # cannot happen while capacity covers t_end / sample_dt
         raise SimulationError(f"sample buffer overflow: {n_s} > {samples.shape[0]}")

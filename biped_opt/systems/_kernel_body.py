@@ -72,6 +72,10 @@ CFG_SAMPLE_DT = 5
 CFG_TOUCHED_DOWN = 6
 CFG_SIZE = 7
 
+#: the y0 argument of simulate_maneuver that starts from the maneuver's own initial state at s
+#: (an array of NSTATE entries is the state to start from)
+FROM_S = np.empty(0)
+
 
 @nb.njit("void(f8[::1], i8, f8[::1], i8, f8[::1], f8[::1], i8, f8[::1], i8)", **HOT_PATH)
 def _field_at(p, mode, y, yo, u, out, off, lam, lo):
@@ -493,7 +497,7 @@ def simulate_batch_kernel(p, code, ss, us, cfg, events, y_out, outcome, info):
     """:func:`simulate_maneuver` over many s and inputs in parallel threads; ``outcome[k]``
     receives the maneuver's outcome at the final state."""
     no_samples = np.empty((0, SAMPLE_WIDTH))
-    from_s = np.empty(0)
+    from_s = np.empty(0)  # (FROM_S, allocated here: a global array would be frozen into code)
     mode0 = INITIAL_MODE[code]  # (unused with from_s; a variable, not a literal 0, which Numba
     # would compile a second specialisation of the whole kernel for)
     for k in nb.prange(ss.shape[0]):

@@ -770,7 +770,7 @@ def _expand(text: str, functions: dict[str, list[str]], invariant: set[str], tag
     inlining of them (inline="always") took a quarter of the module's compile time; the
     expanded text compiles to the same arithmetic, and the parameters, inputs and mode
     factors are read once per step instead of once per stage."""
-    def body_of(lines: list[str]) -> tuple[list[str], list[str]]:
+    def body_of(lines: list[str]) -> tuple[list[str], list[str], set[str]]:
         k = next(i for i, line in enumerate(lines) if line.startswith("def "))
         head = lines[k][lines[k].index("(") + 1:lines[k].index(")")]
         params = [v.split(":")[0].strip() for v in head.split(", ")]
@@ -779,7 +779,10 @@ def _expand(text: str, functions: dict[str, list[str]], invariant: set[str], tag
             while '"""' not in (lines[k].strip()[3:] if k == start else lines[k]):
                 k += 1
             k += 1
-        return params, lines[k:]
+        body = lines[k:]
+        local = {n for line in body if (d := _ASSIGNED.fullmatch(line))
+                 for n in d[1].split(", ")} - set(params)
+        return params, body, local
 
     bodies = {name: body_of(lines) for name, lines in functions.items()}
     hoisted: dict[str, set[str]] = {}  # per function: its names computed once
@@ -791,11 +794,9 @@ def _expand(text: str, functions: dict[str, list[str]], invariant: set[str], tag
         indent, targets, name, args = m[1], m[2], m[3], m[4]
         if name not in bodies:
             return m[0]
-        params, body = bodies[name]
+        params, body, local = bodies[name]
         values = dict(zip(params, (a.strip() for a in args.split(","))))
         copies += 1
-        local = {n for line in body if (d := _ASSIGNED.fullmatch(line))
-                 for n in d[1].split(", ")} - set(params)
         first = name not in hoisted
         once = hoisted.setdefault(name, set())
         once_tag = f"h{tag}{list(bodies).index(name)}"

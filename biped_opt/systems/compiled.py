@@ -75,9 +75,6 @@ def _write(folder: Path, path: Path, text: str) -> None:
     os.replace(fh.name, path)
 
 
-#: the y0 argument of a generated ``simulate_maneuver`` that starts from the maneuver's own
-#: initial state at s (an array of NSTATE entries would be the state to start from)
-_FROM_S = np.empty(0)
 #: the generated modules' names in sys.modules (Numba's cached code refers to them by name)
 _MODULE_PREFIX = "biped_opt_systems_"
 
@@ -111,9 +108,9 @@ def _module_for(derived: DerivedSystem) -> tuple[str, ModuleType]:
                 # a new module: its event functions compile in a second process meanwhile
                 precompile.start(path, _MODULE_PREFIX + name)
         module = _import(name, path)
-        if fresh:
-            precompile.step_first(module)
-        return name, module
+    if fresh:  # (outside the lock: a compile of seconds must not hold up other systems)
+        precompile.step_first(module)
+    return name, module
 
 
 _GENERATOR: list[str] = []
@@ -166,6 +163,23 @@ def _read_entry(entry: Path | None) -> tuple[dict[str, Any], ModuleType] | None:
             return facts, _import(name, path)
     except (OSError, ValueError, KeyError, TypeError):
         return None  # absent or unreadable: derive and render instead
+
+
+def kernel_config(module: ModuleType, options: SimulatorOptions, sample_dt: float = 0.0,
+                  touched_down: bool = False) -> Array:
+    """The ``cfg`` vector a generated module's kernel takes (layout: its CFG_* indices).
+    ``touched_down``: the trajectory continues after a touchdown, so a terminal event armed
+    after the first touchdown is armed from the start."""
+    m = module
+    cfg = np.empty(m.CFG_SIZE)
+    cfg[m.CFG_T_END] = options.t_end
+    cfg[m.CFG_MAX_EVENTS] = options.max_events
+    cfg[m.CFG_RTOL] = options.rtol
+    cfg[m.CFG_ATOL] = options.atol
+    cfg[m.CFG_H_MAX] = options.h_max
+    cfg[m.CFG_SAMPLE_DT] = sample_dt
+    cfg[m.CFG_TOUCHED_DOWN] = float(touched_down)
+    return cfg
 
 
 def cached_module(system: str | Path) -> ModuleType | None:
@@ -356,9 +370,7 @@ class CompiledSystem:
         key = (options, sample_dt)
         cfg = self._cfgs.get(key)
         if cfg is None:
-            cfg = self._cfgs[key] = np.array(
-                [options.t_end, options.max_events, options.rtol, options.atol, options.h_max,
-                 sample_dt, 0.0], dtype=np.float64)  # (the layout: _kernel_body's CFG_*)
+            cfg = self._cfgs[key] = kernel_config(self.module, options, sample_dt)
         return cfg
 
     def simulate(self, maneuver: str, s: float, inputs: Any = None, *,
@@ -384,7 +396,7 @@ class CompiledSystem:
         events = np.empty((options.max_events + 1, m.EVENT_WIDTH))
         y_out = np.empty(m.NSTATE)
         status, t_f, _mode_f, n_ev, n_s, nfev, nsteps, _nrej, outcome = m.simulate_maneuver(
-            self._p, code, s, u, cfg, samples, events, y_out, _FROM_S, 0)
+            self._p, code, s, u, cfg, samples, events, y_out, m.FROM_S, 0)
         return SystemTrajectory(
             self.name, maneuver, s, tuple(u.tolist()[: self._ninputs]), STATUS_NAMES[status],
             t_f, outcome, y_out, events[: n_ev + (status == 0)], samples[: min(n_s, capacity)],
