@@ -30,7 +30,8 @@ import numpy as np
 
 from biped_opt.errors import InvalidParameterError
 
-__all__ = ["Study", "StudyRow", "evaluate_point", "COLUMNS", "PROBLEM_PARAMETERS"]
+__all__ = ["Study", "StudyLimits", "StudyRow", "evaluate_point", "COLUMNS",
+           "PROBLEM_PARAMETERS", "LIMITS"]
 
 #: problem data a study can vary besides the system's parameters
 PROBLEM_PARAMETERS = ("target", "outcome_weight")
@@ -66,6 +67,57 @@ class StudyRow:
         out.update(self.parameters)
         out.update({k: getattr(self, k) for k in COLUMNS})
         return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class StudyLimits:
+    """The largest study :meth:`Study.from_spec` reads, checked before anything is built: a
+    node states its own (parameters), a study file gets :data:`LIMITS`."""
+
+    max_points: int = 1_000_000  #: parameter points (grid points x samples)
+    max_num: int = 100_001  #: points of an s grid (num, num_optimal)
+    max_values: int = 100_000  #: values of one grid axis, and samples
+    max_text: int = 200  #: characters of a name (study, system, problem, maneuver, parameter)
+
+    def __post_init__(self) -> None:
+        for name in ("max_points", "max_num", "max_values", "max_text"):
+            if getattr(self, name) < 1:
+                raise InvalidParameterError(f"{name} must be >= 1, got {getattr(self, name)}")
+
+
+#: the limits of a study file (a node's parameters may be tighter)
+LIMITS = StudyLimits()
+#: largest seed (numpy's generators take 0 <= seed < 2**64; 2**63 keeps it an int64)
+MAX_SEED = 2**63 - 1
+
+
+def _count(where: str, value: Any, low: int, high: int, limit: str = "") -> int:
+    """An integer in [low, high] (an integral float such as 1e3 too); the message names the
+    key and, when ``limit`` is given, the limit that bounds it."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+            or (isinstance(value, (float, np.floating))
+                and not (math.isfinite(value) and float(value).is_integer())):
+        raise InvalidParameterError(f"{where} must be an integer, got {_short(value)}")
+    number = int(value)
+    if not low <= number <= high:
+        bound = f" ({limit})" if limit else ""
+        raise InvalidParameterError(
+            f"{where} must be in [{low}, {high}]{bound}, got {number}")
+    return number
+
+
+def _text(where: str, value: Any, limits: StudyLimits) -> str:
+    if not isinstance(value, str):
+        raise InvalidParameterError(f"{where} must be a string, got {_short(value)}")
+    if len(value) > limits.max_text:
+        raise InvalidParameterError(
+            f"{where} must be at most {limits.max_text} characters, got {len(value)}")
+    return value
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:40] + "..."
 
 
 def _pairs(where: str, value: Any) -> dict[str, Any]:
@@ -105,50 +157,85 @@ class Study:
     name: str = "study"
 
     @classmethod
-    def from_spec(cls, spec: Mapping[str, Any], *, where: str = "study") -> Study:
-        """A study from a mapping (a study file's, or the ROS action goal's)."""
+    def from_spec(cls, spec: Mapping[str, Any], *, where: str = "study",
+                  limits: StudyLimits = LIMITS) -> Study:
+        """A study from a mapping (a study file's, or the ROS action goal's). Every value is
+        checked, and the study's size against ``limits``, before anything is built."""
+        return cls(**cls.fields_from_spec(spec, where=where, limits=limits))
+
+    @classmethod
+    def fields_from_spec(cls, spec: Mapping[str, Any], *, where: str = "study",
+                         limits: StudyLimits = LIMITS) -> dict[str, Any]:
+        """The checked keyword arguments of :meth:`from_spec`'s study, nothing described yet
+        (a node resolves the system's name before it builds the study)."""
         spec = _pairs(where, spec)
         known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(spec) - known)
+        unknown = sorted(set(spec) - known, key=str)
         if unknown:
             raise InvalidParameterError(
-                f"{where}: unknown key {unknown[0]!r} (keys: {', '.join(sorted(known))})")
+                f"{where}: unknown key {_short(unknown[0])} (keys: {', '.join(sorted(known))})")
         if "system" not in spec:
             raise InvalidParameterError(f"{where}: 'system' is missing")
         grid = []
         for key, values in _pairs(f"{where}: grid", spec.get("grid")).items():
+            key = _text(f"{where}: grid: a name", key, limits)
             if not isinstance(values, (list, tuple)) or not values:
                 raise InvalidParameterError(
                     f"{where}: grid: {key}: must be a non-empty list of values")
-            grid.append((str(key), tuple(_finite(f"{where}: grid: {key}", v) for v in values)))
+            if len(values) > limits.max_values:
+                raise InvalidParameterError(
+                    f"{where}: grid: {key}: at most {limits.max_values} values (limit "
+                    f"max_values), got {len(values)}")
+            grid.append((key, tuple(_finite(f"{where}: grid: {key}", v) for v in values)))
         sample = []
         for key, pair in _pairs(f"{where}: sample", spec.get("sample")).items():
+            key = _text(f"{where}: sample: a name", key, limits)
             if not isinstance(pair, (list, tuple)) or len(pair) != 2:
                 raise InvalidParameterError(f"{where}: sample: {key}: must be [low, high]")
             lo, hi = (_finite(f"{where}: sample: {key}", v) for v in pair)
             if not lo < hi:
                 raise InvalidParameterError(f"{where}: sample: {key}: needs low < high")
-            sample.append((str(key), (lo, hi)))
+            sample.append((key, (lo, hi)))
+        samples = _count(f"{where}: samples", spec.get("samples", 0), 0, limits.max_values,
+                         "max_values")
+        points = math.prod(len(v) for _, v in grid) * (max(samples, 1) if sample else 1)
+        if points > limits.max_points:
+            raise InvalidParameterError(
+                f"{where}: {points} parameter points (grid x samples); at most "
+                f"{limits.max_points} (limit max_points)")
         s_range = spec.get("s_range")
         if s_range is not None:
             if not isinstance(s_range, (list, tuple)) or len(s_range) != 2:
                 raise InvalidParameterError(f"{where}: s_range must be [low, high]")
             s_range = tuple(_finite(f"{where}: s_range", v) for v in s_range)
-        return cls(
-            system=str(spec["system"]),
-            maneuver=None if spec.get("maneuver") is None else str(spec["maneuver"]),
-            inputs=tuple((str(k), _finite(f"{where}: inputs: {k}", v))
+            if not s_range[0] < s_range[1]:
+                raise InvalidParameterError(
+                    f"{where}: s_range must have low < high, got {list(s_range)}")
+        optional = {key: None if spec.get(key) is None else
+                    _text(f"{where}: {key}", spec[key], limits)
+                    for key in ("maneuver", "problem")}
+        return dict(
+            system=_text(f"{where}: system", spec["system"], limits),
+            maneuver=optional["maneuver"],
+            inputs=tuple((_text(f"{where}: inputs: a name", k, limits),
+                          _finite(f"{where}: inputs: {k}", v))
                          for k, v in _pairs(f"{where}: inputs", spec.get("inputs")).items()),
-            problem=None if spec.get("problem") is None else str(spec["problem"]),
-            grid=tuple(grid), sample=tuple(sample),
-            samples=int(spec.get("samples", 0)), seed=int(spec.get("seed", 0)),
+            problem=optional["problem"],
+            grid=tuple(grid), sample=tuple(sample), samples=samples,
+            seed=_count(f"{where}: seed", spec.get("seed", 0), 0, MAX_SEED),
             s_range=s_range,  # type: ignore[arg-type]
-            num=int(spec.get("num", 201)), num_optimal=int(spec.get("num_optimal", 41)),
-            name=str(spec.get("name", "study")))
+            num=_count(f"{where}: num", spec.get("num", 201), 3, limits.max_num, "max_num"),
+            num_optimal=_count(f"{where}: num_optimal", spec.get("num_optimal", 41), 3,
+                               limits.max_num, "max_num"),
+            name=_text(f"{where}: name", spec.get("name", "study"), limits))
 
     def __post_init__(self) -> None:
         from biped_opt.systems.problems import describe
 
+        if self.size > LIMITS.max_points:  # (before anything is described or built)
+            raise InvalidParameterError(
+                f"study {self.name!r}: {self.size} parameter points; at most "
+                f"{LIMITS.max_points} (limit max_points)")
         system = describe(self.system)
         where = f"study {self.name!r} on {system.where()}"
         if self.maneuver is None and self.problem is None:
@@ -178,6 +265,11 @@ class Study:
             raise InvalidParameterError(f"{where}: sample needs samples >= 1")
         if self.num < 3 or self.num_optimal < 3:
             raise InvalidParameterError(f"{where}: num and num_optimal must be >= 3")
+
+    @property
+    def size(self) -> int:
+        """How many parameter points :meth:`points` makes (counted, not built)."""
+        return math.prod(len(v) for _, v in self.grid) * (self.samples if self.sample else 1)
 
     # -- the parameter points -------------------------------------------------------------------
     @property

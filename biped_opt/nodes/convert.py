@@ -221,32 +221,41 @@ def _is_file(text: str) -> bool:
     return Path(text).suffix in FILE_SUFFIXES
 
 
-def request_problem(system: str, problem: str, maneuver: str, *, allow_files: bool = True
-                    ) -> Problem:
-    """The :class:`~biped_opt.systems.problems.Problem` of a request on any system: ``system``
-    a library name or a system file (``""``: the biped, or the system a problem file names),
-    ``problem`` one the system declares or a problem file (``""``: the one named like
-    ``maneuver``), which must be on ``maneuver``. Each error names the request's field."""
+def request_problem(system: str, problem: str, maneuver: str) -> Problem:
+    """The :class:`~biped_opt.systems.problems.Problem` of an operator's parameters on any
+    system (the recorder's): ``system`` a library name or a system file (``""``: the biped, or
+    the system a problem file names), ``problem`` one the system declares or a problem file
+    (``""``: the one named like ``maneuver``), which must be on ``maneuver``. Each error names
+    the field. (A request from the domain names files only through
+    :mod:`biped_opt.nodes.sources`.)"""
     from biped_opt.systems.problems import describe, load_problem
 
-    for field, text in (("system", system), ("problem", problem)):
-        if _is_file(text) and not allow_files:
-            raise InvalidInputError(f"{field}: files are not served here (parameter "
-                                    f"allow_files is false), got {quoted(text)}")
     described = None
     if system or not _is_file(problem):
         try:
             described = describe(system or "biped")
         except BipedOptError as exc:
             raise InvalidInputError(f"system: {exc}") from None
-        if not problem and maneuver not in described.maneuvers:
-            raise InvalidInputError(
-                f"maneuver: {described.name} has no maneuver {quoted(maneuver)} "
-                f"(maneuvers: {', '.join(described.maneuvers) or 'none'})")
+        if not problem:
+            check_maneuver_of(described, maneuver)
     try:
         found = load_problem(problem or maneuver, system=system or "biped")
     except BipedOptError as exc:
         raise InvalidInputError(f"problem: {exc}") from None
+    return check_problem_on(found, described, maneuver)
+
+
+def check_maneuver_of(described: Any, maneuver: str) -> None:
+    """``maneuver`` must be one of the described system's; the error names the field."""
+    if maneuver not in described.maneuvers:
+        raise InvalidInputError(
+            f"maneuver: {described.name} has no maneuver {quoted(maneuver)} "
+            f"(maneuvers: {', '.join(described.maneuvers) or 'none'})")
+
+
+def check_problem_on(found: Problem, described: Any, maneuver: str) -> Problem:
+    """``found``, a request's problem, must be on the requested system (``described``; None:
+    any) and on ``maneuver``; each error names the field."""
     if described is not None and found.description.name != described.name:
         raise InvalidInputError(
             f"problem: {found.name} is a problem on {found.description.name}, not on "

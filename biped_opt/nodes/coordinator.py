@@ -16,9 +16,23 @@ node gets no more items until it answers one. A late answer to an item done mean
 A refused item (``success = false``: a bad study, or a point the core cannot compute) ends the
 study with the node's message: every node would refuse it.
 
+An item a node answers with ``busy: ...`` (it is compiling the study's system,
+:mod:`biped_opt.nodes.compiler`) goes back to the queue, and that node gets items again after
+:data:`RETRY_S`.
+
 The study is served as the ROS 2 action ``/biped/study`` (``Study.action``: goal the study and the
 table, feedback points done/total and the last point, result the paths and a summary; cancel ends
 it after the items under way), and :meth:`StudyCoordinator.run_study` runs one from Python.
+
+A goal is a request from anyone on the domain, so it chooses nothing outside what the operator
+configured: its study names a library system or one in the parameter ``system_paths`` (and a
+declared problem or one in those directories; :mod:`biped_opt.nodes.sources`), never a path, and
+it is bounded by ``max_points``, ``max_num``, ``max_values`` and ``max_request_chars`` (checked
+before anything is built); its ``out`` is a plain file name, the table written as
+``<output_dir>/<out>`` and ``<out>.study.json`` beside it (parameter ``output_dir``, default
+``$XDG_DATA_HOME/biped_opt/studies``, made when first needed). The work items name the system and
+problem the same way (a file's stem), and each optimiser resolves them in its own
+``system_paths``.
 """
 
 from __future__ import annotations
@@ -28,7 +42,9 @@ import contextlib
 import dataclasses
 import json
 import math
+import os
 import queue
+import re
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -36,8 +52,10 @@ from pathlib import Path
 from typing import Any
 
 from biped_opt import ros
-from biped_opt.errors import BipedOptError, InvalidParameterError
-from biped_opt.nodes.run import announce_ready
+from biped_opt.errors import BipedOptError, InvalidInputError, InvalidParameterError, quoted
+from biped_opt.nodes.compiler import BUSY, failure_message
+from biped_opt.nodes.run import announce_ready, answers, float_parameter, int_parameter
+from biped_opt.nodes.sources import declare_request_limits, name_of
 from biped_opt.record.study_table import StudySummary, StudyTable, spec_path
 from biped_opt.study import Study, StudyRow
 
@@ -50,6 +68,26 @@ WORK_ITEM_TYPE = "biped_opt_interfaces/srv/StudyPoint"
 ITEM_TIMEOUT_S, IN_FLIGHT, DISCOVERY_PERIOD_S = 300.0, 2, 0.5
 #: most points in one request
 BATCH = 16
+#: how long a node that answered ``busy`` gets no items [s]
+RETRY_S = 1.0
+#: a goal's ``out``: a plain file name (no directory, not hidden)
+OUT_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}")
+
+
+def default_output_dir() -> Path:
+    """``$XDG_DATA_HOME/biped_opt/studies`` (default ``~/.local/share/biped_opt/studies``)."""
+    base = os.environ.get("XDG_DATA_HOME") or str(Path.home() / ".local" / "share")
+    return Path(base) / "biped_opt" / "studies"
+
+
+def wire_spec(study: Study) -> str:
+    """The study of a work item: its system and problem by name (a file by its stem), as a
+    request names them; each optimiser resolves them in its own ``system_paths``."""
+    spec = study.as_dict()
+    spec["system"] = name_of(study.system)
+    if study.problem is not None:
+        spec["problem"] = name_of(study.problem)
+    return json.dumps(spec)
 
 
 class StudyFailedError(BipedOptError, RuntimeError):
@@ -93,6 +131,7 @@ class _Worker:
     requests: int = 0  #: requests sent and not answered
     ready: bool = False
     stalled: bool = False  #: an item timed out: no new items until it answers one
+    resting_until: float = 0.0  #: it answered busy: no new items before then (monotonic)
 
 
 class StudyCoordinator(ros.Node):
@@ -100,16 +139,21 @@ class StudyCoordinator(ros.Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("study_coordinator", **kwargs)
+        self._action: Any = None
         self.declare_parameter("item_timeout", ITEM_TIMEOUT_S)
         self.declare_parameter("in_flight", IN_FLIGHT)
         self.declare_parameter("discovery_period", DISCOVERY_PERIOD_S)
-        self.item_timeout = float(self.get_parameter("item_timeout").value)
-        self.in_flight = int(self.get_parameter("in_flight").value)
-        self.discovery_period = float(self.get_parameter("discovery_period").value)
-        if not self.item_timeout > 0 or self.in_flight < 1 or not self.discovery_period > 0:
-            raise InvalidParameterError(
-                "item_timeout and discovery_period must be > 0 and in_flight >= 1, got "
-                f"{self.item_timeout}, {self.discovery_period}, {self.in_flight}")
+        self.declare_parameter("output_dir", str(default_output_dir()))
+        self.item_timeout = float_parameter(self, "item_timeout")
+        self.in_flight = int_parameter(self, "in_flight", 1)
+        self.discovery_period = float_parameter(self, "discovery_period")
+        self._sources, self._study_limits, self._max_request = declare_request_limits(self)
+        output = str(self.get_parameter("output_dir").value).strip()
+        if not output:
+            raise InvalidParameterError("output_dir must name a directory")
+        self.output_dir = Path(output).expanduser().resolve()
+        if self.output_dir.exists() and not self.output_dir.is_dir():
+            raise InvalidParameterError(f"output_dir: {output} is not a directory")
         self._group = ros.ReentrantCallbackGroup()
         self._busy = threading.Lock()  # one study at a time
         #: dispatches per point in the last study (a re-dispatched point counts twice), and the
@@ -151,19 +195,41 @@ class StudyCoordinator(ros.Node):
             return ros.GoalResponse.REJECT
         return ros.GoalResponse.ACCEPT
 
+    def goal_study(self, text: str) -> Study:
+        """The study of a goal (JSON or YAML): bounded by the node's limits, its system and
+        problem resolved by name (see the module docstring), checked before it is built."""
+        import yaml
+
+        if len(text) > self._max_request:
+            raise InvalidInputError(f"study: {len(text)} characters; at most "
+                                    f"{self._max_request} (parameter max_request_chars)")
+        try:
+            spec = yaml.safe_load(text)
+        except (yaml.YAMLError, RecursionError) as exc:
+            raise InvalidInputError(
+                f"study: neither JSON nor YAML ({type(exc).__name__})") from None
+        fields = Study.fields_from_spec(spec, where="study", limits=self._study_limits)
+        fields["system"], fields["problem"] = self._sources.study(fields["system"],
+                                                                  fields["problem"])
+        return Study(**fields)
+
+    def goal_table(self, out: str) -> Path:
+        """Where a goal's table goes: ``out`` a plain file name in ``output_dir``."""
+        if not isinstance(out, str) or not OUT_NAME.fullmatch(out):
+            raise InvalidInputError(
+                f"out: {quoted(out)} is not a plain file name (letters, digits, _ . -; at most "
+                f"128): the table goes into the node's output_dir {self.output_dir}")
+        self.output_dir.mkdir(parents=True, exist_ok=True)
+        return self.output_dir / out
+
     def _execute(self, goal_handle: Any) -> Any:
         """A goal: the study (JSON or YAML) into the table ``out``; feedback after each point;
         a cancel ends it after the points under way (the table stays resumable)."""
-        import yaml
-
         result = ros.actions.Study.Result()
         goal = goal_handle.request
         try:
-            try:
-                spec = yaml.safe_load(goal.study)
-            except yaml.YAMLError as exc:
-                raise InvalidParameterError(f"study: neither JSON nor YAML ({exc})") from None
-            study = Study.from_spec(spec, where="study")
+            table = self.goal_table(goal.out)
+            study = self.goal_study(goal.study)
             points = study.points()
 
             def progress(done: int, total: int, index: int) -> None:
@@ -171,11 +237,16 @@ class StudyCoordinator(ros.Node):
                     done=done, total=total, current_point=index,
                     current=point_values(points, index)))
 
-            summary = self.run_study(study, Path(goal.out), progress=progress,
+            summary = self.run_study(study, table, progress=progress,
                                      stop=lambda: goal_handle.is_cancel_requested)
-        except BipedOptError as exc:
-            self.get_logger().warning(f"study goal failed: {exc}")
-            result.success, result.message = False, str(exc)
+        except BaseException as exc:  # a bad goal, or a bug: one failed goal either way
+            if not answers(exc):
+                raise
+            message = failure_message(exc)
+            if not isinstance(exc, BipedOptError):
+                message = f"internal error: {message}"
+            self.get_logger().warning(f"study goal failed: {message}")
+            result.success, result.message = False, message
             goal_handle.abort()
             return result
         result.success = not summary.stopped
@@ -191,7 +262,7 @@ class StudyCoordinator(ros.Node):
         return result
 
     def destroy_node(self) -> None:
-        if self._action is not None:
+        if getattr(self, "_action", None) is not None:
             self._action.destroy()
             self._action = None
         super().destroy_node()
@@ -205,7 +276,7 @@ class _Run:
                  stop: Callable[[], bool] | None) -> None:
         self.node, self.study = node, study
         self.table = StudyTable(study, Path(path))
-        self.spec = json.dumps(study.as_dict())
+        self.spec = wire_spec(study)
         self.queue: collections.deque[int] = collections.deque(self.table.pending())
         self.events: queue.SimpleQueue[tuple[str, int, Any]] = queue.SimpleQueue()
         self.workers: dict[str, _Worker] = {}
@@ -290,8 +361,10 @@ class _Run:
     def _dispatch(self) -> None:
         # round robin by load: the least loaded ready node gets the next request
         while self.queue:
+            now = time.monotonic()
             ready = [w for w in self.workers.values()
-                     if not w.stalled and w.requests < self.node.in_flight and self._ready(w)]
+                     if not w.stalled and w.requests < self.node.in_flight
+                     and w.resting_until <= now and self._ready(w)]
             if not ready:
                 return
             worker = min(ready, key=lambda w: w.requests)
@@ -333,6 +406,13 @@ class _Run:
         response = future.result()
         if all(index in self.table.done for index in indices):
             return  # a late answer to items other nodes did meanwhile
+        if not response.success and response.message.startswith(BUSY):
+            if worker is not None:  # compiling the study's system: ask again soon
+                worker.resting_until = time.monotonic() + RETRY_S
+            for index in indices:
+                self.node.dispatches[index] -= 1  # (not computed: it counts when it is)
+                self._requeue(index)
+            return
         if not response.success:
             raise StudyFailedError(f"points {list(indices)} failed on {name}: "
                                    f"{response.message}")

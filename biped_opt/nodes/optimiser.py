@@ -13,18 +13,28 @@ the field (an unexpected error: ``success = false`` and ``internal error: ...``)
 it (one line a second at most) and keeps serving. Requests are served concurrently (reentrant
 callback group, multi-threaded executor).
 
-**Any system.** A request whose ``system`` (a library name or a system file) or ``problem`` (one
-the system declares, or a problem file; ``""``: the one named like the maneuver) is set is
-solved by :func:`biped_opt.systems.optimal.optimal_policy` with ``theta0`` as the maneuver's s;
-the reply names the decisions (``decision_names``), gives the full input vector in the system's
-order (``system_inputs``) and the contact modes as bit masks (``contact_modes``). Its
+**Any system.** A request whose ``system`` or ``problem`` is set is solved by
+:func:`biped_opt.systems.optimal.optimal_policy` with ``theta0`` as the maneuver's s; the reply
+names the decisions (``decision_names``), gives the full input vector in the system's order
+(``system_inputs``) and the contact modes as bit masks (``contact_modes``). Its
 ``value_derivative`` is the envelope theorem's dc/ds at the optimal inputs with the outcome's and
 final state's one-sided sensitivities (:func:`biped_opt.systems.derivatives.outcome_gradient`),
-NaN on a side where they are not defined. A system is compiled on its first request (a first
-compile in a checkout takes 20-30 s, later ones load it); the parameter ``systems`` (a list of
-library names or files) compiles them, with the problems they declare, at start-up. With
-``allow_files`` false a request may name library systems and declared problems only (a system or
-problem file is Python the node runs: only allow it where every peer on the domain is trusted).
+NaN on a side where they are not defined.
+
+**What a request may name** (:mod:`biped_opt.nodes.sources`): ``system`` a library system
+(``rocking_bar``, ``walker3_coupled``...) or the name of ``<dir>/<name>.py`` in a directory of
+the parameter ``system_paths`` (empty by default: library systems only); ``problem`` one the
+system declares or ``<dir>/<name>.yaml`` (``.yml``, ``.py``) there (``""``: the one named like
+the maneuver). Never a path: a system or problem file is code the node runs, so only the
+operator chooses which. Systems larger than ``max_legs`` constraints or ``max_coordinates``
+coordinates are refused before anything is derived.
+
+**Compiling never holds up a request** (:mod:`biped_opt.nodes.compiler`): the first request for
+a system the node has not prepared is answered at once (``success = false``, ``busy: ... is
+being compiled (k in queue); retry``) while a separate process compiles it (a first compile
+takes 10-90 s; later ones load it from the on-disk cache); at most ``compile_queue`` systems
+wait, ``compile_timeout`` [s] bounds one. The parameter ``systems`` (names as a request gives
+them) prepares systems and their declared problems at start-up.
 
 Answers are cached by (maneuver, theta0, problem), least recently used first out, at most
 ``cache_size`` entries (parameter, default 4096). An entry holds only the reply's numbers (about
@@ -36,6 +46,10 @@ default size whatever the traffic (``bench/service_load.py`` measures the node's
 and a point's index; the point's rows as JSON), one at a time (further requests wait in the
 service's queue). ``worker`` (parameter; default the host name and process id) makes the name
 unique on the domain, so every optimiser started with the defaults on any machine serves its own.
+A work item names its system and problem as a request does; its study is bounded by the
+parameters ``max_points`` (parameter points), ``max_num`` (points of an s grid),
+``max_values`` (values of a grid axis, samples) and ``max_request_chars`` (the study's text),
+checked before anything is built.
 """
 
 from __future__ import annotations
@@ -56,13 +70,25 @@ import numpy as np
 from biped_opt import ros
 from biped_opt.errors import (
     BipedOptError,
+    InvalidInputError,
     InvalidParameterError,
     SimulationError,
 )
 from biped_opt.maneuvers import Maneuver
 from biped_opt.nodes import convert
-from biped_opt.nodes.run import announce_ready, refuse, run_node, warm_up_kernels
-from biped_opt.nodes.simulator import BIPED, compile_served_system
+from biped_opt.nodes.compiler import COMPILE_TIMEOUT_S, Compiler
+from biped_opt.nodes.run import (
+    announce_ready,
+    answers,
+    float_parameter,
+    int_parameter,
+    refuse,
+    run_node,
+    string_list_parameter,
+    warm_up_kernels,
+)
+from biped_opt.nodes.simulator import BIPED
+from biped_opt.nodes.sources import check_name, declare_request_limits
 from biped_opt.optimal import OptimalControlProblem, OptimalResult, get_problem, optimal_policy
 from biped_opt.optimal.derivatives import outcome_sensitivity
 
@@ -74,6 +100,8 @@ __all__ = ["Answer", "OptimiserNode", "main", "value_derivative", "system_value_
 
 #: default of the ``cache_size`` parameter [entries]
 CACHE_SIZE = 4096
+#: default of the parameter compile_queue [systems]; the most points in one work item
+COMPILE_QUEUE, MAX_INDICES = 4, 256
 NAN = float("nan")
 
 
@@ -134,22 +162,23 @@ class OptimiserNode(ros.Node):
             self._problems[maneuver] = self._problem_from_parameters(maneuver)
         self.declare_parameter("cache_size", CACHE_SIZE)
         self.declare_parameter("systems", [])
-        self.declare_parameter("allow_files", True)
+        self.declare_parameter("compile_queue", COMPILE_QUEUE)
+        self.declare_parameter("compile_timeout", COMPILE_TIMEOUT_S)
         self.declare_parameter("worker", "")
-        self._allow_files = bool(self.get_parameter("allow_files").value)
         self._cache_size = int(self.get_parameter("cache_size").value)
         if self._cache_size < 0:
             raise InvalidParameterError(
                 f"cache_size must be >= 0 (0: no cache), got {self._cache_size}")
+        self._sources, self._study_limits, self._max_request = declare_request_limits(self)
         self._cache: OrderedDict[tuple, Answer] = OrderedDict()
         self._lock = threading.Lock()
-        #: compiled systems (keys of :meth:`_compiled`), and the lock a first compile holds
-        self._compiled_keys: set[tuple] = set()
-        self._compile_lock = threading.Lock()
+        self._compiler = Compiler(self.get_logger(),
+                                  queue_size=int_parameter(self, "compile_queue", 0),
+                                  timeout=float_parameter(self, "compile_timeout"))
         if self.get_parameter("warm_up").value:
             warm_up_kernels(self)
-        for system in self.get_parameter("systems").value:
-            self._warm_up_system(str(system).strip())
+        for system in string_list_parameter(self, "systems"):
+            self._warm_up_system(system)
         self._group = ros.ReentrantCallbackGroup()
         self._service = self.create_service(
             ros.srvs.OptimalPolicy, "/biped/optimal_policy", self._on_request,
@@ -179,58 +208,63 @@ class OptimiserNode(ros.Node):
         )
 
     # -- other systems -----------------------------------------------------------------------
+    def _job(self, kind: str, system: str, problem: str, maneuver: str = "") -> dict[str, Any]:
+        """What the compiler prepares (see :func:`biped_opt.nodes.compiler.prepare`)."""
+        return {"kind": kind, "system": system, "problem": problem, "maneuver": maneuver,
+                "system_paths": [str(p) for p in self._sources.system_paths],
+                "max_legs": self._sources.limits.max_legs,
+                "max_coordinates": self._sources.limits.max_coordinates}
+
     def _warm_up_system(self, system: str) -> None:
-        """Compile ``system`` (an entry of the parameter ``systems``) for the problems it
-        declares before serving; a bad entry stops the node with one line naming it."""
+        """Prepare ``system`` (an entry of the parameter ``systems``) for studies and with the
+        problems it declares before serving; a bad entry stops the node with one line naming
+        it."""
         if system in BIPED:
             return  # (the biped's kernels: parameter warm_up)
-        from biped_opt.systems.problems import describe
-        from biped_opt.systems.problems import get_problem as system_problem
-
         self.get_logger().info(f"compiling system {system!r} (a first compile takes a while; "
                                "later starts load it)")
         try:
-            names = list(describe(system).problems)
-            for name in names:
-                self._compiled(system_problem(system, name))
+            described = self._sources.describe("systems", self._sources.system("systems", system))
+            self._compiler.prepare_now(("study", system, ""), self._job("study", system, ""))
+            for name, problem in described.problems.items():
+                key = ("policy", system, name, problem["maneuver"])
+                self._compiler.prepare_now(key, self._job("policy", system, name,
+                                                          problem["maneuver"]))
         except BipedOptError as exc:
-            raise InvalidParameterError(f"systems: {exc}") from None
-        if not names:  # no declared problem: a problem file will need its kernel
-            compile_served_system(system)
+            text = str(exc)
+            raise InvalidParameterError(
+                text if text.startswith("systems:") else f"systems: {system}: {text}") from None
 
-    def _compiled(self, problem: Problem) -> None:
-        """Compile the system of ``problem`` once (concurrent first requests wait for one
-        compile instead of each starting its own)."""
-        from biped_opt.systems.optimal import compiled_for
-
-        key = (id(problem.description), problem.parameters)
-        if key in self._compiled_keys:
-            return
-        with self._compile_lock:
-            if key not in self._compiled_keys:
-                compiled = compiled_for(problem)
-                compiled.simulate(problem.maneuver, 0.0, problem.inputs())
-                self._compiled_keys.add(key)
+    def kill_work(self) -> None:
+        """Kill a compile under way (the node is stopping)."""
+        self._compiler.close()
 
     # -- requests ----------------------------------------------------------------------------
     def solve(self, maneuver_text: str, theta0: float, system: str = "", problem: str = ""
               ) -> Answer:
         """Validated, cached answer to one request."""
-        system, problem = system.strip(), problem.strip()
         if system in BIPED and not problem:
             maneuver = convert.request_maneuver(maneuver_text)
             th = convert.request_theta0(maneuver, theta0)
             biped = self._problems[maneuver]
             return self._cached((maneuver, th, biped),
                                 lambda: Answer.of(biped, optimal_policy(biped, th)))
-        on = convert.request_problem(system, problem, maneuver_text, allow_files=self._allow_files)
+        # names only, checked before anything is compiled (see biped_opt.nodes.sources)
+        if problem:
+            check_name("problem", problem, "problem")
+        check_name("maneuver", maneuver_text, "maneuver")
+        self._sources.check_library_request(system, problem, maneuver_text)
         s = convert.request_s(theta0)
+        name = problem or maneuver_text
+        on = self._compiler.get(
+            ("policy", system, name, maneuver_text),
+            f"system {system or 'biped'} (problem {name})",
+            self._job("policy", system, problem, maneuver_text))
         key = ("system", id(on.description), json.dumps(on.as_dict(), sort_keys=True), s)
 
         def answer() -> Answer:
             from biped_opt.systems.optimal import optimal_policy as system_optimal_policy
 
-            self._compiled(on)
             return Answer.of_system(on, system_optimal_policy(on, s))
 
         return self._cached(key, answer)
@@ -251,7 +285,9 @@ class OptimiserNode(ros.Node):
         try:
             answer = self.solve(request.maneuver, request.theta0, request.system,
                                 request.problem)
-        except Exception as exc:  # bad request, or a bug: one refused request either way
+        except BaseException as exc:  # bad request, or a bug: one refused request either way
+            if not answers(exc):
+                raise
             return refuse(self, "/biped/optimal_policy", response, exc)
         answer.fill(response)
         return response
@@ -259,24 +295,31 @@ class OptimiserNode(ros.Node):
 
     # -- study work items --------------------------------------------------------------------
     def _study(self, text: str) -> tuple[Any, list[dict[str, float]]]:
-        """The study of a work item and its points (the last few studies kept)."""
+        """The study of a work item and its points (the last few studies kept); its size is
+        checked before anything is built, its system prepared by the compiler."""
         from biped_opt.study import Study
 
         if text in self._studies:
             self._studies.move_to_end(text)
             return self._studies[text]
+        if len(text) > self._max_request:
+            raise InvalidInputError(f"study: {len(text)} characters; at most "
+                                    f"{self._max_request} (parameter max_request_chars)")
         try:
             spec = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise InvalidParameterError(f"study: not JSON ({exc})") from None
-        if isinstance(spec, dict) and not self._allow_files:
-            for key in ("system", "problem"):
-                value = spec.get(key)
-                if isinstance(value, str) and convert._is_file(value):
-                    raise InvalidParameterError(
-                        f"study: {key}: files are not served here (parameter allow_files is "
-                        f"false), got {value!r}")
-        study = Study.from_spec(spec, where="study")
+        except (ValueError, RecursionError) as exc:
+            raise InvalidInputError(f"study: not JSON ({type(exc).__name__}: "
+                                    f"{str(exc)[:100]})") from None
+        fields = Study.fields_from_spec(spec, where="study", limits=self._study_limits)
+        system, problem = fields["system"], fields["problem"] or ""
+        self._sources.system("study: system", system)
+        if problem:
+            check_name("study: problem", problem, "problem")
+        self._compiler.get(("study", system, problem),
+                           f"system {system}" + (f" (problem {problem})" if problem else ""),
+                           self._job("study", system, problem))
+        fields["system"], fields["problem"] = self._sources.study(system, problem)
+        study = Study(**fields)
         self._studies[text] = (study, study.points())
         while len(self._studies) > 4:
             self._studies.popitem(last=False)
@@ -288,23 +331,32 @@ class OptimiserNode(ros.Node):
 
         start = time.perf_counter()
         try:
-            study, points = self._study(request.study)
+            if len(request.indices) > MAX_INDICES:
+                raise InvalidInputError(f"indices: at most {MAX_INDICES} points in one item, "
+                                        f"got {len(request.indices)}")
             indices = [int(i) for i in request.indices]
             if not indices:
-                raise InvalidParameterError("indices: no point asked for")
+                raise InvalidInputError("indices: no point asked for")
+            study, points = self._study(request.study)
             for index in indices:
-                if not index < len(points):
-                    raise InvalidParameterError(
+                if not 0 <= index < len(points):
+                    raise InvalidInputError(
                         f"indices: {index} is not a point of the study ({len(points)} points)")
             # one core per node for study points (the batch kernels' threads would take the
             # other cores from the nodes beside it): start one optimiser per core to use them
             numba.set_num_threads(1)
             rows = [r for index in indices for r in evaluate_point(study, index, points[index])]
-        except Exception as exc:  # bad request, or a bug: one refused request either way
+        except BaseException as exc:  # bad request, or a bug: one refused request either way
+            if not answers(exc):
+                raise
             return refuse(self, self.study_service_name, response, exc)
         response.success, response.rows = True, encode_rows(rows)
         response.seconds = time.perf_counter() - start
         return response
+
+    def destroy_node(self) -> None:
+        self._compiler.close()
+        super().destroy_node()
 
 
 def default_worker_name() -> str:

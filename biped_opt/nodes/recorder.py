@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import json
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -50,8 +51,10 @@ from biped_opt.errors import InvalidInputError, SimulationError
 from biped_opt.fixed_sweep import FIXED_INPUTS, theta_grid
 from biped_opt.maneuvers import spec
 from biped_opt.nodes import convert
+from biped_opt.nodes.compiler import BUSY, COMPILE_TIMEOUT_S
 from biped_opt.nodes.run import announce_ready, run_node
 from biped_opt.nodes.simulator import BIPED, SYSTEM_INFO_QOS
+from biped_opt.nodes.sources import name_of
 from biped_opt.optimal import OptimalControlProblem, get_problem
 from biped_opt.record import SweepWriter
 
@@ -386,8 +389,15 @@ class RecorderNode(ros.Node):
         if req.optimal:
             ask = ros.srvs.OptimalPolicy.Request()
             ask.maneuver, ask.theta0 = maneuver, s
-            ask.system, ask.problem = req.system.strip(), req.problem.strip()
+            # names, as any request gives them (a file: its stem, in the optimiser's
+            # system_paths); a system being compiled there is asked for again
+            ask.system, ask.problem = name_of(req.system.strip()), name_of(req.problem.strip())
+            deadline = time.monotonic() + COMPILE_TIMEOUT_S
             answer = self._call(self._optimiser, ask)
+            while not answer.success and answer.message.startswith(BUSY) \
+                    and time.monotonic() < deadline:
+                time.sleep(1.0)
+                answer = self._call(self._optimiser, ask)
             if not answer.success:
                 raise SimulationError(f"optimiser failed at s = {s}: {answer.message}")
             inputs = [float(v) for v in np.asarray(answer.system_inputs)]

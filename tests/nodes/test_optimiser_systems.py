@@ -5,6 +5,7 @@ recorded to MCAP and read back by mcap-ros2-support."""
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ from mcap_ros2.decoder import DecoderFactory
 from biped_opt import ros
 from biped_opt.errors import BipedOptError
 from biped_opt.fixed_sweep import theta_grid
+from biped_opt.nodes.compiler import BUSY
 from biped_opt.nodes.graph import Graph
 from biped_opt.nodes.optimiser import system_value_derivative
 from biped_opt.nodes.recorder import SweepRequest
@@ -40,13 +42,20 @@ CASES = {
 }
 
 
+#: a problem file on the bar's maneuver, served by name from the optimiser's system_paths
+OTHER = "system: rocking_bar\nmaneuver: drop\ndecisions: {u_th: [-0.5, 0.5]}\n"
+
+
 @pytest.fixture(scope="module")
-def graph():
+def graph(tmp_path_factory):
     """One graph for the module: its optimiser compiles both systems at start-up (parameter
-    systems), its simulator and recorder serve the rocking bar."""
+    systems) and serves problem files by name from a directory (system_paths), its simulator
+    and recorder serve the rocking bar."""
+    problems = tmp_path_factory.mktemp("problems")
+    (problems / "other.yaml").write_text(OTHER)
     g = Graph(domain_id=unique_domain_id(), overrides={
         "simulator": {"autostart": False, "system": "rocking_bar"},
-        "optimiser": {"systems": sorted(CASES)},
+        "optimiser": {"systems": sorted(CASES), "system_paths": [str(problems)]},
         "recorder": {"system": "rocking_bar"}})
     probe = ros.Node("probe", context=g.context)
     g.executor.add_node(probe)
@@ -59,6 +68,17 @@ def graph():
 
 def _policy(probe, **fields):
     return call(probe, ros.srvs.OptimalPolicy, "/biped/optimal_policy", **fields)
+
+
+def _policy_when_compiled(probe, timeout: float = 240.0, **fields):
+    """The reply once the node has compiled what the request needs (it answers ``busy`` while
+    it compiles: tests/nodes/test_hostile.py checks that)."""
+    deadline = time.monotonic() + timeout
+    reply = _policy(probe, **fields)
+    while reply.message.startswith(BUSY) and time.monotonic() < deadline:
+        time.sleep(0.5)
+        reply = _policy(probe, **fields)
+    return reply
 
 
 @pytest.mark.parametrize("name", sorted(CASES))
@@ -129,45 +149,48 @@ def test_old_biped_requests_get_todays_reply(graph):
     assert same.value == reply.value and list(same.policy) == list(reply.policy)
 
 
-def test_bad_requests_are_refused_and_the_node_keeps_serving(graph, tmp_path):
-    other = tmp_path / "other.yaml"  # a problem file on the bar's maneuver
-    other.write_text("system: rocking_bar\nmaneuver: drop\ndecisions: {u_th: [-0.5, 0.5]}\n")
+def test_bad_requests_are_refused_and_the_node_keeps_serving(graph):
     for fields, start in (
         ({"system": "no_such_system", "maneuver": "drop"}, "system: unknown system"),
-        ({"system": "missing/bar.py", "maneuver": "drop"}, "system: missing/bar.py: no such"),
+        ({"system": "missing/bar.py", "maneuver": "drop"},
+         "system: 'missing/bar.py' is not a system name"),
         ({"system": "rocking_bar", "maneuver": "drop", "problem": "missing.yaml"},
-         "problem: missing.yaml: no such problem file"),
+         "problem: 'missing.yaml' is not a problem name"),
         ({"system": "rocking_bar", "maneuver": "drop", "problem": "far"},
          "problem: "),
         ({"system": "rocking_bar", "maneuver": "hop"}, "maneuver: rocking_bar has no maneuver"),
         ({"system": "walker3_coupled", "maneuver": "liftoff", "problem": "touchdown"},
          "maneuver: problem touchdown is on maneuver 'touchdown', not 'liftoff'"),
-        ({"system": "walker3_coupled", "maneuver": "drop", "problem": str(other)},
+        ({"system": "walker3_coupled", "maneuver": "drop", "problem": "other"},
          "problem: other is a problem on rocking_bar, not on walker3_coupled"),
         ({"system": "rocking_bar", "maneuver": "drop", "theta0": math.nan}, "theta0:"),
         ({"system": "rocking_bar", "maneuver": "drop", "theta0": math.inf}, "theta0:"),
     ):
-        reply = _policy(graph.probe, **{"theta0": 0.1, **fields})
+        reply = _policy_when_compiled(graph.probe, **{"theta0": 0.1, **fields})
         assert not reply.success and reply.message.startswith(start), (fields, reply.message)
         assert len(reply.message) < 300
-    # a problem file on the served system, with the system left to the file
-    good = _policy(graph.probe, maneuver="drop", theta0=0.1, problem=str(other))
+    # a problem file of system_paths by name, with the system left to the file
+    good = _policy_when_compiled(graph.probe, maneuver="drop", theta0=0.1, problem="other")
     assert good.success and list(good.decision_names) == ["u_th"]
     good = _policy(graph.probe, maneuver="drop", theta0=0.1, system="rocking_bar")
     assert good.success
 
 
-def test_files_are_refused_without_allow_files(domain_id, tmp_path):
+def test_paths_are_refused_with_the_default_parameters(domain_id, tmp_path):
+    """Without system_paths a request names library systems and declared problems only: a
+    problem file, by path or by name, is refused; a library system is served."""
     other = tmp_path / "p.yaml"
-    other.write_text("system: rocking_bar\nmaneuver: drop\ndecisions: {u_th: [-0.5, 0.5]}\n")
+    other.write_text(OTHER)
     with Graph(domain_id=domain_id, overrides={
             "simulator": {"autostart": False, "warm_up": False},
-            "optimiser": {"allow_files": False, "warm_up": False}}) as g:
+            "optimiser": {"warm_up": False, "systems": ["rocking_bar"]}}) as g:
         probe = ros.Node("probe", context=g.context)
         g.executor.add_node(probe)
         reply = _policy(probe, maneuver="drop", theta0=0.1, problem=str(other))
-        assert not reply.success and reply.message.startswith(
-            "problem: files are not served here (parameter allow_files is false)")
+        assert not reply.success and reply.message.startswith("problem: '")
+        assert "is not a problem name" in reply.message and "never a file" in reply.message
+        reply = _policy(probe, maneuver="drop", theta0=0.1, problem="p")
+        assert not reply.success and "declares no problem 'p'" in reply.message, reply.message
         assert _policy(probe, maneuver="drop", theta0=0.1, system="rocking_bar").success
         g.executor.remove_node(probe)
         probe.destroy_node()

@@ -25,9 +25,9 @@ def local_table(tmp_path_factory) -> list[dict[str, str]]:
 
 
 @pytest.fixture()
-def graph():
+def graph(tmp_path):
     domain = unique_domain_id()
-    hosts = [optimiser(domain, "h1"), coordinator(domain)]
+    hosts = [optimiser(domain, "h1"), coordinator(domain, output_dir=str(tmp_path))]
     client = Host(lambda c: ros.Node("study_client", context=c), domain)
     hosts.append(client)
     action = ros.ActionClient(client.node, ros.actions.Study, "/biped/study",
@@ -39,9 +39,9 @@ def graph():
         host.close()
 
 
-def _send(action, study: dict, out, feedback: list):
+def _send(action, study: dict, out: str, feedback: list):
     future = action.send_goal_async(
-        ros.actions.Study.Goal(study=json.dumps(study), out=str(out)),
+        ros.actions.Study.Goal(study=json.dumps(study), out=out),
         feedback_callback=lambda m: feedback.append(m.feedback))
     assert future.wait(10)
     return future.result()
@@ -50,7 +50,7 @@ def _send(action, study: dict, out, feedback: list):
 def test_a_goal_runs_the_study_with_feedback_and_a_result(tmp_path, graph, local_table):
     _, action = graph
     feedback: list = []
-    handle = _send(action, SPEC, tmp_path / "t.csv", feedback)
+    handle = _send(action, SPEC, "t.csv", feedback)
     assert handle.accepted
     done = handle.get_result_async()
     assert done.wait(120)
@@ -72,7 +72,7 @@ def test_a_goal_runs_the_study_with_feedback_and_a_result(tmp_path, graph, local
 def test_cancel_stops_the_study_and_a_new_goal_continues_it(tmp_path, graph, local_table):
     _, action = graph
     feedback: list = []
-    handle = _send(action, SPEC, tmp_path / "t.csv", feedback)
+    handle = _send(action, SPEC, "t.csv", feedback)
     deadline = time.monotonic() + 60
     while len(feedback) < 3 and time.monotonic() < deadline:
         time.sleep(0.01)
@@ -90,7 +90,7 @@ def test_cancel_stops_the_study_and_a_new_goal_continues_it(tmp_path, graph, loc
     again = handle.cancel_goal_async()
     assert again.wait(10) and again.result().return_code == 3
     # the same goal again continues the table
-    handle = _send(action, SPEC, tmp_path / "t.csv", [])
+    handle = _send(action, SPEC, "t.csv", [])
     done = handle.get_result_async()
     assert done.wait(120)
     second = done.result().result
@@ -101,7 +101,7 @@ def test_cancel_stops_the_study_and_a_new_goal_continues_it(tmp_path, graph, loc
 
 def test_a_bad_goal_is_aborted_with_the_reason(tmp_path, graph):
     _, action = graph
-    handle = _send(action, {**SPEC, "grid": {"mass": [1.0]}}, tmp_path / "t.csv", [])
+    handle = _send(action, {**SPEC, "grid": {"mass": [1.0]}}, "t.csv", [])
     done = handle.get_result_async()
     assert done.wait(30)
     reply = done.result()

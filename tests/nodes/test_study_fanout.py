@@ -42,10 +42,13 @@ class Host:
         ros.try_shutdown(context=self.context)
 
 
-def optimiser(domain: int, name: str) -> Host:
+def optimiser(domain: int, name: str, **params) -> Host:
+    """An optimiser that has prepared the study's system before it serves (else its first
+    items are answered busy while it compiles)."""
+    params = {"warm_up": False, "worker": name, "systems": [SPEC["system"]], **params}
     return Host(lambda c: OptimiserNode(
         context=c, namespace=name, parameter_overrides=[
-            ros.Parameter("warm_up", value=False), ros.Parameter("worker", value=name)]), domain)
+            ros.Parameter(k, value=v) for k, v in params.items()]), domain)
 
 
 def coordinator(domain: int, **params) -> Host:

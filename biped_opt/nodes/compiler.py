@@ -1,0 +1,243 @@
+"""Systems compiled beside a node's service, never on the threads that answer requests.
+
+A first request for a system the node has not prepared is answered at once (``success =
+false``, ``busy: system X is being compiled (k in queue); retry``) and queued. One background
+thread takes the queue in order: a separate process (``python -m biped_opt.nodes.compiler``,
+killed when the node stops) describes the system, checks its size, derives, generates and
+compiles it into the on-disk cache and runs the calls a request will make (so their machine code
+is cached too); then the thread loads the result into the node's process (from the cache: about
+a second) and later requests are served. The queue holds at most ``compile_queue`` systems
+(parameter); a system whose preparation failed is refused with the reason from then on.
+"""
+
+from __future__ import annotations
+
+import collections
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Hashable
+from pathlib import Path
+from typing import Any
+
+from biped_opt.errors import BipedOptError, InvalidInputError
+from biped_opt.nodes.sources import Sources, SystemLimits
+
+__all__ = ["BUSY", "Busy", "Compiler", "prepare", "failure_message", "main"]
+
+#: the start of a refusal that a retry may cure (a client or coordinator waits and asks again)
+BUSY = "busy: "
+#: longest a compile process may run [s] (default of the parameter compile_timeout)
+COMPILE_TIMEOUT_S = 900.0
+
+
+class Busy(BipedOptError, RuntimeError):
+    """The system of a request is being prepared; its message starts with :data:`BUSY`."""
+
+
+def failure_message(exc: BaseException) -> str:
+    """One line for any failure, also of the kinds that are not errors (SystemExit,
+    KeyboardInterrupt raised by a system file's code)."""
+    if isinstance(exc, BipedOptError):
+        return str(exc)
+    text = str(exc)
+    return f"{type(exc).__name__}{': ' + text if text else ''}"[:500]
+
+
+def _sources(job: dict[str, Any]) -> Sources:
+    return Sources(tuple(Path(p) for p in job["system_paths"]),
+                   SystemLimits(max_legs=job["max_legs"],
+                                max_coordinates=job["max_coordinates"]))
+
+
+def prepare(job: dict[str, Any]) -> Any:
+    """Build and exercise what a job names (in the compile process, then in the node):
+    ``kind`` "policy" (an OptimalPolicy request's system, problem and maneuver: returns its
+    Problem) or "study" (a study's system and problem: returns None)."""
+    import numpy as np
+
+    from biped_opt.systems.compiled import shared
+    from biped_opt.systems.optimal import compiled_for, optimal_policy
+
+    sources = _sources(job)
+    problem = None
+    if job["kind"] == "policy":
+        problem = sources.problem(job["system"], job["problem"], job["maneuver"])
+    else:
+        from biped_opt.systems.problems import load_problem
+
+        source, problem_source = sources.study(job["system"], job["problem"])
+        if problem_source is not None:
+            problem = load_problem(problem_source, system=source)
+            sources.limits.check("problem", problem.description)
+    if job["kind"] == "study":  # the fixed-input kernels of a study
+        from biped_opt.systems.nonsmooth import find_nonsmooth
+
+        compiled = shared(source)
+        for maneuver in compiled.maneuvers:
+            compiled.simulate(maneuver, 0.0)
+        if compiled.maneuvers:
+            find_nonsmooth(compiled, compiled.maneuvers[0], s=np.linspace(-0.1, 0.1, 5))
+    if problem is not None:  # the optimiser's calls
+        from biped_opt.nodes.optimiser import system_value_derivative
+
+        compiled_for(problem).simulate(problem.maneuver, 0.0)
+        try:
+            result = optimal_policy(problem, 0.05)
+            if result.success:
+                system_value_derivative(problem, result)
+        except BipedOptError:
+            pass  # (s = 0.05 is only an exercise: a point it cannot solve proves nothing)
+    return problem if job["kind"] == "policy" else None
+
+
+class Compiler:
+    """The queue and the background thread of a node (see the module docstring)."""
+
+    def __init__(self, logger: Any, *, queue_size: int, timeout: float = COMPILE_TIMEOUT_S
+                 ) -> None:
+        self._logger = logger
+        self.queue_size, self.timeout = queue_size, timeout
+        self._lock = threading.Lock()
+        self._wake = threading.Condition(self._lock)
+        self._ready: dict[Hashable, Any] = {}
+        self._failed: dict[Hashable, str] = {}
+        self._queue: collections.deque[tuple[Hashable, str, dict[str, Any]]] = \
+            collections.deque()
+        self._current: Hashable | None = None
+        self._process: subprocess.Popen | None = None
+        self._closed = False
+        self._thread = threading.Thread(target=self._run, name="system-compiler", daemon=True)
+        self._thread.start()
+
+    def get(self, key: Hashable, what: str, job: dict[str, Any]) -> Any:
+        """What ``job`` prepared for ``key``; else queue it and raise :class:`Busy` (or the
+        reason it failed)."""
+        with self._lock:
+            if key in self._ready:
+                return self._ready[key]
+            if key in self._failed:
+                raise InvalidInputError(self._failed[key])
+            waiting = [k for k, _, _ in self._queue]
+            if key == self._current:
+                raise Busy(f"{BUSY}{what} is being compiled ({len(waiting)} in queue behind "
+                           "it); retry")
+            if key in waiting:
+                raise Busy(f"{BUSY}{what} is waiting to be compiled ({waiting.index(key) + 1} "
+                           f"of {len(waiting)} in queue); retry")
+            if self.queue_size < 1 or len(self._queue) >= self.queue_size:
+                raise Busy(f"{BUSY}{what} needs a compile and the compile queue is full "
+                           f"({len(self._queue)} of compile_queue = {self.queue_size}); retry "
+                           "later")
+            self._queue.append((key, what, job))
+            self._wake.notify()
+            position = len(self._queue) + (self._current is not None)
+        self._logger.info(f"queued a compile of {what} ({position} in queue)")
+        raise Busy(f"{BUSY}{what} is being compiled ({position} in queue); retry")
+
+    def prepare_now(self, key: Hashable, job: dict[str, Any]) -> Any:
+        """Prepare ``job`` in this thread (start-up: the parameter ``systems``)."""
+        value = prepare(job)
+        with self._lock:
+            self._ready[key] = value
+        return value
+
+    def close(self) -> None:
+        """Stop the thread and kill a compile under way."""
+        with self._lock:
+            self._closed = True
+            self._queue.clear()
+            self._wake.notify()
+            process = self._process
+        if process is not None and process.poll() is None:
+            _kill(process)
+
+    # -- the background thread ---------------------------------------------------------------
+    def _run(self) -> None:
+        try:  # (SymPy and the systems' modules: a first request need not wait for them)
+            import biped_opt.systems.problems  # noqa: F401
+        except Exception:  # pragma: no cover (the same error reaches the first request)
+            pass
+        while True:
+            with self._lock:
+                while not self._queue and not self._closed:
+                    self._wake.wait()
+                if self._closed:
+                    return
+                key, what, job = self._queue.popleft()
+                self._current = key
+            start = time.monotonic()
+            try:
+                self._compile(what, job)
+                value = prepare(job)  # from the cache the process filled
+            except BaseException as exc:  # (a system file's SystemExit too): the reason
+                message = failure_message(exc)
+                with self._lock:
+                    self._failed[key], self._current = message, None
+                self._logger.warning(f"cannot compile {what}: {message}")
+                continue
+            with self._lock:
+                self._ready[key], self._current = value, None
+            self._logger.info(f"compiled {what} in {time.monotonic() - start:.1f} s")
+
+    def _compile(self, what: str, job: dict[str, Any]) -> None:
+        command = [sys.executable, "-m", "biped_opt.nodes.compiler", json.dumps(job)]
+        with self._lock:
+            if self._closed:
+                raise InvalidInputError(f"{what}: the node is stopping")
+            self._process = process = subprocess.Popen(
+                command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                stderr=subprocess.PIPE, text=True, start_new_session=True)
+        try:
+            _, err = process.communicate(timeout=self.timeout)
+        except subprocess.TimeoutExpired:
+            _kill(process)
+            process.communicate()
+            raise InvalidInputError(
+                f"{what}: the compile took more than {self.timeout:g} s (compile_timeout)"
+            ) from None
+        finally:
+            with self._lock:
+                self._process = None
+        if process.returncode != 0:
+            lines = [line for line in (err or "").splitlines() if line.strip()]
+            reason = lines[-1] if lines and process.returncode == 2 else \
+                f"the compile process ended with status {process.returncode}"
+            raise InvalidInputError(reason)
+
+
+def _kill(process: subprocess.Popen) -> None:
+    try:
+        os.killpg(process.pid, signal.SIGKILL)
+    except OSError:
+        pass
+
+
+def _watch_parent() -> None:
+    """End this process when the node that started it is gone (killed without a word)."""
+    parent = os.getppid()
+    while True:
+        time.sleep(1.0)
+        if os.getppid() != parent:
+            os._exit(3)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """The compile process: ``python -m biped_opt.nodes.compiler JOB_JSON``; status 2 and one
+    line on stderr when the job fails."""
+    threading.Thread(target=_watch_parent, daemon=True).start()
+    job = json.loads((sys.argv[1:] if argv is None else argv)[0])
+    try:
+        prepare(job)
+    except BaseException as exc:  # (a system file's SystemExit too): one line, status 2
+        print(failure_message(exc), file=sys.stderr, flush=True)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,281 @@
+"""What a request may name: systems and problems of the library or, by name, of the directories
+the operator configured for the node (parameter ``system_paths``); never a path.
+
+A system or problem file is Python (or names a Python file) that the node runs, so a request
+(an ``OptimalPolicy`` request, a study work item, a ``/biped/study`` goal) names one only as a
+plain name (letters, digits, ``_``; at most :data:`MAX_NAME` characters): ``walker3`` is a
+library system, ``hopper`` is ``<dir>/hopper.py`` in the first configured directory that has it.
+A problem name is one the system declares, else ``<dir>/<name>.yaml`` (``.yml``, ``.py``). A
+problem file's ``system`` key is read the same way (a name; or ``x.py``, a file beside it).
+
+The sizes a node accepts (:class:`SystemLimits`: legs, coordinates) are checked before anything
+is derived: a library walker by its name, a file's system right after its description is built.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from biped_opt.errors import InvalidInputError, InvalidParameterError, quoted
+
+if TYPE_CHECKING:
+    from biped_opt.study import StudyLimits
+    from biped_opt.systems.description import System
+    from biped_opt.systems.problems import Problem
+
+__all__ = ["MAX_NAME", "SystemLimits", "Sources", "check_name", "name_of", "directories",
+           "declare_request_limits"]
+
+#: longest system, problem or worker name a request may give
+MAX_NAME = 64
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+#: suffixes of problem files, in the order they are looked for
+PROBLEM_SUFFIXES = (".yaml", ".yml", ".py")
+#: defaults of the node parameters max_legs and max_coordinates
+MAX_LEGS, MAX_COORDINATES = 6, 16
+#: defaults of a node's limits on a study (parameters max_points, max_num, max_values) and on
+#: the text of a request's study (max_request_chars)
+MAX_POINTS, MAX_NUM, MAX_VALUES, MAX_REQUEST_CHARS = 10_000, 2001, 1000, 65536
+
+
+def check_name(field: str, text: str, what: str = "system") -> str:
+    """``text`` if it is a plain name; else one line saying what a request may give."""
+    if not isinstance(text, str) or len(text) > MAX_NAME or not _NAME.fullmatch(text):
+        size = f"at most {MAX_NAME} " if isinstance(text, str) and len(text) > MAX_NAME else ""
+        source = "a library system" if what == "system" else \
+            "one the system declares" if what == "problem" else "one"
+        raise InvalidInputError(
+            f"{field}: {quoted(text)} is not a {what} name ({size}letters, digits and _): a "
+            f"request names {source} or one in the node's system_paths, never a file")
+    return text
+
+
+def name_of(source: str) -> str:
+    """The name a request gives for a library name or a system/problem file (its stem)."""
+    return Path(source).stem if Path(source).suffix in (".py", *PROBLEM_SUFFIXES) else source
+
+
+def directories(values: Iterable[Any]) -> tuple[Path, ...]:
+    """The ``system_paths`` parameter's directories, absolute; a missing one is an error."""
+    out = []
+    for value in values:
+        text = str(value).strip()
+        if not text:
+            continue
+        path = Path(text).expanduser().resolve()
+        if not path.is_dir():
+            raise InvalidParameterError(f"system_paths: {text}: no such directory")
+        out.append(path)
+    return tuple(out)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SystemLimits:
+    """The largest systems a node derives and compiles (node parameters ``max_legs``: unilateral
+    constraints, 2^n contact modes; ``max_coordinates``)."""
+
+    max_legs: int = MAX_LEGS
+    max_coordinates: int = MAX_COORDINATES
+
+    def __post_init__(self) -> None:
+        if self.max_legs < 1 or self.max_coordinates < 1:
+            raise InvalidParameterError(
+                f"max_legs and max_coordinates must be >= 1, got {self.max_legs}, "
+                f"{self.max_coordinates}")
+
+    def check_walker(self, field: str, name: str) -> None:
+        """A library walker's size from its name alone (nothing built yet)."""
+        from biped_opt.systems.files import WALKER
+
+        match = WALKER.match(name)
+        if match is None:
+            return
+        legs = int(match["n"])
+        if legs > self.max_legs or 3 + 2 * legs > self.max_coordinates:
+            raise InvalidInputError(
+                f"{field}: {name} has {legs} legs and {3 + 2 * legs} coordinates; this node "
+                f"serves at most {self.max_legs} legs and {self.max_coordinates} coordinates "
+                "(parameters max_legs, max_coordinates)")
+
+    def check(self, field: str, system: System) -> None:
+        """A described system's size, before it is derived."""
+        legs, coordinates = len(system.constraints), len(system.q)
+        if legs > self.max_legs or coordinates > self.max_coordinates:
+            raise InvalidInputError(
+                f"{field}: {system.name} has {legs} constraints and {coordinates} coordinates; "
+                f"this node serves at most {self.max_legs} and {self.max_coordinates} "
+                "(parameters max_legs, max_coordinates)")
+
+
+@dataclass(frozen=True)
+class Sources:
+    """Resolves the names a request gives (see the module docstring)."""
+
+    system_paths: tuple[Path, ...] = ()
+    limits: SystemLimits = SystemLimits()
+
+    def system(self, field: str, text: str) -> str:
+        """What :func:`biped_opt.systems.problems.describe` loads for the system name ``text``:
+        the library name itself or the absolute path of ``<dir>/<name>.py``."""
+        from biped_opt.systems.files import WALKER
+        from biped_opt.systems.library import LIBRARY
+
+        name = check_name(field, text)
+        if name in LIBRARY or WALKER.match(name):
+            self.limits.check_walker(field, name)
+            return name
+        for folder in self.system_paths:
+            path = folder / f"{name}.py"
+            if path.is_file():
+                return str(path)
+        where = (f"nor {name}.py in system_paths ({', '.join(map(str, self.system_paths))})"
+                 if self.system_paths else "and this node has no system_paths")
+        raise InvalidInputError(
+            f"{field}: unknown system {quoted(name)}: not a library system "
+            f"({', '.join(LIBRARY)}, walkerN[_coupled|_decoupled]) {where}")
+
+    def problem_file(self, field: str, text: str) -> Path | None:
+        """``<dir>/<name>.yaml`` (.yml, .py) of the problem name ``text``, or None."""
+        name = check_name(field, text, "problem")
+        for folder in self.system_paths:
+            for suffix in PROBLEM_SUFFIXES:
+                path = folder / f"{name}{suffix}"
+                if path.is_file():
+                    return path
+        return None
+
+    def check_library_request(self, system: str, problem: str, maneuver: str) -> None:
+        """What can be checked of a request on a library system without compiling anything
+        (its description is cheap to build): the maneuver, and the problem declared or a file
+        of system_paths. Refuses at once what a compile would only refuse later."""
+        from biped_opt.nodes.convert import check_maneuver_of
+
+        source = self.system("system", system) if system else "biped"
+        if Path(source).suffix == ".py":
+            return  # (a file's description runs its code: that waits for the compiler)
+        described = self.describe("system", source)
+        if not problem:
+            check_maneuver_of(described, maneuver)
+        elif problem not in described.problems and self.problem_file("problem", problem) is None:
+            raise InvalidInputError(
+                f"problem: {described.name} declares no problem {quoted(problem)} "
+                f"(problems: {', '.join(described.problems) or 'none'})"
+                + ("" if self.system_paths else " and this node has no system_paths"))
+
+    def describe(self, field: str, source: str) -> System:
+        """The description of a resolved system, its size checked before anything derives."""
+        from biped_opt.errors import BipedOptError
+        from biped_opt.systems.problems import describe
+
+        try:
+            system = describe(source)
+        except BipedOptError as exc:
+            raise InvalidInputError(f"{field}: {exc}") from None
+        self.limits.check(field, system)
+        return system
+
+    def problem(self, system: str, problem: str, maneuver: str) -> Problem:
+        """The problem of a request: ``system`` a name ("": the biped, or the system a problem
+        file names), ``problem`` a name (""): the one named like ``maneuver``). The problem
+        must be on ``maneuver``. Runs the system's description (a file's code): call it where
+        a slow or failing description holds up nobody else."""
+        from biped_opt.errors import BipedOptError
+        from biped_opt.nodes.convert import check_maneuver_of, check_problem_on
+        from biped_opt.systems.problems import Problem, get_problem, load_problem, read_yaml
+
+        source = self.system("system", system) if system else ""
+        name = problem or maneuver
+        described = None
+        if source or not problem:
+            described = self.describe("system", source or "biped")
+            if not problem:
+                check_maneuver_of(described, maneuver)
+        declared = described is not None and name in described.problems
+        path = None if declared else self.problem_file("problem", name)
+        try:
+            if path is None:
+                found = get_problem(source or "biped", name)
+            elif path.suffix == ".py":
+                found = load_problem(path)
+            else:
+                spec = read_yaml(path)
+                if not isinstance(spec, Mapping):
+                    raise InvalidParameterError(f"{path}: must hold a mapping")
+                spec = dict(spec)
+                spec["system"] = self._file_system(path, spec.get("system"), source)
+                spec.setdefault("name", path.stem)
+                found = Problem.from_spec(spec, where=str(path))
+        except BipedOptError as exc:
+            raise InvalidInputError(f"problem: {exc}") from None
+        self.limits.check("system", found.description)
+        return check_problem_on(found, described, maneuver)
+
+    def _file_system(self, path: Path, value: Any, source: str) -> str:
+        """The system a problem file names: absent, the request's (else the biped); ``x.py``
+        a file beside it; else a name as a request would give it."""
+        if value is None:
+            return source or "biped"
+        text = str(value)
+        if text.endswith(".py") and _NAME.fullmatch(text[:-3] or "-"):
+            return str(path.parent / text)
+        return self.system(f"{path.name}: system", text)
+
+    def study(self, system: str, problem: str | None) -> tuple[str, str | None]:
+        """The ``system`` and ``problem`` a :class:`~biped_opt.study.Study` loads for a study
+        that names them: the system resolved as :meth:`system` (and described, its size
+        checked); the problem a declared name (kept) or the path of its file, whose ``system``
+        key must be absent, a library name or ``x.py`` beside it (what the study's loader
+        reads itself)."""
+        from biped_opt.systems.files import WALKER
+        from biped_opt.systems.library import LIBRARY
+        from biped_opt.systems.problems import read_yaml
+
+        source = self.system("system", system)
+        described = self.describe("system", source)
+        if not problem or problem in described.problems:
+            return source, problem or None
+        path = self.problem_file("problem", problem)
+        if path is None:
+            raise InvalidInputError(
+                f"problem: {described.name} declares no problem {quoted(problem)} "
+                f"(problems: {', '.join(described.problems) or 'none'}) and system_paths has "
+                "no such file")
+        if path.suffix != ".py":
+            spec = read_yaml(path)
+            value = spec.get("system") if isinstance(spec, Mapping) else None
+            text = "" if value is None else str(value)
+            if text and not (text in LIBRARY or WALKER.match(text) or (
+                    text.endswith(".py") and _NAME.fullmatch(text[:-3] or "-"))):
+                raise InvalidInputError(
+                    f"problem: {path.name}: system: a study's problem file names a library "
+                    f"system or a file beside it (x.py), got {quoted(text)}")
+            if WALKER.match(text):
+                self.limits.check_walker(f"problem: {path.name}: system", text)
+        return source, str(path)
+
+
+def declare_request_limits(node: Any) -> tuple[Sources, StudyLimits, int]:
+    """Declare and read the parameters that bound what a request may name and ask for
+    (``system_paths``, ``max_legs``, ``max_coordinates``, ``max_points``, ``max_num``,
+    ``max_values``, ``max_request_chars``): the node's :class:`Sources`, study limits and
+    longest study text. A bad value stops the node (one line, status 2)."""
+    from biped_opt.nodes.run import int_parameter, string_list_parameter
+    from biped_opt.study import StudyLimits
+
+    for name, default in (("system_paths", []), ("max_legs", MAX_LEGS),
+                          ("max_coordinates", MAX_COORDINATES), ("max_points", MAX_POINTS),
+                          ("max_num", MAX_NUM), ("max_values", MAX_VALUES),
+                          ("max_request_chars", MAX_REQUEST_CHARS)):
+        node.declare_parameter(name, default)
+    sources = Sources(
+        directories(string_list_parameter(node, "system_paths")),
+        SystemLimits(max_legs=int_parameter(node, "max_legs", 1),
+                     max_coordinates=int_parameter(node, "max_coordinates", 1)))
+    limits = StudyLimits(max_points=int_parameter(node, "max_points", 1),
+                         max_num=int_parameter(node, "max_num", 3),
+                         max_values=int_parameter(node, "max_values", 1))
+    return sources, limits, int_parameter(node, "max_request_chars", 1)
