@@ -39,13 +39,14 @@ class Busy(BipedOptError, RuntimeError):
     """The system of a request is being prepared; its message starts with :data:`BUSY`."""
 
 
-def failure_message(exc: BaseException) -> str:
+def failure_message(exc: BaseException, what: str = "") -> str:
     """One line for any failure, also of the kinds that are not errors (SystemExit,
-    KeyboardInterrupt raised by a system file's code)."""
+    KeyboardInterrupt raised by a system file's code), then prefixed by ``what``."""
     if isinstance(exc, BipedOptError):
         return str(exc)
     text = str(exc)
-    return f"{type(exc).__name__}{': ' + text if text else ''}"[:500]
+    line = f"{type(exc).__name__}{': ' + text if text else ''}"[:500]
+    return f"{what}: {line}" if what else line
 
 
 def _sources(job: dict[str, Any]) -> Sources:
@@ -175,7 +176,7 @@ class Compiler:
                 self._compile(what, job)
                 value = prepare(job)  # from the cache the process filled
             except BaseException as exc:  # (a system file's SystemExit too): the reason
-                message = failure_message(exc)
+                message = failure_message(exc, what)
                 with self._lock:
                     self._failed[key], self._current = message, None
                 self._logger.warning(f"cannot compile {what}: {message}")
@@ -234,7 +235,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         prepare(job)
     except BaseException as exc:  # (a system file's SystemExit too): one line, status 2
-        print(failure_message(exc), file=sys.stderr, flush=True)
+        print(failure_message(exc, f"system {job['system'] or 'biped'}"), file=sys.stderr,
+              flush=True)
         return 2
     return 0
 

@@ -30,8 +30,8 @@ declared problem or one in those directories; :mod:`biped_opt.nodes.sources`), n
 it is bounded by ``max_points``, ``max_num``, ``max_values`` and ``max_request_chars`` (checked
 before anything is built); its ``out`` is a plain file name, the table written as
 ``<output_dir>/<out>`` and ``<out>.study.json`` beside it (parameter ``output_dir``, default
-``$XDG_DATA_HOME/biped_opt/studies``, made when first needed). The work items name the system and
-problem the same way (a file's stem), and each optimiser resolves them in its own
+(also ``""``) ``$XDG_DATA_HOME/biped_opt/studies``, made when first needed). The work items name
+the system and problem the same way (a file's stem), and each optimiser resolves them in its own
 ``system_paths``.
 """
 
@@ -149,9 +149,7 @@ class StudyCoordinator(ros.Node):
         self.discovery_period = float_parameter(self, "discovery_period")
         self._sources, self._study_limits, self._max_request = declare_request_limits(self)
         output = str(self.get_parameter("output_dir").value).strip()
-        if not output:
-            raise InvalidParameterError("output_dir must name a directory")
-        self.output_dir = Path(output).expanduser().resolve()
+        self.output_dir = Path(output or default_output_dir()).expanduser().resolve()
         if self.output_dir.exists() and not self.output_dir.is_dir():
             raise InvalidParameterError(f"output_dir: {output} is not a directory")
         self._group = ros.ReentrantCallbackGroup()
@@ -209,8 +207,11 @@ class StudyCoordinator(ros.Node):
             raise InvalidInputError(
                 f"study: neither JSON nor YAML ({type(exc).__name__})") from None
         fields = Study.fields_from_spec(spec, where="study", limits=self._study_limits)
-        fields["system"], fields["problem"] = self._sources.study(fields["system"],
-                                                                  fields["problem"])
+        try:
+            fields["system"], fields["problem"] = self._sources.study(fields["system"],
+                                                                      fields["problem"])
+        except BipedOptError as exc:
+            raise InvalidInputError(f"study: {exc}") from None
         return Study(**fields)
 
     def goal_table(self, out: str) -> Path:

@@ -33,8 +33,9 @@ coordinates are refused before anything is derived.
 a system the node has not prepared is answered at once (``success = false``, ``busy: ... is
 being compiled (k in queue); retry``) while a separate process compiles it (a first compile
 takes 10-90 s; later ones load it from the on-disk cache); at most ``compile_queue`` systems
-wait, ``compile_timeout`` [s] bounds one. The parameter ``systems`` (names as a request gives
-them) prepares systems and their declared problems at start-up.
+wait, ``compile_timeout`` [s] bounds one. The parameter ``systems`` prepares systems and their
+declared problems at start-up: names as a request gives them, or the operator's system files,
+whose directories then join ``system_paths`` (a request names such a file by its stem).
 
 Answers are cached by (maneuver, theta0, problem), least recently used first out, at most
 ``cache_size`` entries (parameter, default 4096). An entry holds only the reply's numbers (about
@@ -54,6 +55,7 @@ checked before anything is built.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import re
@@ -62,6 +64,7 @@ import threading
 import time
 from collections import OrderedDict
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numba
@@ -88,7 +91,7 @@ from biped_opt.nodes.run import (
     warm_up_kernels,
 )
 from biped_opt.nodes.simulator import BIPED
-from biped_opt.nodes.sources import check_name, declare_request_limits
+from biped_opt.nodes.sources import check_name, declare_request_limits, name_of
 from biped_opt.optimal import OptimalControlProblem, OptimalResult, get_problem, optimal_policy
 from biped_opt.optimal.derivatives import outcome_sensitivity
 
@@ -177,8 +180,14 @@ class OptimiserNode(ros.Node):
                                   timeout=float_parameter(self, "compile_timeout"))
         if self.get_parameter("warm_up").value:
             warm_up_kernels(self)
-        for system in string_list_parameter(self, "systems"):
-            self._warm_up_system(system)
+        systems = string_list_parameter(self, "systems")
+        files = [Path(s).expanduser().resolve() for s in systems if Path(s).suffix == ".py"]
+        if files:  # (the operator's files: their directories join system_paths)
+            folders = tuple(dict.fromkeys([*self._sources.system_paths,
+                                           *(f.parent for f in files)]))
+            self._sources = dataclasses.replace(self._sources, system_paths=folders)
+        for system in systems:
+            self._warm_up_system(name_of(system))
         self._group = ros.ReentrantCallbackGroup()
         self._service = self.create_service(
             ros.srvs.OptimalPolicy, "/biped/optimal_policy", self._on_request,
@@ -221,10 +230,11 @@ class OptimiserNode(ros.Node):
         it."""
         if system in BIPED:
             return  # (the biped's kernels: parameter warm_up)
-        self.get_logger().info(f"compiling system {system!r} (a first compile takes a while; "
-                               "later starts load it)")
         try:
-            described = self._sources.describe("systems", self._sources.system("systems", system))
+            source = self._sources.system("systems", system)
+            self.get_logger().info(f"compiling system {system!r} (a first compile takes a "
+                                   "while; later starts load it)")
+            described = self._sources.describe("systems", source)
             self._compiler.prepare_now(("study", system, ""), self._job("study", system, ""))
             for name, problem in described.problems.items():
                 key = ("policy", system, name, problem["maneuver"])
@@ -355,7 +365,8 @@ class OptimiserNode(ros.Node):
         return response
 
     def destroy_node(self) -> None:
-        self._compiler.close()
+        if getattr(self, "_compiler", None) is not None:  # (a bad parameter stops it sooner)
+            self._compiler.close()
         super().destroy_node()
 
 
