@@ -46,12 +46,14 @@ def run(args: argparse.Namespace) -> int:
         input_file("--params-file", args.params_file)
     # Ctrl-C or SIGTERM while the graph starts abandons the start; once it records, either one
     # stops the sweep after the current point, the file is finished and the summary printed
+    # (the optimiser serves the operator's problem file by name from its directory)
+    problem_file = [args.problem] if Path(args.problem).suffix else []
     with stop_requested(interrupt=True) as stop:
         try:
             graph = Graph(params_file=args.params_file,
                           overrides={"simulator": {"autostart": False, "system": args.system},
-                                     "optimiser": {"systems": [args.system] if args.optimal
-                                                   else []},
+                                     "optimiser": {"systems": [args.system, *problem_file]
+                                                   if args.optimal else []},
                                      "recorder": {"system": args.system}})
         except KeyboardInterrupt:
             return 0

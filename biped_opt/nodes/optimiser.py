@@ -35,7 +35,8 @@ being compiled (k in queue); retry``) while a separate process compiles it (a fi
 takes 10-90 s; later ones load it from the on-disk cache); at most ``compile_queue`` systems
 wait, ``compile_timeout`` [s] bounds one. The parameter ``systems`` prepares systems and their
 declared problems at start-up: names as a request gives them, or the operator's system files,
-whose directories then join ``system_paths`` (a request names such a file by its stem).
+whose directories then join ``system_paths`` (a request names such a file by its stem; a
+problem file listed there only adds its directory).
 
 Answers are cached by (maneuver, theta0, problem), least recently used first out, at most
 ``cache_size`` entries (parameter, default 4096). An entry holds only the reply's numbers (about
@@ -91,7 +92,12 @@ from biped_opt.nodes.run import (
     warm_up_kernels,
 )
 from biped_opt.nodes.simulator import BIPED
-from biped_opt.nodes.sources import check_name, declare_request_limits, name_of
+from biped_opt.nodes.sources import (
+    PROBLEM_SUFFIXES,
+    check_name,
+    declare_request_limits,
+    name_of,
+)
 from biped_opt.optimal import OptimalControlProblem, OptimalResult, get_problem, optimal_policy
 from biped_opt.optimal.derivatives import outcome_sensitivity
 
@@ -181,13 +187,15 @@ class OptimiserNode(ros.Node):
         if self.get_parameter("warm_up").value:
             warm_up_kernels(self)
         systems = string_list_parameter(self, "systems")
-        files = [Path(s).expanduser().resolve() for s in systems if Path(s).suffix == ".py"]
+        files = [Path(s).expanduser().resolve() for s in systems
+                 if Path(s).suffix in (".py", *PROBLEM_SUFFIXES)]
         if files:  # (the operator's files: their directories join system_paths)
             folders = tuple(dict.fromkeys([*self._sources.system_paths,
                                            *(f.parent for f in files)]))
             self._sources = dataclasses.replace(self._sources, system_paths=folders)
         for system in systems:
-            self._warm_up_system(name_of(system))
+            if Path(system).suffix not in PROBLEM_SUFFIXES:
+                self._warm_up_system(name_of(system))
         self._group = ros.ReentrantCallbackGroup()
         self._service = self.create_service(
             ros.srvs.OptimalPolicy, "/biped/optimal_policy", self._on_request,

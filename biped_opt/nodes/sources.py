@@ -27,8 +27,8 @@ if TYPE_CHECKING:
     from biped_opt.systems.description import System
     from biped_opt.systems.problems import Problem
 
-__all__ = ["MAX_NAME", "SystemLimits", "Sources", "check_name", "name_of", "directories",
-           "declare_request_limits"]
+__all__ = ["MAX_NAME", "PROBLEM_SUFFIXES", "SystemLimits", "Sources", "check_name", "name_of",
+           "directories", "declare_request_limits"]
 
 #: longest system, problem or worker name a request may give
 MAX_NAME = 64
@@ -46,11 +46,11 @@ def check_name(field: str, text: str, what: str = "system") -> str:
     """``text`` if it is a plain name; else one line saying what a request may give."""
     if not isinstance(text, str) or len(text) > MAX_NAME or not _NAME.fullmatch(text):
         size = f"at most {MAX_NAME} " if isinstance(text, str) and len(text) > MAX_NAME else ""
-        source = "a library system" if what == "system" else \
-            "one the system declares" if what == "problem" else "one"
+        source = {"system": "a library system", "problem": "one the system declares"}
+        where = (f": a request names {source[what]} or one in the node's system_paths, never "
+                 "a file" if what in source else "")
         raise InvalidInputError(
-            f"{field}: {quoted(text)} is not a {what} name ({size}letters, digits and _): a "
-            f"request names {source} or one in the node's system_paths, never a file")
+            f"{field}: {quoted(text)} is not a {what} name ({size}letters, digits and _){where}")
     return text
 
 

@@ -285,13 +285,15 @@ def test_a_goal_chooses_no_file_and_no_code(tmp_path, evil):
 @pytest.fixture(scope="module")
 def configured(tmp_path_factory):
     """An optimiser whose operator configured a directory of system files (system_paths):
-    one that builds the rocking bar, and ones whose code exits, interrupts, recurses."""
+    one that builds the rocking bar, and ones whose code exits, interrupts, recurses, runs out
+    of memory."""
     folder = tmp_path_factory.mktemp("systems")
     (folder / "bar_copy.py").write_text(
         "from biped_opt.systems.library import rocking_bar\nSYSTEM = rocking_bar()\n")
     (folder / "exits.py").write_text("import sys\nsys.exit(3)\n")
     (folder / "interrupts.py").write_text("raise KeyboardInterrupt\n")
     (folder / "recurses.py").write_text("def f():\n    return f()\nf()\n")
+    (folder / "exhausts.py").write_text("raise MemoryError('out of memory (a stand-in)')\n")
     domain = unique_domain_id()
     host = Host(lambda c: OptimiserNode(context=c, parameter_overrides=[
         ros.Parameter("warm_up", value=False), ros.Parameter("system_paths", value=[str(folder)])]),
@@ -321,9 +323,9 @@ def test_system_files_of_system_paths_are_served_by_name(configured):
 
 @pytest.mark.parametrize(("system", "reason"), [
     ("exits", "SystemExit"), ("interrupts", "KeyboardInterrupt"),
-    ("recurses", "RecursionError")])
-def test_a_system_file_that_exits_interrupts_or_recurses_costs_one_request(configured, system,
-                                                                           reason):
+    ("recurses", "RecursionError"), ("exhausts", "MemoryError")])
+def test_a_system_file_that_exits_interrupts_or_fails_costs_one_request(configured, system,
+                                                                        reason):
     reply = _when_compiled(configured, system)
     assert not reply.success and reason in reply.message and len(reply.message) < 600, \
         reply.message
