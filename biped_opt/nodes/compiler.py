@@ -65,19 +65,17 @@ def prepare(job: dict[str, Any]) -> Any:
     from biped_opt.systems.optimal import compiled_for, optimal_policy
 
     sources = _sources(job)
-    problem = None
     if job["kind"] == "policy":
         problem = sources.problem(job["system"], job["problem"], job["maneuver"])
-    else:
+    else:  # a study: the fixed-input kernels, and its problem's if it has one
+        from biped_opt.systems.nonsmooth import find_nonsmooth
         from biped_opt.systems.problems import load_problem
 
         source, problem_source = sources.study(job["system"], job["problem"])
-        if problem_source is not None:
-            problem = load_problem(problem_source, system=source)
+        problem = None if problem_source is None else load_problem(problem_source,
+                                                                   system=source)
+        if problem is not None:
             sources.limits.check("problem", problem.description)
-    if job["kind"] == "study":  # the fixed-input kernels of a study
-        from biped_opt.systems.nonsmooth import find_nonsmooth
-
         compiled = shared(source)
         for maneuver in compiled.maneuvers:
             compiled.simulate(maneuver, 0.0)
