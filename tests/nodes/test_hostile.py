@@ -351,3 +351,25 @@ def test_a_bad_parameter_ends_the_node_with_status_2_and_one_line(domain_id, nod
     assert out.returncode == 2, out.stderr
     assert out.stderr.strip().splitlines() == [out.stderr.strip()]
     assert out.stderr.startswith(message), out.stderr
+
+
+def test_a_goal_whose_system_file_exits_or_recurses_is_aborted_with_the_reason(tmp_path):
+    """The coordinator describes a goal's system itself (to count and check the study): a
+    system file of its system_paths that exits or recurses ends that goal, not the node."""
+    (tmp_path / "exits.py").write_text("import sys\nsys.exit(3)\n")
+    (tmp_path / "interrupts.py").write_text("raise KeyboardInterrupt\n")
+    (tmp_path / "recurses.py").write_text("def f():\n    return f()\nf()\n")
+    domain = unique_domain_id()
+    host = Host(lambda c: StudyCoordinator(context=c, parameter_overrides=[
+        ros.Parameter("output_dir", value=str(tmp_path / "tables")),
+        ros.Parameter("system_paths", value=[str(tmp_path)])]), domain, threads=4)
+    peer = Host(lambda c: ros.Node("peer", context=c), domain)
+    try:
+        for system, reason in (("exits", "SystemExit: 3"), ("interrupts", "KeyboardInterrupt"),
+                               ("recurses", "RecursionError")):
+            spec = {"system": system, "maneuver": "drop", "grid": {"gamma": [0.5]}}
+            result = _goal(peer.node, spec, "t.csv")
+            assert not result.success and reason in result.message, result.message
+    finally:
+        peer.close()
+        host.close()
