@@ -161,6 +161,7 @@ def test_no_request_runs_a_file_it_names(optimiser, evil):
         {"problem": str(evil / "evil_problem.yaml")}, {"problem": "../evil_problem.yaml"},
         {"problem": str(evil / "abs_problem.yaml"), "system": "rocking_bar"},
         {"problem": "evil_problem"},
+        {"system": "w" * 8192}, {"problem": "p" * 8192, "system": "rocking_bar"},
     ]
     for fields in cases:
         reply = _reply(send_raw(policy, policy_body("drop", 0.1, **fields)))
@@ -168,6 +169,7 @@ def test_no_request_runs_a_file_it_names(optimiser, evil):
         # a reason that names the field, and no compile was started for it
         assert reply.message.split(":")[0] in ("system", "problem"), (fields, reply.message)
         assert not reply.message.startswith(BUSY), (fields, reply.message)
+        assert len(reply.message) < 400 and "internal error" not in reply.message
     for system in (path, "evil", "../evil.py"):
         spec = {"system": system, "maneuver": "drop", "grid": {"gamma": [0.5]}, "num": 5}
         reply = _study_point(study, spec)
