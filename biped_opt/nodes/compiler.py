@@ -59,16 +59,10 @@ def prepare(job: dict[str, Any]) -> Any:
     """Build and exercise what a job names (in the compile process, then in the node):
     ``kind`` "policy" (an OptimalPolicy request's system, problem and maneuver: returns its
     Problem) or "study" (a study's system and problem: returns None)."""
-    import numpy as np
-
-    from biped_opt.systems.compiled import shared
-    from biped_opt.systems.optimal import compiled_for, optimal_policy
-
     sources = _sources(job)
     if job["kind"] == "policy":
         problem = sources.problem(job["system"], job["problem"], job["maneuver"])
     else:  # a study: the fixed-input kernels, and its problem's if it has one
-        from biped_opt.systems.nonsmooth import find_nonsmooth
         from biped_opt.systems.problems import load_problem
 
         source, problem_source = sources.study(job["system"], job["problem"])
@@ -76,6 +70,14 @@ def prepare(job: dict[str, Any]) -> Any:
                                                                    system=source)
         if problem is not None:
             sources.limits.check("problem", problem.description)
+    # (only now the compiler's modules: a description that fails has failed already)
+    import numpy as np
+
+    from biped_opt.systems.compiled import shared
+    from biped_opt.systems.nonsmooth import find_nonsmooth
+    from biped_opt.systems.optimal import compiled_for, optimal_policy
+
+    if job["kind"] == "study":
         compiled = shared(source)
         for maneuver in compiled.maneuvers:
             compiled.simulate(maneuver, 0.0)
