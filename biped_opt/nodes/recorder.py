@@ -47,7 +47,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from biped_opt import ros
-from biped_opt.errors import InvalidInputError, SimulationError
+from biped_opt.errors import (
+    BipedOptError,
+    InvalidInputError,
+    InvalidParameterError,
+    SimulationError,
+)
 from biped_opt.fixed_sweep import FIXED_INPUTS, theta_grid
 from biped_opt.maneuvers import spec
 from biped_opt.nodes import convert
@@ -194,9 +199,16 @@ class RecorderNode(ros.Node):
         self.finished = threading.Event()
         self.last_summary: SweepSummary | None = None
         self.error: BaseException | None = None
+        autostart = bool(self.get_parameter("autostart").value)
+        if autostart:
+            try:  # (a sweep the parameters cannot give stops the node: status 2)
+                self.request_from_parameters().validated()
+            except BipedOptError as exc:
+                raise InvalidParameterError(f"cannot record from the parameters: {exc}") \
+                    from None
         announce_ready(self, calls=("/biped/optimal_policy", "/biped/simulate"),
                        publishes=("/biped/sweep",))
-        if self.get_parameter("autostart").value:
+        if autostart:
             threading.Thread(target=self._record_from_parameters, daemon=True).start()
 
     # -- parameters -> request ----------------------------------------------------------

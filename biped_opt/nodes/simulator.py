@@ -22,7 +22,8 @@ Any other system (parameter ``system``: a library name such as ``rocking_bar`` o
   in the system's declared order; the reply carries ``contact_modes`` and ``system_states``.
 
 The default ``maneuver`` and ``inputs`` of such a system are its first maneuver and zeros. An
-unknown system or a bad system file stops the node at start-up with one line saying why.
+unknown system or a bad system file stops the node at start-up with one line saying why, as
+does (with ``autostart``) a run the parameters cannot start.
 """
 
 from __future__ import annotations
@@ -139,7 +140,6 @@ class SimulatorNode(ros.Node):
         self._lock = threading.Lock()
         self._playback: _Playback | None = None
         self._timer = self.create_timer(0.005, self._on_tick)
-        announce_ready(self, serves=("/biped/simulate",), publishes=topics)
         if self.get_parameter("autostart").value:
             try:
                 self.start(
@@ -148,8 +148,10 @@ class SimulatorNode(ros.Node):
                     list(self.get_parameter("inputs").value),
                     float(self.get_parameter("real_time_factor").value),
                 )
-            except BipedOptError as exc:
-                self.get_logger().error(f"cannot start from the parameters: {exc}")
+            except BipedOptError as exc:  # a bad parameter: the node stops (status 2)
+                raise InvalidParameterError(f"cannot start from the parameters: {exc}") \
+                    from None
+        announce_ready(self, serves=("/biped/simulate",), publishes=topics)
 
     # -- running --------------------------------------------------------------------------
     def run(self, maneuver: str, theta0: float, inputs: Any) -> Any:

@@ -343,6 +343,7 @@ def test_a_system_file_that_exits_interrupts_or_fails_costs_one_request(configur
                                                   "/no/such/dir: no such directory"),
     ("optimiser", "compile_queue:=-1", "optimiser: error: compile_queue must be an integer"),
     ("coordinator", "in_flight:=0", "studycoordinator: error: in_flight must be an integer"),
+    ("simulator", "theta0:=5.0", "simulator: error: cannot start from the parameters: theta0:"),
 ])
 def test_a_bad_parameter_ends_the_node_with_status_2_and_one_line(domain_id, node, param,
                                                                  message):
