@@ -229,8 +229,8 @@ class StudyCoordinator(ros.Node):
         result = ros.actions.Study.Result()
         goal = goal_handle.request
         try:
-            table = self.goal_table(goal.out)
             study = self.goal_study(goal.study)
+            table = self.goal_table(goal.out)
             points = study.points()
 
             def progress(done: int, total: int, index: int) -> None:

@@ -278,7 +278,7 @@ def test_a_goal_chooses_no_file_and_no_code(tmp_path, evil):
         result = _goal(peer.node, "[" * 100_000, "t.csv")
         assert not result.success and "max_request_chars" in result.message
         assert not (evil / "marker").exists()
-        assert not out.exists() or not any(out.iterdir())  # nothing written for a refusal
+        assert not out.exists()  # nothing written, not even the directory, for a refusal
     finally:
         peer.close()
         host.close()
