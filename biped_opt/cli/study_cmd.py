@@ -6,12 +6,16 @@ keys of :meth:`biped_opt.study.Study.from_spec` (system, maneuver and inputs and
 and/or sample with samples and seed, s_range, num, num_optimal, name). With ``--ros`` a
 coordinator (:mod:`biped_opt.nodes.coordinator`) hands the points to every optimiser node on the
 domain (``ROS_DOMAIN_ID``), on any machine. Run again with the same arguments to continue an
-interrupted study; SIGINT/SIGTERM stop it after the points under way.
+interrupted study; SIGINT/SIGTERM stop it after the points under way (exit status 130, as a
+shell gives an interrupted command). A table damaged since (a row that is not UTF-8, holds a NUL
+byte, names a point the study does not have or other parameter values) loses those rows and
+their points are computed again, which the run says in one line.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from biped_opt.cli.args import int_in_range, output_directory, output_file, path_arg, positive_float
@@ -86,9 +90,13 @@ def run(args: argparse.Namespace) -> int:
         else:
             summary = run_study(study, args.out, workers=args.workers, progress=bar.update,
                                 stop=stop.is_set)
+    if summary.repaired:
+        print(f"biped-opt study: {args.out}: {summary.repaired}", file=sys.stderr)
     print(f"{summary.path}: {summary.points} parameter points, {summary.computed} computed now, "
           f"{summary.resumed} resumed, {summary.rows} rows"
           + ("; stopped early, run again to continue" if summary.stopped else ""))
+    if stop.is_set():
+        return 130  # (the table as far as it got; no file or figure of a part of it)
     if args.mcap is not None:
         from biped_opt.record.study_table import write_study_mcap
 
@@ -98,6 +106,7 @@ def run(args: argparse.Namespace) -> int:
         from biped_opt.record.study_table import read_table
 
         output_directory("--figures", args.figures)
-        for path in study_figures(args.figures, read_table(args.out), study.parameter_names):
+        for path in study_figures(args.figures, read_table(args.out, study),
+                                  study.parameter_names):
             print(f"  {path}")
     return 0
