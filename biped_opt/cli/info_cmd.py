@@ -30,7 +30,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def describe(path: str | Path) -> dict:
     """Plain-data summary of a recording (what ``info`` prints)."""
-    from biped_opt.record.reader import read_raw, system_description
+    from biped_opt.record.reader import read_raw, recorded_system
     from biped_opt.record.replay import qos_from_metadata
 
     raw = read_raw(path)
@@ -57,7 +57,7 @@ def describe(path: str | Path) -> dict:
         "duration_s": (span[1] - span[0]) * 1e-9 if span else 0.0,
         "sweep_points": counts.get("/biped/sweep", 0),
         "sweep": raw.metadata.get("biped_opt.sweep", {}),
-        "system": system_description(raw.metadata),
+        "system": recorded_system(raw),
         "metadata_records": sorted(raw.metadata),
     }
 

@@ -104,7 +104,8 @@ def print_sweep(args: argparse.Namespace, data: dict, header: str, lines: list[s
             with open(args.out, "w", encoding="utf-8") as fh:
                 fh.write(strict_json.dumps(data))
         except OSError as exc:
-            raise InvalidInputError(f"--out: cannot write {args.out!r}: {exc.strerror}") from None
+            raise InvalidInputError(f"--out: cannot write {str(args.out)!r}: {exc.strerror}"
+                                    ) from None
         print(f"wrote {len(lines)} points to {args.out}")
     else:
         print(header)
