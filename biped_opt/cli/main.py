@@ -74,8 +74,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except KeyboardInterrupt:  # (Ctrl-C during the imports: interrupted all the same)
+        print("biped-opt: interrupted", file=sys.stderr)
+        return 130
     try:
         status = int(args.func(args) or 0)
         sys.stdout.flush()
@@ -93,6 +96,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(devnull, sys.stdout.fileno())
         os.close(devnull)
         return 0
+    except OSError as exc:  # (a disk that fills up, a file removed under the command)
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"biped-opt {args.command}: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except MemoryError:
+        print(f"biped-opt {args.command}: error: not enough memory for this command",
+              file=sys.stderr)
+        return EXIT_USAGE
 
 
 if __name__ == "__main__":

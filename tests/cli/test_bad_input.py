@@ -396,3 +396,24 @@ def test_a_bad_domain_in_the_environment_is_one_line(value, fragment, argv, plac
     assert main([_fill(a, places) for a in argv]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and fragment in err, err
+
+
+@pytest.mark.parametrize(("error", "fragment"), [
+    (MemoryError(), "biped-opt sweep: error: not enough memory for this command"),
+    (OSError(28, "No space left on device", "/x/s.json"),
+     "biped-opt sweep: error: /x/s.json: No space left on device"),
+    (KeyboardInterrupt(), "biped-opt sweep: interrupted"),
+])
+def test_what_the_machine_refuses_is_one_line(error, fragment, monkeypatch, capsys):
+    """Out of memory, a full disk, Ctrl-C in the middle of the work: one line, no traceback
+    (status 2, or 130 for an interrupted command as a shell gives it)."""
+    from biped_opt.cli import sweep_cmd
+
+    def refuse(*_args, **_kwargs):
+        raise error
+
+    monkeypatch.setattr(sweep_cmd, "sweep_fixed", refuse)
+    status = main(["sweep", "--maneuver", "touchdown", "--num", "3"])
+    err = capsys.readouterr().err
+    assert status == (130 if isinstance(error, KeyboardInterrupt) else 2)
+    assert err == fragment + "\n", err

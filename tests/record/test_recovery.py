@@ -218,7 +218,7 @@ def test_no_flipped_bit_yields_anything_the_file_did_not_hold(recording, tmp_pat
         # MCAP gives the metadata record no CRC of its own; the writer adds one: a bit in it
         # loses the record (the file then is not complete), it never changes it
         assert raw.metadata in (whole.metadata, {}), offset
-        assert raw.complete or not meta_start <= offset < meta_end, offset
+        assert not (raw.complete and meta_start <= offset < meta_end), offset
         if raw.complete:
             assert raw.messages == whole.messages and raw.channels == whole.channels, offset
             continue
