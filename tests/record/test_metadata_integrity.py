@@ -5,8 +5,8 @@ A metadata record lies outside the CRC-checked chunks. The writer seals each one
 its own (key ``crc32``); a file written without it (an older recording) is checked by a
 validated parse of every key used. Every byte of the metadata records of small recordings (a
 fixed-input sweep of the biped, sealed and not, a sweep of another system) is damaged in turn,
-and both commands run in-process on the result. (The writer writes no attachments, and the readers read
-none.)
+and both commands run in-process on the result. (The writer writes no attachments, and the
+readers read none.)
 """
 
 from __future__ import annotations
