@@ -21,7 +21,7 @@ from types import ModuleType
 
 import biped_opt
 from biped_opt import strict_json
-from biped_opt.cli.args import int_at_least
+from biped_opt.cli.args import MAX_POINTS, MAX_SEED, int_in_range
 from biped_opt.errors import BipedOptError
 
 __all__ = ["BenchUnavailableError", "load_bench", "register", "run", "format_table"]
@@ -73,9 +73,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "bench", help="time biped_opt against solve_ivp and a relaxation simulator"
     )
-    p.add_argument("--cases", type=int_at_least("--cases", 2), default=200,
+    p.add_argument("--cases", type=int_in_range("--cases", 2, MAX_POINTS), default=200,
                    help="number of (maneuver, theta0, inputs) cases, half each (default 200)")
-    p.add_argument("--seed", type=int, default=None, help="seed of the random cases")
+    p.add_argument("--seed", type=int_in_range("--seed", 0, MAX_SEED), default=None,
+                   help="seed of the random cases")
     p.add_argument("--quick", action="store_true",
                    help="one timing round, short sweeps, relaxation on a subset")
     p.add_argument("--no-compile", action="store_true",

@@ -14,6 +14,8 @@ import argparse
 import time
 from pathlib import Path
 
+from biped_opt.cli.args import output_directory, path_arg
+
 SWEEPS = (  # maneuver, optimal, angles
     ("touchdown", False, 401),
     ("liftoff", False, 401),
@@ -24,13 +26,13 @@ SWEEPS = (  # maneuver, optimal, angles
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("demo", help="run the paper's sweeps through the nodes; MCAP, figures")
-    p.add_argument("--out", type=Path, default=Path("out"), help="output directory (default out/)")
+    p.add_argument("--out", type=path_arg(output_directory, "--out", create=False),
+                   default=Path("out"), help="output directory (default out/)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from biped_opt import ros
-    from biped_opt.cli.args import output_directory
     from biped_opt.cli.signals import stop_requested
     from biped_opt.maneuvers import spec
     from biped_opt.nodes.graph import Graph

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from biped_opt.cli.args import int_at_least, output_directory
+from biped_opt.cli.args import MAX_POINTS, int_in_range, output_directory, path_arg
 from biped_opt.cli.system_cmds import add_system_arguments, problem_from_system_args, uses_system
 from biped_opt.errors import InvalidInputError
 
@@ -23,17 +23,18 @@ SYSTEM_NUM = {"fixed": 401, "optimal": 101}
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("figures", help="reproduce the paper's figures (PNG) and nonsmooth table, "
                                        "or draw any system's (--system)")
-    p.add_argument("--out", type=Path, default=Path("out/figures"), help="output directory")
-    p.add_argument("--fixed-num", type=int_at_least("--fixed-num", 5), default=None,
+    p.add_argument("--out", type=path_arg(output_directory, "--out", create=False),
+                   default=Path("out/figures"), help="output directory")
+    p.add_argument("--fixed-num", type=int_in_range("--fixed-num", 5, MAX_POINTS), default=None,
                    help="angles per fixed sweep (default 401; the biped's)")
-    p.add_argument("--optimal-num", type=int_at_least("--optimal-num", 5), default=None,
+    p.add_argument("--optimal-num", type=int_in_range("--optimal-num", 5, MAX_POINTS), default=None,
                    help="angles per optimal sweep (default 201; the biped's)")
     p.add_argument("--progress", action="store_true", help="progress bars on stderr")
     add_system_arguments(p, sweep=True)
     g = p.add_argument_group("any system: the maneuver and the grid")
     g.add_argument("--maneuver", default=None, metavar="M",
                    help="the maneuver swept at fixed inputs (--input NAME=VALUE)")
-    g.add_argument("--num", type=int_at_least("--num", 5), default=None,
+    g.add_argument("--num", type=int_in_range("--num", 5, MAX_POINTS), default=None,
                    help=f"values of s (default {SYSTEM_NUM['fixed']} fixed, "
                         f"{SYSTEM_NUM['optimal']} optimal; 0 included when inside)")
     p.set_defaults(func=run)

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from biped_opt import strict_json
+from biped_opt.cli.args import MAX_SEED, int_in_range, output_directory, path_arg
 from biped_opt.gradients import PROBLEMS, report, run_gradient_study
 
 SIGMAS = (0.003, 0.03)
@@ -17,12 +18,14 @@ EPS_VALUES = (0.02, 0.002)
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "gradients", help="descent and policy-gradient estimators at kinks and jumps, measured")
-    p.add_argument("--seed", type=int, default=0, help="seed of every random draw (default 0)")
+    p.add_argument("--seed", type=int_in_range("--seed", 0, MAX_SEED), default=0,
+                   help="seed of every random draw (default 0)")
     p.add_argument("--quick", action="store_true",
                    help="small grids and samples (about a minute per problem)")
     p.add_argument("--problem", action="append", choices=[name for _, name, _, _ in PROBLEMS],
                    help="study only this problem (repeatable; default all four)")
-    p.add_argument("--figures", metavar="DIR", default=None,
+    p.add_argument("--figures", type=path_arg(output_directory, "--figures", create=False),
+                   metavar="DIR", default=None,
                    help="write one figure per problem, gradients_<problem>.png, into DIR")
     p.add_argument("--json", action="store_true", help="print the tables' numbers as JSON")
     p.add_argument("--verbose", action="store_true", help="report each stage on stderr")
@@ -42,6 +45,8 @@ def run(args: argparse.Namespace) -> int:
         print(report(study, SAMPLE_COUNTS))
     if args.figures:
         from biped_opt.plots.gradients import gradient_figure
+
+        output_directory("--figures", args.figures)
 
         for name in study.curves:
             path = gradient_figure(study, name, Path(args.figures) / f"gradients_{name}.png")

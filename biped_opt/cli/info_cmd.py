@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from biped_opt import strict_json
-from biped_opt.cli.args import new_directory
+from biped_opt.cli.args import new_directory, path_arg
 
 __all__ = ["register", "func", "describe"]
 
@@ -22,7 +22,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "rosbag2 directory (metadata.yaml version 8, which ROS 2 Humble reads, "
                     "and the MCAP).")
     p.add_argument("file", help="the .mcap recording")
-    p.add_argument("--to-rosbag2", type=Path, metavar="DIR",
+    p.add_argument("--to-rosbag2", type=path_arg(new_directory, "--to-rosbag2"), metavar="DIR",
                    help="write the recording as a rosbag2 directory DIR (new or empty)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=func)
@@ -30,7 +30,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def describe(path: str | Path) -> dict:
     """Plain-data summary of a recording (what ``info`` prints)."""
-    from biped_opt.record.reader import read_raw, system_description
+    from biped_opt.record.reader import read_raw, recorded_system
     from biped_opt.record.replay import qos_from_metadata
 
     raw = read_raw(path)
@@ -57,7 +57,7 @@ def describe(path: str | Path) -> dict:
         "duration_s": (span[1] - span[0]) * 1e-9 if span else 0.0,
         "sweep_points": counts.get("/biped/sweep", 0),
         "sweep": raw.metadata.get("biped_opt.sweep", {}),
-        "system": system_description(raw.metadata),
+        "system": recorded_system(raw),
         "metadata_records": sorted(raw.metadata),
     }
 
@@ -98,8 +98,6 @@ def _text(info: dict) -> str:
 
 
 def func(args: argparse.Namespace) -> int:
-    if args.to_rosbag2 is not None:
-        new_directory("--to-rosbag2", args.to_rosbag2)
     info = describe(args.file)
     print(strict_json.dumps(info, indent=2) if args.json else _text(info))
     if args.to_rosbag2 is not None:

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
+
+from biped_opt.cli.args import input_file, path_arg
 
 NODES = ("simulator", "optimiser", "recorder", "coordinator")
 
@@ -18,7 +19,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("ros_args", nargs=argparse.REMAINDER, help="--ros-args ...")
     p.set_defaults(func=run_node)
     p = sub.add_parser("launch", help="run all three nodes in one process (as the launch file)")
-    p.add_argument("--params-file", type=Path, default=None,
+    p.add_argument("--params-file", type=path_arg(input_file, "--params-file"), default=None,
                    help="ROS 2 parameter file (default: config/biped.yaml)")
     p.set_defaults(func=run_launch)
 
@@ -32,14 +33,11 @@ def run_node(args: argparse.Namespace) -> int:
 
 
 def run_launch(args: argparse.Namespace) -> int:
-    from biped_opt.cli.args import input_file
     from biped_opt.cli.signals import stop_requested
     from biped_opt.nodes.graph import Graph
 
     # a signal while the graph starts abandons the start; once it runs, a signal (even one that
     # arrives while the "running" line is printed) only ends the wait below
-    if args.params_file is not None:
-        input_file("--params-file", args.params_file)
     with stop_requested(interrupt=True) as stop:
         try:
             graph = Graph(params_file=args.params_file)

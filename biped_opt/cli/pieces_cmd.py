@@ -5,14 +5,23 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 from biped_opt import strict_json
-from biped_opt.cli.args import int_at_least, int_in_range, positive_float
+from biped_opt.cli.args import (
+    MAX_POINTS,
+    MAX_SEED,
+    int_in_range,
+    output_file,
+    path_arg,
+    positive_float,
+)
 
 #: the exact derivatives are accurate to ~1e-10 (variational tolerance); a cone whose further
 #: direction misses g.d by more than this is cut into more than one linear piece
 LINEAR_TOL = 1e-8
+#: most rounds to count: the unperturbed walker has a few simultaneous rounds in its 12 s, and
+#: k beyond them counts nothing more
+MAX_ROUNDS = 10
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -28,24 +37,24 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--legs", type=int_in_range("--legs", 1, MAX_LEGS), nargs="+",
                    default=list(range(1, MAX_LEGS + 1)), metavar="N",
                    help=f"numbers of legs (default 1..{MAX_LEGS})")
-    p.add_argument("--rounds", type=int_at_least("--rounds", 1), default=3, metavar="K",
+    p.add_argument("--rounds", type=int_in_range("--rounds", 1, MAX_ROUNDS), default=3, metavar="K",
                    help="count for k = 1..K rounds, as far as the walker has them (default 3)")
-    p.add_argument("--samples", type=int_at_least("--samples", 2), default=400,
+    p.add_argument("--samples", type=int_in_range("--samples", 2, MAX_POINTS), default=400,
                    help="samples of the neighbourhood per count (default 400)")
-    p.add_argument("--radius", type=positive_float("--radius"), default=1e-3,
+    p.add_argument("--radius", type=positive_float("--radius", maximum=0.01), default=1e-3,
                    help="size of the perturbation s (default 1e-3, at most 0.01)")
-    p.add_argument("--seed", type=int_at_least("--seed", 0), default=0,
+    p.add_argument("--seed", type=int_in_range("--seed", 0, MAX_SEED), default=0,
                    help="seed of the samples and of the check directions (default 0)")
     p.add_argument("--no-derivative", action="store_true",
                    help="skip the B-derivative's linear pieces")
-    p.add_argument("--figure", type=Path, metavar="FILE.png",
+    p.add_argument("--figure", type=path_arg(output_file, "--figure", overwrite=True),
+                   metavar="FILE.png",
                    help="also draw the counts (and linear pieces) against (n!)^k")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from biped_opt.cli.args import output_file
     from biped_opt.pieces import (
         count_pieces,
         derivative_pieces,
@@ -53,8 +62,6 @@ def run(args: argparse.Namespace) -> int:
         simultaneous_rounds,
     )
 
-    if args.figure is not None:
-        output_file("--figure", args.figure, overwrite=True)
     start = time.perf_counter()
     counts, derivatives = [], {}
     for n in sorted(set(args.legs)):

@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from biped_opt.cli.args import finite_float, input_file, int_in_range, output_file
+from biped_opt.cli.args import finite_float, input_file, int_in_range, output_file, path_arg
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -16,9 +15,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--num", required=True, type=int_in_range("--num", 2, 100_000),
                    help="angles (th0 = 0 is always added)")
     p.add_argument("--optimal", action="store_true", help="optimal policies (else fixed inputs)")
-    p.add_argument("--out", required=True, type=Path,
+    p.add_argument("--out", required=True, type=path_arg(output_file, "--out", overwrite=False),
                    help="output .mcap file (its directory must exist; never overwritten)")
-    p.add_argument("--params-file", type=Path, default=None, help="ROS 2 parameter file")
+    p.add_argument("--params-file", type=path_arg(input_file, "--params-file"), default=None,
+                   help="ROS 2 parameter file")
     p.add_argument("--system", default="",
                    help="record another system than the biped: a library name or a system "
                         "file (the --theta0 range is then the maneuver's s)")
@@ -41,9 +41,6 @@ def run(args: argparse.Namespace) -> int:
                            theta0_max=args.theta0_max, num=args.num, optimal=args.optimal,
                            output=args.out, system=args.system, problem=args.problem,
                            fixed_inputs=tuple(args.inputs)).validated()
-    output_file("--out", args.out, overwrite=False)
-    if args.params_file is not None:
-        input_file("--params-file", args.params_file)
     # Ctrl-C or SIGTERM while the graph starts abandons the start; once it records, either one
     # stops the sweep after the current point, the file is finished and the summary printed
     # (the optimiser serves the operator's problem file by name from its directory)

@@ -6,7 +6,7 @@ import argparse
 import signal
 import sys
 
-from biped_opt.cli.args import int_in_range, positive_float
+from biped_opt.cli.args import float_in_range, int_in_range
 
 __all__ = ["register", "func"]
 
@@ -22,13 +22,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "'ros2 bag play'. Unfinished files (a killed recorder) are replayed from "
                     "their complete chunks. Ctrl-C or SIGTERM stops it (exit status 0).")
     p.add_argument("file", help="the .mcap recording")
-    p.add_argument("--rate", type=positive_float("--rate"), default=1.0,
-                   help="speed factor (default 1)")
+    p.add_argument("--rate", type=float_in_range("--rate", 1e-3, 1e3), default=1.0,
+                   help="speed factor, 0.001 to 1000 (default 1)")
     p.add_argument("--loop", action="store_true", help="start again after the last message")
     p.add_argument("--topics", nargs="+", metavar="T", help="replay only these topics")
     p.add_argument("--domain-id", type=int_in_range("--domain-id", 0, MAX_DOMAIN_ID), default=None,
                    help="DDS domain (default: $ROS_DOMAIN_ID, else 0)")
-    p.add_argument("--delay", type=positive_float("--delay", zero=True), default=0.5,
+    p.add_argument("--delay", type=float_in_range("--delay", 0.0, 3600.0), default=0.5,
                    help="seconds to wait for subscribers to be discovered before the first "
                         "message (default 0.5)")
     p.set_defaults(func=func)

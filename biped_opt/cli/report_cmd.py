@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
+
+from biped_opt.cli.args import output_directory, path_arg
 
 __all__ = ["register", "func"]
 
@@ -17,17 +18,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "slopes extrapolated from the recorded angles on each side). --refine also "
                     "locates every point to 1e-10 with the core and prints both.")
     p.add_argument("files", nargs="+", metavar="FILE", help=".mcap recordings")
-    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--out", type=path_arg(output_directory, "--out", create=False),
+                   required=True, help="output directory (made once the recordings are read)")
     p.add_argument("--refine", action="store_true",
                    help="re-locate the points with the core (simulates/optimises again)")
     p.set_defaults(func=func)
 
 
 def func(args: argparse.Namespace) -> int:
-    from biped_opt.cli.args import output_directory
     from biped_opt.record.report import report
 
-    output_directory("--out", args.out, create=False)  # made once the recordings are read
     result = report(args.files, args.out, refine=args.refine)
     for s in result.sweeps:
         state = "complete" if s.complete else f"RECOVERED ({s.note})"

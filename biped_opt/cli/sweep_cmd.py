@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 from biped_opt import strict_json
-from biped_opt.cli.args import finite_float, int_at_least, output_file
+from biped_opt.cli.args import MAX_POINTS, finite_float, int_in_range, output_file, path_arg
 from biped_opt.cli.optimise_cmd import add_problem_arguments, problem_from_args
 from biped_opt.cli.simulate_cmd import parse_maneuver_arg
 from biped_opt.cli.system_cmds import add_system_arguments, run_sweep, uses_system
@@ -22,7 +21,8 @@ def add_range_arguments(p: argparse.ArgumentParser, num_help: str) -> None:
                    help="smallest th0 [rad] (default: -limit of the maneuver)")
     p.add_argument("--theta0-max", type=finite_float("--theta0-max"), default=None,
                    help="largest th0 [rad] (default: +limit of the maneuver)")
-    p.add_argument("--num", type=int_at_least("--num", 2), default=None, help=num_help)
+    p.add_argument("--num", type=int_in_range("--num", 2, MAX_POINTS), default=None,
+                   help=num_help)
     p.add_argument("--progress", dest="progress", action="store_true", default=None,
                    help="draw a progress bar on stderr (default: when stderr is a terminal)")
     p.add_argument("--no-progress", dest="progress", action="store_false")
@@ -58,7 +58,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         p.add_argument(f"--{name}", type=finite_float(f"--{name}"), default=None,
                        help=f"fixed-input sweep: {name} (default: the paper's figure input)")
     add_system_arguments(p, sweep=True)
-    p.add_argument("--out", default=None, metavar="F.json",
+    p.add_argument("--out", type=path_arg(output_file, "--out", overwrite=True), default=None,
+                   metavar="F.json",
                    help="write the sweep as JSON to this file (default: a table on stdout)")
     p.set_defaults(func=run)
 
@@ -99,12 +100,12 @@ def print_sweep(args: argparse.Namespace, data: dict, header: str, lines: list[s
                 ok: bool) -> int:
     """The sweep as JSON to --out, else as a table on stdout; the exit status."""
     if args.out:
-        output_file("--out", Path(args.out), overwrite=True)
         try:
             with open(args.out, "w", encoding="utf-8") as fh:
                 fh.write(strict_json.dumps(data))
         except OSError as exc:
-            raise InvalidInputError(f"--out: cannot write {args.out!r}: {exc.strerror}") from None
+            raise InvalidInputError(f"--out: cannot write {str(args.out)!r}: {exc.strerror}"
+                                    ) from None
         print(f"wrote {len(lines)} points to {args.out}")
     else:
         print(header)

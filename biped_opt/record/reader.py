@@ -7,12 +7,22 @@ every complete, intact chunk, skips and counts damaged ones, and reports how muc
 (MCAP.md: crash safety). A file that is not MCAP, or holds
 nothing recoverable, is an error.
 :func:`read_recording` decodes what :func:`read_raw` returns.
+
+Metadata records lie outside the chunks: nothing but the data section's CRC covers them, and a file
+whose data section fails it is read by recovery. So every metadata record is checked before it is
+handed on (:func:`checked_metadata`): its own CRC where the writer sealed it
+(:func:`biped_opt.record.writer.sealed`), and for the records this package reads, every key and
+the type of every value used (JSON that parses to the lists and numbers expected). A record that
+fails is left out and the note says so; readers then fall back on what the CRC-checked chunks hold
+(the SweepPoints' maneuver and kind, the ``/biped/system_info`` message). Attachments are not
+read.
 """
 
 from __future__ import annotations
 
 import io
 import json
+import math
 import struct
 import zlib
 from collections import defaultdict
@@ -31,12 +41,12 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, ChunkIndex, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
-from biped_opt.record.writer import SYSTEM_METADATA, RecordError
+from biped_opt.record.writer import METADATA_CRC, SYSTEM_METADATA, RecordError, metadata_crc
 from biped_opt.ros.interfaces import load_interfaces
 
 __all__ = [
-    "RawChannel", "RawMessage", "RawRecording", "RecordedMessage", "Recording", "read_raw",
-    "read_recording", "system_description",
+    "RawChannel", "RawMessage", "RawRecording", "RecordedMessage", "Recording", "checked_metadata",
+    "read_raw", "read_recording", "recorded_system", "system_description",
 ]
 
 
@@ -98,11 +108,176 @@ def system_description(metadata: dict[str, dict[str, str]]) -> dict[str, Any] | 
     out: dict[str, Any] = {}
     for key, text in record.items():
         try:
-            out[key] = text if key in ("system", "source") else json.loads(text)
-        except ValueError:
-            raise RecordError(f"metadata {SYSTEM_METADATA}: {key} is not JSON: {text!r}"
+            out[key] = text if key in _PLAIN else json.loads(text)
+        except (ValueError, RecursionError):
+            raise RecordError(f"metadata {SYSTEM_METADATA}: {key} is not JSON: {text[:40]!r}"
                               ) from None
     return out
+
+
+def recorded_system(raw: RawRecording) -> dict[str, Any] | None:
+    """The recorded system's description: the ``biped_opt.system`` metadata record, else (a
+    record lost to damage) the ``/biped/system_info`` message, which a CRC-checked chunk holds;
+    None for a recording of the biped."""
+    described = system_description(raw.metadata)
+    if described is not None or raw.channels.get("/biped/system_info") is None:
+        return described
+    message = next((m for m in raw.messages if m.topic == "/biped/system_info"), None)
+    if message is None:
+        return None
+    typestore = load_interfaces().typestore
+    info = typestore.deserialize_cdr(message.data, raw.channels["/biped/system_info"].type)
+    return {key: (getattr(info, key) if key in _PLAIN else
+                  [float(v) if key in _NUMBER_LISTS else str(v) for v in getattr(info, key)])
+            for key in (*_PLAIN, *_NAME_LISTS, *_NUMBER_LISTS)}
+
+
+# -- metadata: checked before use (see the module docstring) --------------------------------------
+
+#: biped_opt.system: the text fields, the lists of names and of numbers (SystemInfo's fields)
+_PLAIN = ("system", "source")
+_NAME_LISTS = ("coordinates", "constraints", "inputs", "parameter_names", "maneuvers")
+_NUMBER_LISTS = ("parameter_values", "s_min", "s_max")
+
+
+def _finite(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) \
+        and math.isfinite(value)
+
+
+def _loads(text: str) -> Any:
+    try:
+        return json.loads(text)
+    except (ValueError, RecursionError):
+        raise ValueError("not JSON") from None
+
+
+def _names(text: str) -> None:
+    value = _loads(text)
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise ValueError("not a list of names")
+
+
+def _numbers(text: str) -> None:
+    value = _loads(text)
+    if not isinstance(value, list) or not all(_finite(v) for v in value):
+        raise ValueError("not a list of finite numbers")
+
+
+def _number(text: str) -> None:
+    if not math.isfinite(float(text)):
+        raise ValueError("not finite")
+
+
+def _integer(text: str) -> None:
+    int(text)
+
+
+def _flag(text: str) -> None:
+    if text not in ("True", "False"):
+        raise ValueError("not True or False")
+
+
+def _inputs(text: str) -> None:
+    if text:
+        _numbers(text)
+        if len(_loads(text)) > 64:
+            raise ValueError("more inputs than any system has")
+
+
+def _pairs_of(value: Any, names: list[str], what: str, check: Any) -> None:
+    if not isinstance(value, dict) or set(value) != set(names) or \
+            not all(check(value[n]) for n in names):
+        raise ValueError(f"{what} are not one per decision")
+
+
+def _cost(text: str) -> None:
+    """The biped's problem (OptimalControlProblem.describe())."""
+    d = _loads(text)
+    if not isinstance(d, dict) or not isinstance(d.get("decisions"), list) or \
+            not all(isinstance(n, str) for n in d["decisions"]):
+        raise ValueError("no list of decisions")
+    names = d["decisions"]
+    _pairs_of(d.get("bounds"), names, "bounds",
+              lambda b: isinstance(b, list) and len(b) == 2 and all(_finite(v) for v in b))
+    _pairs_of(d.get("alphas"), names, "alphas", _finite)
+    if not _finite(d.get("theta_star")):
+        raise ValueError("theta_star is not a finite number")
+    fixed = d.get("fixed_inputs", {})
+    if not isinstance(fixed, dict) or not all(_finite(v) for v in fixed.values()):
+        raise ValueError("fixed_inputs are not numbers")
+    for key in ("name", "maneuver"):
+        if not isinstance(d.get(key, ""), str):
+            raise ValueError(f"{key} is not text")
+
+
+def _problem(text: str) -> None:
+    """Another system's problem (Problem.as_dict()): what a report reads of it."""
+    d = _loads(text)
+    decisions = d.get("decisions") if isinstance(d, dict) else None
+    if not isinstance(decisions, dict) or not all(
+            isinstance(b, list) and len(b) == 2 and all(_finite(v) for v in b)
+            for b in decisions.values()):
+        raise ValueError("no decisions with [low, high] bounds")
+
+
+def _study(text: str) -> None:
+    if not isinstance(_loads(text), dict):
+        raise ValueError("not a JSON object")
+
+
+def _text(_text: str) -> None:
+    """Any text."""
+
+
+#: the records this package reads: each key it knows with the check of its value, and the keys
+#: that must be there; a record with another key is not this package's record as written
+_RECORDS: dict[str, tuple[dict[str, Any], tuple[str, ...]]] = {
+    "biped_opt.sweep": ({
+        "maneuver": _text, "system": _text, "theta0_min": _number, "theta0_max": _number,
+        "num": _integer, "optimal": _flag, "fixed_inputs": _inputs, "cost": _cost,
+        "problem": _problem}, ()),
+    SYSTEM_METADATA: ({
+        **{k: _text for k in _PLAIN}, **{k: _names for k in _NAME_LISTS},
+        **{k: _numbers for k in _NUMBER_LISTS}}, (*_PLAIN, *_NAME_LISTS, "parameter_values")),
+    "biped_opt.study": ({"study": _study}, ("study",)),
+}
+
+
+def _fault(name: str, pairs: dict[str, str]) -> str:
+    """Why a metadata record cannot be used ("" when it can)."""
+    crc = pairs.get(METADATA_CRC)
+    if crc is not None and crc != metadata_crc(name, pairs):
+        return "it fails its CRC"
+    if name not in _RECORDS:
+        return ""
+    checks, required = _RECORDS[name]
+    for key, text in pairs.items():
+        if key == METADATA_CRC:
+            continue
+        if key not in checks:
+            return f"unknown key {key[:40]!r}"
+        try:
+            checks[key](text)
+        except (ValueError, TypeError, OverflowError) as exc:
+            return f"{key}: {exc}"
+    missing = [k for k in required if k not in pairs]
+    return f"{missing[0]} is missing" if missing else ""
+
+
+def checked_metadata(records: Iterable[tuple[str, dict[str, str]]]
+                     ) -> tuple[dict[str, dict[str, str]], list[str]]:
+    """The metadata records that pass their checks (see the module docstring), their CRC key
+    removed, and one note per record left out. A later record of a name replaces an earlier."""
+    out: dict[str, dict[str, str]] = {}
+    notes = []
+    for name, pairs in records:
+        why = _fault(name, pairs)
+        if why:
+            notes.append(f"metadata record {name[:40]!r} ignored: {why}")
+            continue
+        out[name] = {k: v for k, v in pairs.items() if k != METADATA_CRC}
+    return out, notes
 
 
 def read_recording(path: str | Path) -> Recording:
@@ -232,10 +407,11 @@ def _read_raw_indexed(path: Path, data: bytes, wanted: set[str] | None) -> RawRe
         for _schema, channel, message in reader.iter_messages(
             topics=None if wanted is None else sorted(wanted), log_time_order=True)
     ]
-    metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+    metadata, notes = checked_metadata((m.name, dict(m.metadata))
+                                       for m in reader.iter_metadata())
     return RawRecording(path=path, channels=channels, messages=tuple(out), metadata=metadata,
-                        complete=True, note="indexed", file_size=len(data),
-                        bytes_read=len(data))
+                        complete=not notes, note="; ".join(["indexed", *notes]),
+                        file_size=len(data), bytes_read=len(data))
 
 
 # -- the record structure --------------------------------------------------------------------
@@ -415,7 +591,7 @@ class _Scan:
     #: a file without chunks (a writer that chunks puts them all in chunks, so between chunks
     #: they can only be records whose opcode was damaged)
     loose: list[Any] = field(default_factory=list)
-    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    metadata: list[tuple[str, dict[str, str]]] = field(default_factory=list)
     chunks: int = 0  #: chunk records seen, intact or not
     corrupt: int = 0  #: chunks skipped: framing, size, CRC or decompression failed
     skipped: int = 0  #: records outside chunks that did not parse
@@ -447,8 +623,11 @@ def _scan(data: bytes, summary: _Summary | None) -> _Scan:
             elif in_chunk:  # the index says a chunk starts here: its opcode is damaged
                 raise _Framing("not a chunk where the index has one")
             elif opcode == Opcode.METADATA:
-                item = Metadata.read(_stream(data, body, end))
-                found.metadata[item.name] = dict(item.metadata)
+                stream = _stream(data, body, end)
+                item = Metadata.read(stream)
+                if stream.count != end - body:  # (the map's own length is damaged)
+                    raise ValueError("a metadata map shorter than its record")
+                found.metadata.append((item.name, dict(item.metadata)))
             elif opcode in _TOP_LEVEL:
                 found.loose.append(_TOP_LEVEL[opcode](_stream(data, body, end), end - body))
         except _DAMAGED as exc:
@@ -520,9 +699,11 @@ def _recover(path: Path, data: bytes, wanted: set[str] | None, summary: _Summary
         ch.topic: _raw_channel(schemas.get(ch.schema_id), ch)
         for ch in by_id.values() if wanted is None or ch.topic in wanted
     }
+    metadata, notes = checked_metadata(found.metadata)
     note = (f"recovered {len(out)} messages from the complete chunks of {why}: {found.good} of "
-            f"{len(data)} bytes ({found.good / max(len(data), 1):.1%}) were readable{losses}")
+            f"{len(data)} bytes ({found.good / max(len(data), 1):.1%}) were readable{losses}"
+            + "".join(f"; {n}" for n in notes))
     return RawRecording(path=path, channels=channels, messages=tuple(out),
-                        metadata=found.metadata, complete=False, note=note,
+                        metadata=metadata, complete=False, note=note,
                         file_size=len(data), bytes_read=found.good,
                         damaged_chunks=found.corrupt)

@@ -53,7 +53,7 @@ from biped_opt.model.modes import ContactMode
 from biped_opt.optimal import OptimalControlProblem, get_problem
 from biped_opt.optimal.nonsmooth import NonsmoothPoint, NonsmoothReport
 from biped_opt.optimal.sweep import FixedSweep, OptimalSweep
-from biped_opt.record.reader import read_raw, system_description
+from biped_opt.record.reader import read_raw, recorded_system
 from biped_opt.ros.interfaces import load_interfaces
 from biped_opt.systems.derive import mode_name
 
@@ -147,43 +147,53 @@ class RecordedSweep:
         return self.maneuver if self.system == "biped" else f"{self.system}:{self.maneuver}"
 
 
-def _problem(meta: dict[str, str], maneuver: str) -> OptimalControlProblem:
+def _problem(meta: dict[str, str], maneuver: str, path: Path) -> OptimalControlProblem:
+    """The biped's problem the recording was costed with (its ``cost``, else the maneuver's
+    default); a recorded problem that is no problem of the biped is a :class:`ReportError`."""
     text = meta.get("cost")
-    if not text:
-        return get_problem(maneuver)
-    d = json.loads(text)
-    decisions = tuple(d["decisions"])
-    fixed = tuple(float(d.get("fixed_inputs", {}).get(n, 0.0)) for n in INPUT_NAMES)
-    return OptimalControlProblem(
-        name=str(d.get("name", maneuver)), maneuver=d.get("maneuver", maneuver),
-        decisions=decisions, fixed_inputs=fixed,  # type: ignore[arg-type]
-        bounds=tuple(tuple(d["bounds"][k]) for k in decisions),  # type: ignore[arg-type]
-        theta_star=float(d["theta_star"]), alphas=tuple(float(d["alphas"][k]) for k in decisions),
-    )
+    try:
+        if not text:
+            return get_problem(maneuver)
+        d = json.loads(text)
+        decisions = tuple(d["decisions"])
+        fixed = tuple(float(d.get("fixed_inputs", {}).get(n, 0.0)) for n in INPUT_NAMES)
+        return OptimalControlProblem(
+            name=str(d.get("name", maneuver)), maneuver=d.get("maneuver", maneuver),
+            decisions=decisions, fixed_inputs=fixed,  # type: ignore[arg-type]
+            bounds=tuple(tuple(d["bounds"][k]) for k in decisions),  # type: ignore[arg-type]
+            theta_star=float(d["theta_star"]),
+            alphas=tuple(float(d["alphas"][k]) for k in decisions))
+    except (BipedOptError, KeyError, TypeError, ValueError) as exc:
+        raise ReportError(f"{path}: the recorded sweep (maneuver {maneuver[:40]!r}) has no "
+                          f"problem of the biped: {exc}") from None
 
 
 def load_sweep(path: str | Path) -> RecordedSweep:
-    """Read the SweepPoints (only) of a recording; unfinished files are recovered."""
-    raw = read_raw(path, topics=["/biped/sweep"])
-    if not raw.messages:
+    """Read the SweepPoints (and the system's description) of a recording; unfinished files are
+    recovered. The ``biped_opt.sweep`` record says what kind of sweep it is; without it (lost to
+    damage: :func:`~biped_opt.record.reader.checked_metadata`) the SweepPoints do, and a fixed
+    sweep of the biped is costed with its maneuver's default problem."""
+    raw = read_raw(path, topics=["/biped/sweep", "/biped/system_info"])
+    sweep = [m for m in raw.messages if m.topic == "/biped/sweep"]
+    if not sweep:
         raise ReportError(f"{raw.path}: no /biped/sweep messages ({raw.note})")
     ts = load_interfaces().typestore
     typename = raw.channels["/biped/sweep"].type
     points: dict[float, Any] = {}
-    for m in raw.messages:
+    for m in sweep:
         msg = ts.deserialize_cdr(m.data, typename)
         points[float(msg.theta0)] = msg  # a repeated angle: the later point wins
     msgs = [points[k] for k in sorted(points)]
     meta = raw.metadata.get("biped_opt.sweep", {})
     maneuver = meta.get("maneuver") or msgs[0].maneuver
     pol = np.array([np.asarray(m.policy, dtype=float) for m in msgs]).reshape(len(msgs), -1)
-    described = system_description(raw.metadata)
+    described = recorded_system(raw)
     extra: dict[str, Any] = {}
     problem: OptimalControlProblem | None = None
+    optimal = (meta["optimal"] == "True") if "optimal" in meta else bool(msgs[0].optimal)
     if described is not None:  # another system: a sweep over s, no cost at fixed inputs
         extra = {"system": str(described["system"]),
                  "constraints": tuple(described["constraints"])}
-        optimal = meta.get("optimal") == "True"
         if optimal:
             try:
                 extra["system_problem"] = json.loads(meta["problem"])
@@ -195,17 +205,19 @@ def load_sweep(path: str | Path) -> RecordedSweep:
         else:
             names = tuple(described["inputs"])
             inputs = pol[0]
-    elif optimal := ((meta["optimal"] == "True") if "optimal" in meta
-                     else bool(msgs[0].optimal)):
-        problem = _problem(meta, maneuver)
+    elif optimal:
+        problem = _problem(meta, maneuver, raw.path)
         names = problem.decisions
         inputs = np.full(3, np.nan)
     else:
-        problem = _problem(meta, maneuver)
+        problem = _problem(meta, maneuver, raw.path)
         names = INPUT_NAMES[: pol.shape[1]]
         text = meta.get("fixed_inputs")
         inputs = np.zeros(3)
         given = json.loads(text) if text else pol[0].tolist()
+        if len(given) > inputs.size:
+            raise ReportError(f"{raw.path}: {len(given)} fixed inputs recorded for the biped's "
+                              f"{inputs.size}")
         inputs[: len(given)] = given
     if pol.shape[1] != len(names):
         raise ReportError(f"{raw.path}: policy has {pol.shape[1]} entries, expected "

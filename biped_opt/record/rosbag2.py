@@ -26,7 +26,7 @@ from mcap.writer import CompressionType, Writer
 
 import biped_opt
 from biped_opt.record.reader import RawRecording, read_raw
-from biped_opt.record.writer import RecordError, SweepWriter
+from biped_opt.record.writer import RecordError, SweepWriter, sealed
 
 __all__ = ["METADATA_VERSION", "Rosbag2SweepWriter", "export_rosbag2", "metadata_yaml"]
 
@@ -145,7 +145,7 @@ def export_rosbag2(recording: str | Path | RawRecording, directory: str | Path) 
             writer.add_message(ids[m.topic], log_time=m.log_time_ns, data=m.data,
                                publish_time=m.publish_time_ns, sequence=seq)
         for name, values in raw.metadata.items():
-            writer.add_metadata(name, values)
+            writer.add_metadata(name, sealed(name, values))
         writer.finish()
     _write_metadata_from_summary(out, mcap_path)
     return out

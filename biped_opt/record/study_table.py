@@ -7,6 +7,13 @@ parameter point and nonsmooth point, columns ``point``, the varied parameters, t
 interrupted run continues where it stopped: the rows of a parameter point are appended in one
 write and flushed; on resume the points whose rows are all there are kept, anything torn (a half
 line, a point with missing rows) is dropped and recomputed, and no point appears twice.
+
+On resume every row is checked before it is trusted (:func:`_check_row`): valid UTF-8 without NUL
+bytes, the header's number of columns, a point index that is an integer of the study, the
+parameter values of that point exactly (they are written as Python's shortest repr, so they read
+back equal), numbers where numbers belong. A row that fails is dropped with its whole point, which
+is computed again, and the run says so in one line (:attr:`StudySummary.repaired`); a file whose
+header or study is not this study's is refused, never rewritten.
 """
 
 from __future__ import annotations
@@ -39,6 +46,8 @@ class StudySummary:
     resumed: int  #: already in the table when the run started
     rows: int  #: rows in the table now
     stopped: bool  #: interrupted before every point was done
+    #: what resuming dropped from a damaged table (one line), "" when nothing
+    repaired: str = ""
 
 
 def spec_path(path: Path) -> Path:
@@ -49,58 +58,154 @@ def _header(study: Study) -> list[str]:
     return ["point", *study.parameter_names, *COLUMNS]
 
 
+#: characters a table row never holds: a row is one line, and NUL is no text
+_NOT_IN_ROWS = str.maketrans({"\n": " ", "\r": " ", "\0": " "})
+#: the columns that hold numbers ("" for NaN), and the one that holds a positive count
+_NUMBERS = ("s", "left", "right", "size")
+
+
+def _field(value: object) -> object:
+    if isinstance(value, float) and math.isnan(value):
+        return ""
+    return value.translate(_NOT_IN_ROWS) if isinstance(value, str) else value
+
+
 def _text(study: Study, rows: Iterable[StudyRow]) -> str:
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     for row in rows:
         d = row.as_dict()
-        writer.writerow([("" if isinstance(v, float) and math.isnan(v) else v)
-                         for v in (d[c] for c in _header(study))])
+        writer.writerow([_field(d[c]) for c in _header(study)])
     return buf.getvalue()
 
 
-def read_table(path: Path) -> list[dict[str, str]]:
-    """The complete rows of a study table (torn lines and incomplete points left out)."""
-    text = Path(path).read_text()
-    if text and not text.endswith("\n"):
-        text = text[: text.rfind("\n") + 1]  # a line cut by an interruption
-    rows = list(csv.DictReader(io.StringIO(text)))
+def _check_row(line: bytes, header: list[str], study: Study | None,
+               points: list[dict[str, float]] | None) -> dict[str, str] | str:
+    """The row on ``line`` (one line of the table, without its newline) as a dict, or why it
+    cannot be trusted (see the module docstring); without a study only its form is checked."""
+    if b"\0" in line:
+        return "a NUL byte"
+    try:
+        text = line.decode("utf-8")
+    except UnicodeDecodeError:
+        return "not UTF-8"
+    try:
+        (fields,) = list(csv.reader([text]))
+    except (csv.Error, ValueError):
+        return "not one CSV row"
+    if len(fields) != len(header):
+        return f"{len(fields)} columns, not {len(header)}"
+    row = dict(zip(header, fields))
+    if not (row["point"].isascii() and row["point"].isdigit()):
+        return f"point {row['point'][:20]!r} is not an integer"
+    if not (row["rows"].isascii() and row["rows"].isdigit()) or int(row["rows"]) < 1:
+        return f"rows {row['rows'][:20]!r} is not a positive integer"
+    try:
+        for name in _NUMBERS:
+            if row[name]:
+                float(row[name])
+        values = {n: float(row[n]) for n in header[1:len(header) - len(COLUMNS)]}
+    except ValueError:
+        return "a number column holds no number"
+    if study is None or points is None:
+        return row
+    index = int(row["point"])
+    if index >= len(points):
+        return f"point {index} is not one of the study's 0..{len(points) - 1}"
+    if values != {n: points[index][n] for n in study.parameter_names}:
+        return f"the parameter values of point {index} are not the study's"
+    return row
+
+
+@dataclass
+class _Read:
+    """A table read back: its complete, checked rows and what was dropped."""
+
+    header: list[str]
+    rows: list[dict[str, str]]
+    damaged: list[tuple[int, str]]  #: (line number, why) of each row that failed its check
+    incomplete: int  #: points whose rows were not all there (or too many)
+
+
+def _read(path: Path, study: Study | None = None) -> _Read:
+    """Every line of the table checked (:func:`_check_row`), complete points only."""
+    data = Path(path).read_bytes()
+    lines = data.split(b"\n")
+    if lines[-1]:
+        lines[-1] = b""  # a line cut by an interruption
+    first = lines[0].decode("utf-8", "replace")
+    header = next(csv.reader([first]), []) if "\0" not in first else []
+    if (header[:1] != ["point"] or tuple(header[len(header) - len(COLUMNS):]) != COLUMNS
+            or (study is not None and header != _header(study))):
+        return _Read(header, [], [], 0)  # not a table (of this study): no row is read
+    points = study.points() if study is not None else None
+    rows, damaged = [], []
+    for number, line in enumerate(lines[1:-1], start=2):
+        checked = _check_row(line, header, study, points)
+        if isinstance(checked, str):
+            damaged.append((number, checked))
+        else:
+            rows.append(checked)
     count: dict[str, int] = {}
     for r in rows:
         count[r["point"]] = count.get(r["point"], 0) + 1
-    return [r for r in rows if r.get("rows") and str(count[r["point"]]) == r["rows"]]
+    complete = [r for r in rows if str(count[r["point"]]) == r["rows"]
+                and all(o["rows"] == r["rows"] for o in rows if o["point"] == r["point"])]
+    incomplete = len(count) - len({r["point"] for r in complete})
+    return _Read(header, complete, damaged, incomplete)
 
 
-def _resume(study: Study, path: Path) -> set[int]:
-    """Points already complete in ``path`` (rewritten without torn rows), or a new table."""
+def read_table(path: Path, study: Study | None = None) -> list[dict[str, str]]:
+    """The complete rows of a study table (torn lines, rows that fail their check and
+    incomplete points left out; with ``study``, rows of other points or parameter values
+    too)."""
+    return _read(path, study).rows
+
+
+def _repairs(read: _Read) -> str:
+    """One line saying what a resume dropped ("" when nothing)."""
+    if not read.damaged and not read.incomplete:
+        return ""
+    parts = []
+    if read.damaged:
+        line, why = read.damaged[0]
+        more = f" and {len(read.damaged) - 1} more" if len(read.damaged) > 1 else ""
+        parts.append(f"{len(read.damaged)} damaged row(s) dropped (line {line}: {why}{more})")
+    if read.incomplete:
+        parts.append(f"{read.incomplete} incomplete point(s) dropped")
+    return "; ".join(parts) + "; their points are computed again"
+
+
+def _resume(study: Study, path: Path) -> tuple[set[int], str]:
+    """Points already complete in ``path`` (rewritten without torn or damaged rows) and what
+    was dropped (:func:`_repairs`), or a new table."""
     spec = spec_path(path)
     if not path.exists():
         path.write_text(",".join(_header(study)) + "\n")
         spec.write_text(json.dumps(study.as_dict(), indent=1))
-        return set()
+        return set(), ""
     if not spec.exists():
         raise InvalidInputError(f"--out: {path} exists and is not a study table (no {spec.name})")
     try:
-        saved = json.loads(spec.read_text())
-    except json.JSONDecodeError:
+        saved = json.loads(spec.read_bytes().decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
         raise InvalidInputError(f"--out: {spec} is not valid JSON") from None
     if saved != json.loads(json.dumps(study.as_dict())):
         raise InvalidInputError(f"--out: {path} holds a different study; choose another file "
                                 "or remove it to start again")
-    with open(path, encoding="utf-8") as fh:
-        first = fh.readline().rstrip("\n")
-    if first != ",".join(_header(study)):
-        raise InvalidInputError(f"--out: {path}: unexpected header {first!r}")
-    keep = read_table(path)
+    read = _read(path, study)
+    if read.header != _header(study):
+        raise InvalidInputError(f"--out: {path} is not this study's table (its first line is "
+                                "not the header); choose another file or remove it")
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=_header(study), lineterminator="\n")
     writer.writeheader()
-    writer.writerows(keep)
-    if buf.getvalue() != path.read_text():  # drop torn rows once, atomically
+    writer.writerows(read.rows)
+    if buf.getvalue().encode() != path.read_bytes():  # drop the rest once, atomically
         tmp = path.with_name(path.name + ".tmp")
         tmp.write_text(buf.getvalue())
         os.replace(tmp, path)
-    return {int(r["point"]) for r in keep}
+    return {int(r["point"]) for r in read.rows}, _repairs(read)
 
 
 def _worker_init() -> None:
@@ -130,7 +235,8 @@ class StudyTable:
             raise InvalidInputError(f"--out: directory {str(path.parent)!r} does not exist")
         self.study, self.path = study, path
         self.points = study.points()
-        self.done = _resume(study, path)
+        self.created = not path.exists()
+        self.done, self.repaired = _resume(study, path)
         self.resumed = len(self.done)
         self.computed = 0
         self._synced = time.monotonic()
@@ -166,7 +272,15 @@ class StudyTable:
             os.fsync(fh.fileno())
         return StudySummary(path=self.path, points=len(self.points), computed=self.computed,
                             resumed=self.resumed, rows=len(read_table(self.path)),
-                            stopped=stopped or len(self.done) < len(self.points))
+                            stopped=stopped or len(self.done) < len(self.points),
+                            repaired=self.repaired)
+
+    def discard_if_new(self) -> None:
+        """Remove the table and its study file if this run made them and wrote no point: a run
+        that fails before its first point (a study that cannot be computed) leaves nothing."""
+        if self.created and not self.done:
+            for path in (self.path, spec_path(self.path)):
+                path.unlink(missing_ok=True)
 
 
 def run_study(study: Study, path: Path, *, workers: int = 1,
@@ -176,7 +290,16 @@ def run_study(study: Study, path: Path, *, workers: int = 1,
     docstring) with ``workers`` local processes; ``progress(done, total)`` after each point;
     ``stop()`` true ends the run after the points under way (the table stays resumable)."""
     table = StudyTable(study, path)
-    points = table.points
+    try:
+        return _run(table, workers, progress, stop)
+    except BaseException:
+        table.discard_if_new()
+        raise
+
+
+def _run(table: StudyTable, workers: int, progress: Callable[[int, int], None] | None,
+         stop: Callable[[], bool] | None) -> StudySummary:
+    study, points = table.study, table.points
     pending = table.pending()
     stopped = False
 
@@ -219,7 +342,7 @@ def write_study_mcap(study: Study, table: Path, output: Path) -> int:
     in a ``biped_opt.study`` metadata record. Returns the number of rows written."""
     from biped_opt.record.writer import STUDY_TOPICS, SweepWriter
 
-    rows = sorted(read_table(table), key=lambda r: int(r["point"]))
+    rows = sorted(read_table(table, study), key=lambda r: int(r["point"]))
     names = list(study.parameter_names)
 
     def number(text: str) -> float:

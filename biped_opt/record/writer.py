@@ -11,6 +11,11 @@ Every file opens in ``ros2 bag info/play``, Foxglove and the ``mcap``/``rosbags`
   defaults, which ``ros2 bag`` needs to list topics);
 - a ``biped_opt.sweep`` metadata record with the sweep's parameters.
 
+MCAP gives a metadata record no CRC of its own (only the data section's, which covers every
+record at once), so each record written here carries one: the key ``crc32`` holds the CRC-32 of
+the record's name and other pairs (:func:`sealed`), and a reader can tell a damaged record from
+an intact one even in a file it has to recover.
+
 A recording of another system than the biped (``system=`` the SystemInfo fields) holds
 ``/biped/system_state`` (SystemState) instead of ``/biped/state`` and ``/biped/contact_mode``, its
 SystemInfo once on ``/biped/system_info`` (first, at log time 0) and the same description in a
@@ -30,6 +35,7 @@ import contextlib
 import json
 import signal
 import threading
+import zlib
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from types import FrameType
@@ -51,7 +57,10 @@ __all__ = [
     "SYSTEM_TOPICS",
     "STUDY_TOPICS",
     "SYSTEM_METADATA",
+    "METADATA_CRC",
     "SweepWriter",
+    "metadata_crc",
+    "sealed",
     "qos_yaml",
     "NS",
 ]
@@ -94,6 +103,23 @@ SYSTEM_TOPICS = ("/biped/system_info", "/biped/system_state", "/biped/sweep")
 STUDY_TOPICS = ("/biped/study",)
 #: name of the metadata record describing a non-biped system (SystemInfo's fields)
 SYSTEM_METADATA = "biped_opt.system"
+#: the key of a metadata record that holds the CRC of the rest of it (:func:`sealed`)
+METADATA_CRC = "crc32"
+
+
+def metadata_crc(name: str, pairs: Mapping[str, str]) -> str:
+    """The CRC-32 (as 8 hex digits) of a metadata record's name and pairs other than
+    :data:`METADATA_CRC`, over their JSON text in key order (what any reader can recompute)."""
+    items = sorted((k, v) for k, v in pairs.items() if k != METADATA_CRC)
+    text = json.dumps([name, items], ensure_ascii=False)
+    return f"{zlib.crc32(text.encode('utf-8', 'surrogatepass')):08x}"
+
+
+def sealed(name: str, pairs: Mapping[str, str]) -> dict[str, str]:
+    """``pairs`` with :data:`METADATA_CRC` added: the record as it is written. The CRC comes
+    first, so a damaged length that cuts the map short cuts the other pairs, not the CRC."""
+    out = {k: v for k, v in pairs.items() if k != METADATA_CRC}
+    return {METADATA_CRC: metadata_crc(name, out), **out}
 
 
 class RecordError(BipedOptError, OSError):
@@ -180,10 +206,11 @@ class SweepWriter:
                 },
             )
         if metadata:
-            self._writer.add_metadata(metadata_name, {k: str(v) for k, v in metadata.items()})
+            self._writer.add_metadata(metadata_name, sealed(
+                metadata_name, {k: str(v) for k, v in metadata.items()}))
         if self.system is not None:
-            self._writer.add_metadata(SYSTEM_METADATA, {
-                k: v if isinstance(v, str) else json.dumps(v) for k, v in self.system.items()})
+            self._writer.add_metadata(SYSTEM_METADATA, sealed(SYSTEM_METADATA, {
+                k: v if isinstance(v, str) else json.dumps(v) for k, v in self.system.items()}))
             self.write("/biped/system_info", self.system, 0)
 
     # -- lifecycle -------------------------------------------------------------------------

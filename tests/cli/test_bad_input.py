@@ -94,9 +94,9 @@ CASES: list[tuple[list[str], str]] = [
     (["optimise", "--maneuver", "touchdown", "--theta0", "0", "--variant"],
      "--variant: only the liftoff maneuver"),
     # -- sweep ---------------------------------------------------------------------------
-    (["sweep", "--maneuver", "touchdown", "--num", "1"], "--num must be at least 2"),
-    (["sweep", "--maneuver", "touchdown", "--num", "0"], "--num must be at least 2"),
-    (["sweep", "--maneuver", "touchdown", "--num", "-3"], "--num must be at least 2"),
+    (["sweep", "--maneuver", "touchdown", "--num", "1"], "--num must be between 2 and 1000000"),
+    (["sweep", "--maneuver", "touchdown", "--num", "0"], "--num must be between 2 and 1000000"),
+    (["sweep", "--maneuver", "touchdown", "--num", "-3"], "--num must be between 2 and 1000000"),
     (["sweep", "--maneuver", "touchdown", "--num", "abc"], "--num must be an integer"),
     (["sweep", "--maneuver", "touchdown", "--num", "2.5"], "--num must be an integer"),
     (["sweep", "--maneuver", "touchdown", "--theta0-min", "0.1", "--theta0-max", "-0.1"],
@@ -116,7 +116,7 @@ CASES: list[tuple[list[str], str]] = [
     (["sweep", "--maneuver", "liftoff", "--variant", "--bounds", "u12=0,1"],
      "--bounds: 'u12' is not a decision input"),
     # -- nonsmooth -----------------------------------------------------------------------
-    (["nonsmooth", "--maneuver", "touchdown", "--num", "1"], "--num must be at least 2"),
+    (["nonsmooth", "--maneuver", "touchdown", "--num", "1"], "--num must be between 2 and 1000000"),
     (["nonsmooth", "--maneuver", "touchdown", "--theta0-min", "1e-3", "--theta0-max", "-1e-3"],
      "--theta0-min must be below --theta0-max"),
     (["nonsmooth", "--maneuver", "x"], f"{MANEUVERS} 'x'"),
@@ -128,10 +128,10 @@ CASES: list[tuple[list[str], str]] = [
     (["figures", "--out", "{text}"], "--out: '{text}' exists and is not a directory"),
     (["figures", "--out", "{text}/sub"], "--out: cannot create directory '{text}/sub'"),
     (["figures", "--out", "/proc/biped_opt_figures"], "--out: cannot create directory"),
-    (["figures", "--fixed-num", "4"], "--fixed-num must be at least 5"),
+    (["figures", "--fixed-num", "4"], "--fixed-num must be between 5 and 1000000"),
     (["figures", "--fixed-num", "x"], "--fixed-num must be an integer"),
-    (["figures", "--optimal-num", "0"], "--optimal-num must be at least 5"),
-    (["figures", "--optimal-num", "-1"], "--optimal-num must be at least 5"),
+    (["figures", "--optimal-num", "0"], "--optimal-num must be between 5 and 1000000"),
+    (["figures", "--optimal-num", "-1"], "--optimal-num must be between 5 and 1000000"),
     # -- demo ----------------------------------------------------------------------------
     (["demo", "--out", "{text}"], "--out: '{text}' exists and is not a directory"),
     (["demo", "--out", "{text}/sub"], "--out: cannot create directory '{text}/sub'"),
@@ -197,16 +197,97 @@ CASES: list[tuple[list[str], str]] = [
     (["replay", "{mcap}", "--domain-id", "300"], "--domain-id must be between 0 and 232"),
     (["replay", "{mcap}", "--domain-id", "-1"], "--domain-id must be between 0 and 232"),
     (["replay", "{mcap}", "--domain-id", "x"], "--domain-id must be an integer"),
-    (["replay", "{mcap}", "--rate", "0"], "--rate must be positive"),
-    (["replay", "{mcap}", "--rate", "-1"], "--rate must be positive"),
+    (["replay", "{mcap}", "--rate", "0"], "--rate must be between 0.001 and 1000"),
+    (["replay", "{mcap}", "--rate", "-1"], "--rate must be between 0.001 and 1000"),
     (["replay", "{mcap}", "--rate", "nan"], "--rate must be finite"),
-    (["replay", "{mcap}", "--delay", "-0.5"], "--delay must be at least 0"),
+    (["replay", "{mcap}", "--delay", "-0.5"], "--delay must be between 0 and 3600"),
     (["replay", "{tmp}/none.mcap"], "no such recording"),
     (["replay", "{text}"], "{text}: not an MCAP file"),
     (["replay", "{empty}"], "{empty}: not an MCAP file"),
     # -- bench ---------------------------------------------------------------------------
-    (["bench", "--cases", "1"], "--cases must be at least 2"),
+    (["bench", "--cases", "1"], "--cases must be between 2 and 1000000"),
     (["bench", "--cases", "many"], "--cases must be an integer"),
+    (["bench", "--cases", "10000000"], "--cases must be between 2 and 1000000, got 10000000"),
+    (["bench", "--seed", "-1"], "--seed must be between 0 and 4294967295, got -1"),
+    (["bench", "--seed", "1.5"], "--seed must be an integer, got '1.5'"),
+    # -- every numeric option has a stated range: a typo never starts an unbounded run ----
+    (["sweep", "--maneuver", "touchdown", "--num", "1000000000"],
+     "--num must be between 2 and 1000000, got 1000000000"),
+    (["sweep", "--maneuver", "touchdown", "--num", "1e9"], "--num must be an integer, got '1e9'"),
+    (["sweep", "--maneuver", "touchdown", "--num", "9" * 5000],
+     "--num must be an integer, got '99999999999999999999'... (5000 characters)"),
+    (["nonsmooth", "--maneuver", "touchdown", "--num", "1e10"], "--num must be an integer"),
+    (["nonsmooth", "--maneuver", "touchdown", "--num", "10000000000"],
+     "--num must be between 2 and 1000000"),
+    (["figures", "--fixed-num", "2000000"], "--fixed-num must be between 5 and 1000000"),
+    (["figures", "--system", "rocking_bar", "--num", "2000000"],
+     "--num must be between 5 and 1000000"),
+    (["gradients", "--seed", "-1"], "--seed must be between 0 and 4294967295, got -1"),
+    (["gradients", "--seed", "4294967296"], "--seed must be between 0 and 4294967295"),
+    (["gradients", "--seed", "x"], "--seed must be an integer, got 'x'"),
+    (["pieces", "--seed", "-1"], "--seed must be between 0 and 4294967295"),
+    (["pieces", "--rounds", "0"], "--rounds must be between 1 and 10"),
+    (["pieces", "--rounds", "1000"], "--rounds must be between 1 and 10"),
+    (["pieces", "--samples", "100000000"], "--samples must be between 2 and 1000000"),
+    (["pieces", "--radius", "0.5"], "--radius must be at most 0.01, got '0.5'"),
+    (["pieces", "--legs", "9"], "--legs must be between 1 and 4"),
+    (["study", "{study}", "--out", "{tmp}/t.csv", "--workers", "0"],
+     "--workers must be between 1 and 256"),
+    (["study", "{study}", "--out", "{tmp}/t.csv", "--workers", "100000"],
+     "--workers must be between 1 and 256"),
+    (["study", "{study}", "--out", "{tmp}/t.csv", "--ros", "--item-timeout", "1e12"],
+     "--item-timeout must be at most 86400"),
+    (["replay", "{mcap}", "--rate", "1e-9"], "--rate must be between 0.001 and 1000"),
+    (["replay", "{mcap}", "--rate", "1e9"], "--rate must be between 0.001 and 1000"),
+    (["replay", "{mcap}", "--delay", "1e300"], "--delay must be between 0 and 3600"),
+    # -- every output path is checked while parsing: before any work, nothing created -----
+    # (root may write everywhere by os.access, /proc included: a file must really be creatable)
+    (["study", "{study}", "--out", "/proc/x.csv"], "--out: directory '/proc' is not writable"),
+    (["study", "{study}", "--out", "{tmp}/t.csv", "--mcap", "/proc/x.mcap"],
+     "--mcap: directory '/proc' is not writable"),
+    (["study", "{study}", "--out", "{dir}"], "--out: '{dir}' is a directory"),
+    (["study", "{study}", "--out", "{tmp}/missing/t.csv"],
+     "--out: directory '{tmp}/missing' does not exist"),
+    (["study", "{study}", "--out", "{tmp}/t.csv", "--mcap", "{dir}"], "--mcap: '{dir}' is a "),
+    (["study", "{study}", "--out", "{tmp}/t.csv", "--figures", "{text}"],
+     "--figures: '{text}' exists and is not a directory"),
+    (["study", "{study}", "--out", "{tmp}/t.csv", "--figures", "/proc/figs"],
+     "--figures: cannot create directory '/proc/figs': '/proc' is not writable"),
+    (["study", "{study}", "--out", "/proc/self/status"], "is not a study table"),
+    (["gradients", "--figures", "{text}"], "--figures: '{text}' exists and is not a directory"),
+    (["gradients", "--figures", "/proc/figs"], "--figures: cannot create directory '/proc/figs'"),
+    (["gradients", "--figures", "{text}/sub"], "--figures: cannot create directory"),
+    (["pieces", "--figure", "/proc/x.png"], "--figure: directory '/proc' is not writable"),
+    (["pieces", "--figure", "{dir}"], "--figure: '{dir}' is a directory"),
+    (["pieces", "--figure", "{tmp}/missing/p.png"],
+     "--figure: directory '{tmp}/missing' does not exist"),
+    (["record", "--maneuver", "touchdown", "--theta0-min", "-0.1", "--theta0-max", "0.1",
+      "--num", "3", "--out", "/proc/r.mcap"], "--out: directory '/proc' is not writable"),
+    (["record", "--maneuver", "touchdown", "--theta0-min", "-0.1", "--theta0-max", "0.1",
+      "--num", "3", "--out", "/sys/r.mcap"], "--out: directory '/sys' is not writable"),
+    (["info", "{mcap}", "--to-rosbag2", "/proc/bag"],
+     "--to-rosbag2: directory '/proc' is not writable"),
+    (["info", "{mcap}", "--to-rosbag2", "{mcap}"],
+     "--to-rosbag2: '{mcap}' exists and is not a directory"),
+    (["report", "{mcap}", "--out", "/proc/rep"],
+     "--out: cannot create directory '/proc/rep': '/proc' is not writable"),
+    (["sweep", "--maneuver", "touchdown", "--out", "/proc/s.json"],
+     "--out: directory '/proc' is not writable"),
+    (["sweep", "--maneuver", "touchdown", "--out", "{tmp}/" + "n" * 300],
+     "characters): File name too long"),
+    (["sweep", "--maneuver", "touchdown", "--out", "{tmp}/a\0b.json"],
+     "--out: '{tmp}/a\\x00b.json': a file name holds no NUL byte"),
+    (["study", "{study}", "--out", "{tmp}/t\0.csv"], "a file name holds no NUL byte"),
+    (["report", "{mcap}", "--out", "{tmp}/r\0"], "a file name holds no NUL byte"),
+    (["info", "{mcap}", "--to-rosbag2", "{tmp}/b\0"], "a file name holds no NUL byte"),
+    (["sweep", "--maneuver", "touchdown", "--out", "/" + "d" * 100_000],
+     "(100001 characters)"),
+    (["figures", "--out", "/proc/f"], "--out: cannot create directory '/proc/f'"),
+    (["demo", "--out", "/proc/d"], "--out: cannot create directory '/proc/d'"),
+    (["launch", "--params-file", "/proc/none.yaml"], "--params-file: no such file"),
+    (["report", "{mcap}", "--out", "{tmp}/" + "r" * 300], "characters): File name too long"),
+    (["study", "{tmp}/none.yaml", "--out", "{tmp}/t.csv"], "{tmp}/none.yaml: no such study"),
+    (["study", "{dir}", "--out", "{tmp}/t.csv"], "{dir}: no such study file"),
 ]
 
 
@@ -219,12 +300,15 @@ def places(tmp_path_factory) -> dict[str, str]:
     (tmp / "dir").mkdir()
     (tmp / "full").mkdir()
     (tmp / "full" / "x").write_text("x")
+    (tmp / "study.yaml").write_text("system: rocking_bar\nmaneuver: drop\n"
+                                    "grid: {gamma: [0.5]}\nnum: 61\n")
     with SweepWriter(tmp / "good.mcap", metadata={"maneuver": "touchdown"}) as w:
         w.write("/biped/contact_mode", {"header": {"stamp": {"sec": 0, "nanosec": 0},
                                                    "frame_id": "biped"}, "mode": 0}, 0)
     return {"tmp": str(tmp), "text": str(tmp / "notes.txt"), "empty": str(tmp / "empty.mcap"),
             "magic": str(tmp / "magic.mcap"), "dir": str(tmp / "dir"),
-            "full": str(tmp / "full"), "mcap": str(tmp / "good.mcap")}
+            "full": str(tmp / "full"), "mcap": str(tmp / "good.mcap"),
+            "study": str(tmp / "study.yaml")}
 
 
 def _fill(text: str, places: dict[str, str]) -> str:
@@ -237,8 +321,8 @@ def _listing(root: Path) -> set[Path]:
     return set(root.rglob("*"))
 
 
-def test_there_are_at_least_100_cases():
-    assert len(CASES) >= 100
+def test_there_are_at_least_180_cases():
+    assert len(CASES) >= 180
 
 
 @pytest.mark.parametrize(("argv", "fragment"), CASES,
@@ -312,3 +396,24 @@ def test_a_bad_domain_in_the_environment_is_one_line(value, fragment, argv, plac
     assert main([_fill(a, places) for a in argv]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and fragment in err, err
+
+
+@pytest.mark.parametrize(("error", "fragment"), [
+    (MemoryError(), "biped-opt sweep: error: not enough memory for this command"),
+    (OSError(28, "No space left on device", "/x/s.json"),
+     "biped-opt sweep: error: /x/s.json: No space left on device"),
+    (KeyboardInterrupt(), "biped-opt sweep: interrupted"),
+])
+def test_what_the_machine_refuses_is_one_line(error, fragment, monkeypatch, capsys):
+    """Out of memory, a full disk, Ctrl-C in the middle of the work: one line, no traceback
+    (status 2, or 130 for an interrupted command as a shell gives it)."""
+    from biped_opt.cli import sweep_cmd
+
+    def refuse(*_args, **_kwargs):
+        raise error
+
+    monkeypatch.setattr(sweep_cmd, "sweep_fixed", refuse)
+    status = main(["sweep", "--maneuver", "touchdown", "--num", "3"])
+    err = capsys.readouterr().err
+    assert status == (130 if isinstance(error, KeyboardInterrupt) else 2)
+    assert err == fragment + "\n", err

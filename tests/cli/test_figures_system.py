@@ -123,7 +123,7 @@ BAR = ["--system", "rocking_bar", "--maneuver", "drop"]
     ([*BAR, "--param", "zeta=1"], "unknown parameter 'zeta'"),
     ([*BAR, "--fixed-num", "9"], "--fixed-num: the biped's option"),
     ([*BAR, "--optimal-num", "9"], "--optimal-num: the biped's option"),
-    ([*BAR, "--num", "3"], "--num must be at least 5"),
+    ([*BAR, "--num", "3"], "--num must be between 5 and 1000000"),
     ([*BAR, "--s-min", "1", "--s-max", "0"], "lo < hi"),
     ([*BAR, "--s", "0"], "ambiguous option: --s could match"),
     (["--system", "nowhere.py", "--maneuver", "drop"], "no such system file"),
