@@ -39,6 +39,7 @@ import argparse
 import json
 import os
 import random
+import shutil
 import signal
 import struct
 import subprocess
@@ -314,13 +315,18 @@ class _Peer:
             return self.point.call_async(case.message)
         outcome = ros.Future()
 
+        def finished(done: Any) -> None:
+            if done.result() is not None:  # None: canceled when the peer closes
+                outcome.set_result(done.result().result)
+
         def accepted(sent: Any) -> None:
             handle = sent.result()
+            if handle is None:
+                return
             if not handle.accepted:
                 outcome.set_result(None)
                 return
-            handle.get_result_async().add_done_callback(
-                lambda done: outcome.set_result(done.result().result))
+            handle.get_result_async().add_done_callback(finished)
 
         self.study.send_goal_async(case.message).add_done_callback(accepted)
         return outcome
@@ -341,14 +347,26 @@ def _message(reply: Any) -> str:
     return ("ok: " if getattr(reply, "success", False) else "") + text[:160]
 
 
-def _collect(futures: dict[str, Any], timeout: float) -> dict[str, dict]:
-    deadline = time.monotonic() + timeout
+def _exchange(peer: _Peer, cases: list[Case], timeout: float) -> dict[str, dict]:
+    """Send ``cases`` at once and wait up to ``timeout`` for their replies: for each, whether
+    it was answered, after how long and what the reply said."""
+    answered_at: dict[str, float] = {}
+    t0 = time.monotonic()
+    futures = {}
+    for case in cases:
+        future = peer.send(case)
+        future.add_done_callback(
+            lambda _f, name=case.name: answered_at.setdefault(name, time.monotonic()))
+        futures[case.name] = future
+    deadline = t0 + timeout
+    for future in futures.values():
+        future.wait(max(0.0, deadline - time.monotonic()))
     out = {}
-    for name, (future, t0) in futures.items():
-        answered = future.wait(max(0.0, deadline - time.monotonic()))
-        out[name] = {"answered": bool(answered),
-                     "seconds": round(time.monotonic() - t0, 3) if answered else None,
-                     "reply": _message(future.result()) if answered else None}
+    for name, future in futures.items():
+        done = name in answered_at and future.done()
+        out[name] = {"answered": done,
+                     "seconds": round(answered_at[name] - t0, 3) if done else None,
+                     "reply": _message(future.result()) if done else None}
     return out
 
 
@@ -382,7 +400,8 @@ def run_hostile(args: argparse.Namespace) -> dict:
 
     os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
     root = Path(tempfile.mkdtemp(prefix="hostile_")).resolve()
-    cases = code_cases(root) + bound_cases(root)
+    cases = code_cases(root)
+    bounds = bound_cases(root)
     cap = int(args.memory_cap_gb * 2**30)
     cwd = root / "cwd"
     optimiser = start_node(args.domain_id, None, parameters=(f"worker:={WORKER}",), cwd=cwd,
@@ -393,8 +412,9 @@ def run_hostile(args: argparse.Namespace) -> dict:
     result: dict[str, Any] = {"directory": str(root)}
     try:
         peer.wait(coordinator=True)
-        futures = {c.name: (peer.send(c), time.monotonic()) for c in cases}
-        replies = _collect(futures, args.timeout)
+        # code first, then the sizes (a study point of 400^4 would hold the work item queue)
+        replies = _exchange(peer, cases, args.timeout)
+        replies.update(_exchange(peer, bounds, args.timeout))
         # five requests of minutes of compile each, then one that every node answers at once
         heavy = [peer.policy.call_async(r) for r in heavy_requests()]
         time.sleep(1.0)
@@ -408,14 +428,19 @@ def run_hostile(args: argparse.Namespace) -> dict:
         result["peak_rss_mib"] = {"optimiser": _peak_mib(optimiser.pid),
                                   "coordinator": _peak_mib(coordinator.pid)}
     finally:
-        peer.close()
-        result["stopped"] = {"optimiser": _stop(optimiser), "coordinator": _stop(coordinator)}
+        try:
+            peer.close()
+        finally:
+            result["stopped"] = {"optimiser": _stop(optimiser),
+                                 "coordinator": _stop(coordinator)}
     executed = sorted(c.name for c in cases if c.marker is not None and c.marker.exists())
     # every goal names its table in root (absolute, or ../ from the nodes' directory root/cwd)
     written = sorted(p.name for p in root.iterdir()
                      if p.suffix == ".csv" or p.name.endswith(".study.json"))
+    if not args.keep_files:
+        shutil.rmtree(root)
     result.update({
-        "cases": len(cases), "code_executed": len(executed), "executed": executed,
+        "cases": len(cases) + len(bounds), "code_executed": len(executed), "executed": executed,
         "files_written": len(written), "written": written,
         "unanswered": sorted(n for n, r in replies.items() if not r["answered"]),
         "internal_errors": sorted(n for n, r in replies.items()
@@ -441,6 +466,8 @@ def main() -> int:
                         help="hostile: seconds for the valid request after the heavy ones")
     parser.add_argument("--memory-cap-gb", type=float, default=3.0,
                         help="hostile: the nodes' address space limit")
+    parser.add_argument("--keep-files", action="store_true",
+                        help="hostile: keep the directory of planted files and markers")
     args = parser.parse_args()
     if args.hostile:
         hostile = run_hostile(args)

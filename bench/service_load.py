@@ -2,7 +2,9 @@
 
 Starts one optimiser node in its own process, then N client processes that each make M calls of
 ``/biped/optimal_policy`` one after another, every call with an angle no other call uses (so no
-reply comes from the node's cache and every request costs a real optimisation). Prints
+reply comes from the node's cache and every request costs a real optimisation; ``--cached``:
+every client asks the same 10 angles over and over, so all but the first answers come from the
+cache and replies follow each other as fast as the clients take them). Prints
 
 - sent, answered, lost (no reply within ``--timeout``), late (answered after it), duplicated
   (a second reply to one request) and misrouted (a reply whose numbers are not those of its
@@ -20,7 +22,7 @@ pushed out of the 10-deep history by replies to other clients before it was take
 server's writer dropped it before this reader acknowledged it).
 
     python bench/service_load.py [--clients 8] [--calls 200] [--runs 1] [--cache-size N]
-                                 [--rmw-reader] [--json]
+                                 [--rmw-reader] [--cached] [--json]
 
 The node runs on whichever backend ``biped_opt.ros`` selects; discovery is loopback only.
 """
@@ -120,7 +122,7 @@ def witness_reader(node: Any) -> Any:
 
 
 def client_main(index: int, clients: int, calls: int, timeout: float,
-                rmw_reader: bool = False) -> None:
+                rmw_reader: bool = False, cached: bool = False) -> None:
     """Make the calls of client ``index``; print one JSON line with every outcome."""
     from biped_opt import ros
     from biped_opt.ros.dds import wire
@@ -130,7 +132,11 @@ def client_main(index: int, clients: int, calls: int, timeout: float,
     results = []
     late: list[float] = []
     lost_seqs: list[int] = []
-    for th in angles(index, clients, calls):
+    # cached: every client asks the same 10 angles over and over, answered from the node's
+    # cache after the first few rounds
+    few = angles(0, 1, 10)
+    for th in ([few[k % 10] for k in range(calls)] if cached
+               else angles(index, clients, calls)):
         done = threading.Event()
         t0 = time.perf_counter()
         future = cli.call_async(ros.srvs.OptimalPolicy.Request(maneuver="touchdown", theta0=th))
@@ -212,7 +218,8 @@ def run_once(args: argparse.Namespace, domain_id: int) -> dict:
         procs = [subprocess.Popen(
             [sys.executable, __file__, "--client", str(k), "--clients", str(args.clients),
              "--calls", str(args.calls), "--timeout", str(args.timeout)]
-            + (["--rmw-reader"] if args.rmw_reader else []),
+            + (["--rmw-reader"] if args.rmw_reader else [])
+            + (["--cached"] if args.cached else []),
             env=env, stdout=subprocess.PIPE, text=True) for k in range(args.clients)]
         outputs = [json.loads(p.communicate()[0].strip().splitlines()[-1]) for p in procs]
         wall = time.perf_counter() - t0
@@ -243,6 +250,7 @@ def summarise(outputs: list[dict], wall: float, rss_before: int, rss_after: int,
     return {
         "clients": args.clients, "calls_per_client": args.calls,
         "reply_reader": "keep-last-10 (rmw)" if args.rmw_reader else "keep-all",
+        "cached": args.cached,
         "sent": len(rows), "answered": len(answered), "lost": lost,
         "lost_evicted": evicted if args.rmw_reader else None,
         "lost_never_arrived": lost - evicted if args.rmw_reader else None,
@@ -268,12 +276,16 @@ def main() -> int:
                         help="skip the misrouting check (recomputing every answer)")
     parser.add_argument("--rmw-reader", action="store_true",
                         help="clients' reply readers keep the last 10 replies, as rmw's do")
+    parser.add_argument("--cached", action="store_true",
+                        help="every client asks the same angles: replies at the rate of the "
+                             "node's cache, not of the optimisation")
     parser.add_argument("--domain-id", type=int, default=1 + os.getpid() % 200)
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--client", type=int, default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.client is not None:
-        client_main(args.client, args.clients, args.calls, args.timeout, args.rmw_reader)
+        client_main(args.client, args.clients, args.calls, args.timeout, args.rmw_reader,
+                    args.cached)
         return 0
     summaries = []
     for run in range(args.runs):
