@@ -265,11 +265,12 @@ def bound_cases(root: Path, *, name_bytes: int = 8192, grid_values: int = 400,
 
 
 def heavy_requests(count: int = 5, system: str = HEAVY_SYSTEM) -> list[Any]:
-    """``count`` OptimalPolicy requests for a library system of minutes of compile."""
+    """``count`` OptimalPolicy requests for a library system of minutes of compile, on a
+    maneuver it has (a walker's touchdown), so that nothing short of the compile refuses them."""
     from biped_opt import ros
 
-    return [ros.srvs.OptimalPolicy.Request(maneuver="drop", theta0=0.01 * k, system=system)
-            for k in range(count)]
+    return [ros.srvs.OptimalPolicy.Request(maneuver="touchdown", theta0=0.001 * k,
+                                           system=system) for k in range(count)]
 
 
 def raw_request(service: Any, request: Any, guid: int = 1, seq: int = 1) -> bytes:
