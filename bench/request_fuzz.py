@@ -20,8 +20,8 @@ requester's code, write where the requester says or stall the service (issue cas
   problem naming a ``.py`` system; ``StudyPoint`` work items and ``/biped/study`` goals whose
   study names them; each file's top level creates a marker file of its own;
 - a ``/biped/study`` goal for a valid one-point study whose ``out`` is ``../<name>.csv``;
-- a system name of 8 KB; a ``StudyPoint`` item and a goal with a 400^4 grid (the nodes run
-  with an address space cap, ``--memory-cap-gb``);
+- a system name and a system path of 8 KB; a ``StudyPoint`` item and a goal with a 400^4 grid
+  (the nodes run with an address space cap, ``--memory-cap-gb``);
 - five requests for the library system ``walker99`` (a compile of minutes), then a valid
   biped request, whose latency is measured.
 
@@ -245,16 +245,22 @@ def grid_study(values: int = 400, dims: int = 4) -> str:
 
 def bound_cases(root: Path, *, name_bytes: int = 8192, grid_values: int = 400,
                 coordinator: bool = True) -> list[Case]:
-    """Requests that must be refused before any large allocation: a system name of
-    ``name_bytes``, a grid of ``grid_values**4`` points (work item and goal)."""
+    """Requests that must be refused before any large allocation: a system name and a system
+    path of about ``name_bytes``, a grid of ``grid_values**4`` points (work item and goal)."""
     from biped_opt import ros
 
     long_name = "s" * name_bytes
+    # a path of as many bytes: directories of 100 characters, longer than PATH_MAX
+    long_path = ("/" + "d" * 99) * max(1, (name_bytes - 5) // 100) + "/s.py"
     cases = [
         Case("policy_long_system_name", "policy",
              ros.srvs.OptimalPolicy.Request(maneuver="drop", theta0=0.0, system=long_name)),
         Case("point_long_system_name", "point", ros.srvs.StudyPoint.Request(
             study=json.dumps({**BASE_STUDY, "system": long_name}), indices=[0])),
+        Case("policy_long_system_path", "policy",
+             ros.srvs.OptimalPolicy.Request(maneuver="drop", theta0=0.0, system=long_path)),
+        Case("point_long_system_path", "point", ros.srvs.StudyPoint.Request(
+            study=json.dumps({**BASE_STUDY, "system": long_path}), indices=[0])),
         Case("point_huge_grid", "point",
              ros.srvs.StudyPoint.Request(study=grid_study(grid_values), indices=[0])),
     ]

@@ -91,6 +91,10 @@ def test_bound_cases_have_the_sizes_they_claim(tmp_path):
     cases = {c.name: c for c in bound_cases(tmp_path, name_bytes=100, grid_values=3)}
     assert len(cases["policy_long_system_name"].message.system) == 100
     assert len(json.loads(cases["point_long_system_name"].message.study)["system"]) == 100
+    full = {c.name: c for c in bound_cases(tmp_path, grid_values=3)}
+    path = full["policy_long_system_path"].message.system
+    assert 8000 <= len(path) <= 8192 and path.startswith("/") and path.endswith(".py")
+    assert json.loads(full["point_long_system_path"].message.study)["system"] == path
     spec = json.loads(cases["point_huge_grid"].message.study)
     study = Study.from_spec(spec, where="study")
     assert len(study.points()) == 3**4  # small here; the bench's 400 gives 400**4
