@@ -21,8 +21,12 @@ pushed out of the 10-deep history by replies to other clients before it was take
 (``evicted``), or it never arrived (``never_arrived``: the reply was not written, or the
 server's writer dropped it before this reader acknowledged it).
 
+``--lossy PERMILLE`` makes the node drop that share of the packets it sends (Cyclone's
+``Internal/Test/XmitLossiness``), so that replies reach the clients only through the reliable
+protocol's repairs, from what the node's reply writer still holds.
+
     python bench/service_load.py [--clients 8] [--calls 200] [--runs 1] [--cache-size N]
-                                 [--rmw-reader] [--cached] [--json]
+                                 [--rmw-reader] [--cached] [--lossy PERMILLE] [--json]
 
 The node runs on whichever backend ``biped_opt.ros`` selects; discovery is loopback only.
 """
@@ -175,16 +179,23 @@ def client_main(index: int, clients: int, calls: int, timeout: float,
 
 def start_node(domain_id: int, cache_size: int | None, *, kind: str = "optimiser",
                parameters: tuple[str, ...] = (), cwd: Path | None = None,
-               memory_cap: int | None = None) -> subprocess.Popen:
+               memory_cap: int | None = None, lossiness: int = 0) -> subprocess.Popen:
     """A node (``biped-opt node <kind>``) in a process of its own, once it logged its ready
     line; what it logs goes on being collected in ``proc.log_lines``. ``parameters``: more
-    ``name:=value``; ``memory_cap``: its address space limit [bytes]."""
+    ``name:=value``; ``memory_cap``: its address space limit [bytes]; ``lossiness``: per mille
+    of the node's packets that Cyclone drops instead of sending (its test setting)."""
     args = [sys.executable, "-m", "biped_opt.cli.main", "node", kind, "--ros-args"]
     if cache_size is not None:
         args += ["-p", f"cache_size:={cache_size}"]
     for parameter in parameters:
         args += ["-p", parameter]
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "PYTHONPATH": str(ROOT)}
+    if lossiness:
+        from biped_opt.ros.dds.context import loopback_config
+
+        env["CYCLONEDDS_URI"] = loopback_config().replace(
+            "</Domain>", "<Internal><Test><XmitLossiness>"
+            f"{lossiness}</XmitLossiness></Test></Internal></Domain>")
 
     def limit() -> None:
         import resource
@@ -210,7 +221,7 @@ def start_node(domain_id: int, cache_size: int | None, *, kind: str = "optimiser
 
 
 def run_once(args: argparse.Namespace, domain_id: int) -> dict:
-    node = start_node(domain_id, args.cache_size)
+    node = start_node(domain_id, args.cache_size, lossiness=args.lossy)
     try:
         rss_before = rss_kib(node.pid)
         env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "PYTHONPATH": str(ROOT)}
@@ -250,7 +261,7 @@ def summarise(outputs: list[dict], wall: float, rss_before: int, rss_after: int,
     return {
         "clients": args.clients, "calls_per_client": args.calls,
         "reply_reader": "keep-last-10 (rmw)" if args.rmw_reader else "keep-all",
-        "cached": args.cached,
+        "cached": args.cached, "lossy_permille": args.lossy,
         "sent": len(rows), "answered": len(answered), "lost": lost,
         "lost_evicted": evicted if args.rmw_reader else None,
         "lost_never_arrived": lost - evicted if args.rmw_reader else None,
@@ -279,6 +290,9 @@ def main() -> int:
     parser.add_argument("--cached", action="store_true",
                         help="every client asks the same angles: replies at the rate of the "
                              "node's cache, not of the optimisation")
+    parser.add_argument("--lossy", type=int, default=0, metavar="PERMILLE",
+                        help="the node drops this per mille of the packets it sends (Cyclone's "
+                             "test setting): replies must be repaired from its writer's history")
     parser.add_argument("--domain-id", type=int, default=1 + os.getpid() % 200)
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--client", type=int, default=None, help=argparse.SUPPRESS)

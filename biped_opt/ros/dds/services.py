@@ -19,8 +19,8 @@ Where this backend does better than rmw_cyclonedds, without changing what peers 
 - **A reply stays repairable until its client has it.** Cyclone's KEEP_LAST writer drops a
   sample from its history when ``depth`` newer ones of the instance are written, acknowledged
   or not, and answers a later request for it with a GAP; a reply topic is keyless, so under
-  the profile's depth 10 the replies to 10 other clients make a reply that one client has not
-  acknowledged (its first transmission lost, or its process descheduled) unrecoverable. A
+  the profile's depth 10 the replies to 10 other clients make a reply whose first
+  transmission one client missed (a full socket buffer, a lossy link) unrecoverable. A
   service's reply writer therefore keeps the last :data:`REPLY_HISTORY` replies: only the
   unacknowledged ones are held (VOLATILE), and KEEP_LAST never blocks the writer on a client
   that stops acknowledging, which KEEP_ALL would. What a client's *reader* drops is the
