@@ -13,7 +13,9 @@ its stderr holds a traceback.
     python bench/request_fuzz.py [--requests 10000] [--seed 1]
 
 ``--hostile`` sends instead, as any peer on the domain can, what would make a node run the
-requester's code, write where the requester says or stall the service (issue cases, one each):
+requester's code, write where the requester says or stall the service, to an optimiser and a
+coordinator it starts with their default parameters (the optimiser's ``worker`` named so that
+its work-item service is known), both in a fresh directory:
 
 - ``OptimalPolicy`` requests whose ``system`` or ``problem`` names a ``.py`` file (absolute,
   relative to the node's working directory, ``../``, with a trailing space) or a ``.yaml``
@@ -28,9 +30,10 @@ requester's code, write where the requester says or stall the service (issue cas
 It prints the markers that exist afterwards (``code_executed``, must be 0), the files the goal
 named that exist (``files_written``, must be 0), the requests left unanswered, the replies that
 are ``internal error``, the valid request's latency, the nodes' peak memory and how they
-stopped on SIGINT. Its exit status is 1 when any code ran or any file was written there.
+stopped (SIGINT, else SIGTERM, else SIGKILL). Its exit status is 1 when any code ran or any
+file was written there.
 
-    python bench/request_fuzz.py --hostile [--timeout 30] [--valid-timeout 60]
+    python bench/request_fuzz.py --hostile [--timeout 60] [--valid-timeout 60] [--keep-files]
 """
 
 from __future__ import annotations
