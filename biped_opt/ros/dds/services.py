@@ -23,8 +23,8 @@ Where this backend does better than rmw_cyclonedds, without changing what peers 
   transmission one client missed (a full socket buffer, a lossy link) unrecoverable. A
   service's reply writer therefore keeps the last :data:`REPLY_HISTORY` replies: only the
   unacknowledged ones are held (VOLATILE), and KEEP_LAST never blocks the writer on a client
-  that stops acknowledging, which KEEP_ALL would (``bench/service_load.py --lossy`` measures
-  replies lost at depth 10 and none at this depth). What a client's *reader* drops is the
+  that stops acknowledging, which KEEP_ALL would (``bench/service_load.py --lossy``: keep-all
+  clients lose replies at depth 10, none at this depth). What a client's *reader* drops is the
   client's own doing: rmw_cyclonedds creates it KEEP_LAST 10, and a busy client's own reply can
   be pushed out of it by replies to the other clients before it is taken, whatever the server
   does (README "ROS 2"; ``bench/service_load.py --rmw-reader`` measures it).
