@@ -2,7 +2,9 @@
 
 Starts one optimiser node in its own process, then N client processes that each make M calls of
 ``/biped/optimal_policy`` one after another, every call with an angle no other call uses (so no
-reply comes from the node's cache and every request costs a real optimisation). Prints
+reply comes from the node's cache and every request costs a real optimisation; ``--cached``:
+every client asks the same 10 angles over and over, so all but the first answers come from the
+cache and replies follow each other as fast as the clients take them). Prints
 
 - sent, answered, lost (no reply within ``--timeout``), late (answered after it), duplicated
   (a second reply to one request) and misrouted (a reply whose numbers are not those of its
@@ -11,7 +13,20 @@ reply comes from the node's cache and every request costs a real optimisation). 
 - p50/p99 latency of the answered calls;
 - the node's resident memory (VmRSS) after its start-up and after the load.
 
-    python bench/service_load.py [--clients 8] [--calls 200] [--runs 1] [--cache-size N] [--json]
+With ``--rmw-reader`` every client's reply reader keeps the last 10 replies, as the reader
+rmw_cyclonedds creates for rclpy's default service QoS (this package's own client keeps all,
+README "ROS 2"); each client then also holds a second, keep-all reader on the reply topic that
+it reads only at the end, to tell why a call was lost: its reply reached the process but was
+pushed out of the 10-deep history by replies to other clients before it was taken
+(``evicted``), or it never arrived (``never_arrived``: the reply was not written, or the
+server's writer dropped it before this reader acknowledged it).
+
+``--lossy PERMILLE`` makes the node drop that share of the packets it sends (Cyclone's
+``Internal/Test/XmitLossiness``), so that replies reach the clients only through the reliable
+protocol's repairs, from what the node's reply writer still holds.
+
+    python bench/service_load.py [--clients 8] [--calls 200] [--runs 1] [--cache-size N]
+                                 [--rmw-reader] [--cached] [--lossy PERMILLE] [--json]
 
 The node runs on whichever backend ``biped_opt.ros`` selects; discovery is loopback only.
 """
@@ -55,14 +70,32 @@ def rss_kib(pid: int) -> int:
 
 # -- one client process --------------------------------------------------------------------------
 
-def optimiser_client(name: str) -> tuple[Any, Any, Any]:
+def rmw_style_client(node: Any, srv_type: Any, name: str) -> Any:
+    """A client of the built-in backend whose reply reader keeps the last 10 replies, as
+    rmw_cyclonedds' reader for rclpy's default service QoS does (endpoints, USER_DATA and
+    header otherwise the backend's, which follow rmw_cyclonedds)."""
+    from biped_opt.ros.dds import qos_profile_services_default
+    from biped_opt.ros.dds.services import Client
+
+    class RmwStyleClient(Client):
+        reader_keeps_all = False
+
+    return node._add(RmwStyleClient(node, srv_type, node._resolve(name),
+                                    qos_profile_services_default, node.default_callback_group))
+
+
+def optimiser_client(name: str, rmw_reader: bool = False) -> tuple[Any, Any, Any]:
     """(node, client of /biped/optimal_policy, executor spinning in a thread) in the default
-    context, once the service is there; ``close_client`` ends them."""
+    context, once the service is there; ``close_client`` ends them. ``rmw_reader``: the
+    client's reply reader keeps the last 10 replies (built-in backend only)."""
     from biped_opt import ros
 
     ros.init(args=[])
     node = ros.Node(name)
-    cli = node.create_client(ros.srvs.OptimalPolicy, "/biped/optimal_policy")
+    if rmw_reader:
+        cli = rmw_style_client(node, ros.srvs.OptimalPolicy, "/biped/optimal_policy")
+    else:
+        cli = node.create_client(ros.srvs.OptimalPolicy, "/biped/optimal_policy")
     executor = ros.SingleThreadedExecutor()
     executor.add_node(node)
     threading.Thread(target=executor.spin, daemon=True).start()
@@ -79,20 +112,43 @@ def close_client(node: Any, executor: Any) -> None:
     ros.try_shutdown()
 
 
-def client_main(index: int, clients: int, calls: int, timeout: float) -> None:
+def witness_reader(node: Any) -> Any:
+    """A keep-all reader of the optimiser's reply topic next to an rmw-style client, without
+    USER_DATA (no server waits for it), read only at the end (``client_main``)."""
+    from cyclonedds.sub import DataReader
+
+    from biped_opt import ros
+    from biped_opt.ros.dds.qos import HistoryPolicy, QoSProfile, to_dds_qos
+
+    topic = node._topic("rr/biped/optimal_policyReply", ros.srvs.OptimalPolicy.ResponseWire)
+    return DataReader(node.context.participant, topic,
+                      qos=to_dds_qos(QoSProfile(history=HistoryPolicy.KEEP_ALL)))
+
+
+def client_main(index: int, clients: int, calls: int, timeout: float,
+                rmw_reader: bool = False, cached: bool = False) -> None:
     """Make the calls of client ``index``; print one JSON line with every outcome."""
     from biped_opt import ros
+    from biped_opt.ros.dds import wire
 
-    node, cli, executor = optimiser_client(f"load_client_{index}")
+    node, cli, executor = optimiser_client(f"load_client_{index}", rmw_reader)
+    witness = witness_reader(node) if rmw_reader else None
     results = []
     late: list[float] = []
-    for th in angles(index, clients, calls):
+    lost_seqs: list[int] = []
+    # cached: every client asks the same 10 angles over and over, answered from the node's
+    # cache after the first few rounds
+    few = angles(0, 1, 10)
+    for th in ([few[k % 10] for k in range(calls)] if cached
+               else angles(index, clients, calls)):
         done = threading.Event()
         t0 = time.perf_counter()
         future = cli.call_async(ros.srvs.OptimalPolicy.Request(maneuver="touchdown", theta0=th))
+        seq = len(results) + 1  # the client numbers its requests 1, 2, ...
         future.add_done_callback(lambda _f, done=done: done.set())
         if not done.wait(timeout):
             results.append({"theta0": th, "answered": False})
+            lost_seqs.append(seq)
             future.add_done_callback(lambda _f, th=th: late.append(th))
             continue
         reply = future.result()
@@ -103,45 +159,78 @@ def client_main(index: int, clients: int, calls: int, timeout: float) -> None:
         })
     time.sleep(0.5)  # a reply still on its way counts as late, not lost
     duplicates = int(getattr(cli, "duplicate_replies", 0))
+    evicted = 0
+    if witness is not None:
+        arrived: set[int] = set()
+        while True:
+            samples, _ = wire.take(witness)
+            if not samples:
+                break
+            arrived.update(int(r.header.seq) for r in samples
+                           if (int(r.header.guid) & ((1 << 64) - 1)) == cli.guid)
+        evicted = sum(seq in arrived for seq in lost_seqs)
+        witness.__del__()
     print(json.dumps({"client": index, "results": results, "late": late,
-                      "duplicates": duplicates}), flush=True)
+                      "duplicates": duplicates, "evicted": evicted}), flush=True)
     close_client(node, executor)
 
 
 # -- the node and the run ------------------------------------------------------------------------
 
-def start_node(domain_id: int, cache_size: int | None) -> subprocess.Popen:
-    """The optimiser in a process of its own, once it logged its ready line; what it logs
-    goes on being collected in ``proc.log_lines``."""
-    args = [sys.executable, "-m", "biped_opt.cli.main", "node", "optimiser", "--ros-args"]
+def start_node(domain_id: int, cache_size: int | None, *, kind: str = "optimiser",
+               parameters: tuple[str, ...] = (), cwd: Path | None = None,
+               memory_cap: int | None = None, lossiness: int = 0) -> subprocess.Popen:
+    """A node (``biped-opt node <kind>``) in a process of its own, once it logged its ready
+    line; what it logs goes on being collected in ``proc.log_lines``. ``parameters``: more
+    ``name:=value``; ``memory_cap``: its address space limit [bytes]; ``lossiness``: per mille
+    of the node's packets that Cyclone drops instead of sending (its test setting)."""
+    args = [sys.executable, "-m", "biped_opt.cli.main", "node", kind, "--ros-args"]
     if cache_size is not None:
         args += ["-p", f"cache_size:={cache_size}"]
+    for parameter in parameters:
+        args += ["-p", parameter]
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen(args, env=env, stderr=subprocess.PIPE, text=True)
+    if lossiness:
+        from biped_opt.ros.dds.context import loopback_config
+
+        env["CYCLONEDDS_URI"] = loopback_config().replace(
+            "</Domain>", "<Internal><Test><XmitLossiness>"
+            f"{lossiness}</XmitLossiness></Test></Internal></Domain>")
+
+    def limit() -> None:
+        import resource
+
+        if memory_cap is not None:
+            resource.setrlimit(resource.RLIMIT_AS, (memory_cap, memory_cap))
+
+    proc = subprocess.Popen(args, env=env, stderr=subprocess.PIPE, text=True, cwd=cwd,
+                            preexec_fn=limit if memory_cap is not None else None)
     deadline = time.monotonic() + 300.0
     assert proc.stderr is not None
     while time.monotonic() < deadline:
         line = proc.stderr.readline()
         if not line:
-            raise RuntimeError(f"the optimiser exited with status {proc.wait()}")
+            raise RuntimeError(f"the {kind} node exited with status {proc.wait()}")
         if "ready" in line:
             lines = [line]
             proc.log_lines = lines  # type: ignore[attr-defined]
             threading.Thread(target=lines.extend, args=(proc.stderr,), daemon=True).start()
             return proc
     proc.kill()
-    raise RuntimeError("the optimiser did not report ready within 300 s")
+    raise RuntimeError(f"the {kind} node did not report ready within 300 s")
 
 
 def run_once(args: argparse.Namespace, domain_id: int) -> dict:
-    node = start_node(domain_id, args.cache_size)
+    node = start_node(domain_id, args.cache_size, lossiness=args.lossy)
     try:
         rss_before = rss_kib(node.pid)
         env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "PYTHONPATH": str(ROOT)}
         t0 = time.perf_counter()
         procs = [subprocess.Popen(
             [sys.executable, __file__, "--client", str(k), "--clients", str(args.clients),
-             "--calls", str(args.calls), "--timeout", str(args.timeout)],
+             "--calls", str(args.calls), "--timeout", str(args.timeout)]
+            + (["--rmw-reader"] if args.rmw_reader else [])
+            + (["--cached"] if args.cached else []),
             env=env, stdout=subprocess.PIPE, text=True) for k in range(args.clients)]
         outputs = [json.loads(p.communicate()[0].strip().splitlines()[-1]) for p in procs]
         wall = time.perf_counter() - t0
@@ -167,9 +256,15 @@ def summarise(outputs: list[dict], wall: float, rss_before: int, rss_after: int,
                     or r["policy"] != [float(v) for v in expected.x]):
                 misrouted += 1
     latency = np.array([r["latency_ms"] for r in answered]) if answered else np.zeros(1)
+    lost = len(rows) - len(answered)
+    evicted = sum(out["evicted"] for out in outputs)
     return {
-        "clients": args.clients, "calls_per_client": args.calls, "sent": len(rows),
-        "answered": len(answered), "lost": len(rows) - len(answered),
+        "clients": args.clients, "calls_per_client": args.calls,
+        "reply_reader": "keep-last-10 (rmw)" if args.rmw_reader else "keep-all",
+        "cached": args.cached, "lossy_permille": args.lossy,
+        "sent": len(rows), "answered": len(answered), "lost": lost,
+        "lost_evicted": evicted if args.rmw_reader else None,
+        "lost_never_arrived": lost - evicted if args.rmw_reader else None,
         "late": sum(len(out["late"]) for out in outputs),
         "duplicated": sum(out["duplicates"] for out in outputs),
         "misrouted": misrouted if args.verify else None,
@@ -190,12 +285,21 @@ def main() -> int:
                         help="the optimiser's cache_size parameter (default: the node's)")
     parser.add_argument("--no-verify", dest="verify", action="store_false",
                         help="skip the misrouting check (recomputing every answer)")
+    parser.add_argument("--rmw-reader", action="store_true",
+                        help="clients' reply readers keep the last 10 replies, as rmw's do")
+    parser.add_argument("--cached", action="store_true",
+                        help="every client asks the same angles: replies at the rate of the "
+                             "node's cache, not of the optimisation")
+    parser.add_argument("--lossy", type=int, default=0, metavar="PERMILLE",
+                        help="the node drops this per mille of the packets it sends (Cyclone's "
+                             "test setting): replies must be repaired from its writer's history")
     parser.add_argument("--domain-id", type=int, default=1 + os.getpid() % 200)
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--client", type=int, default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.client is not None:
-        client_main(args.client, args.clients, args.calls, args.timeout)
+        client_main(args.client, args.clients, args.calls, args.timeout, args.rmw_reader,
+                    args.cached)
         return 0
     summaries = []
     for run in range(args.runs):
@@ -204,9 +308,13 @@ def main() -> int:
         if args.json:
             print(json.dumps(summary), flush=True)
         else:
+            why = ("" if summary["lost_evicted"] is None else
+                   f" ({summary['lost_evicted']} evicted from the reader's history, "
+                   f"{summary['lost_never_arrived']} never arrived)")
             print(f"run {run + 1}: {summary['clients']} clients x {summary['calls_per_client']} "
-                  f"calls: sent {summary['sent']}, answered {summary['answered']}, lost "
-                  f"{summary['lost']}, late {summary['late']}, duplicated "
+                  f"calls, {summary['reply_reader']} reply readers: sent {summary['sent']}, "
+                  f"answered {summary['answered']}, lost {summary['lost']}{why}, late "
+                  f"{summary['late']}, duplicated "
                   f"{summary['duplicated']}, misrouted {summary['misrouted']}, failed replies "
                   f"{summary['failed_replies']}; p50 {summary['p50_ms']:.1f} ms, p99 "
                   f"{summary['p99_ms']:.1f} ms; {summary['calls_per_s']:.1f} calls/s; node RSS "

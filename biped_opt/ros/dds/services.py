@@ -15,7 +15,19 @@ Where this backend does better than rmw_cyclonedds, without changing what peers 
   Readers of a reliable service or client therefore keep all samples (KEEP_ALL) until the
   executor takes them; replies to other clients are discarded right there, so the memory held
   is what arrived between two executor wake-ups. History is not a requested/offered policy, so
-  matching with any peer is unchanged; writers keep the profile as given.
+  matching with any peer is unchanged.
+- **A reply stays repairable until its client has it.** Cyclone's KEEP_LAST writer drops a
+  sample from its history when ``depth`` newer ones of the instance are written, acknowledged
+  or not, and answers a later request for it with a GAP; a reply topic is keyless, so under
+  the profile's depth 10 the replies to 10 other clients make a reply whose first
+  transmission one client missed (a full socket buffer, a lossy link) unrecoverable. A
+  service's reply writer therefore keeps the last :data:`REPLY_HISTORY` replies: only the
+  unacknowledged ones are held (VOLATILE), and KEEP_LAST never blocks the writer on a client
+  that stops acknowledging, which KEEP_ALL would (``bench/service_load.py --lossy``: keep-all
+  clients lose replies at depth 10, none at this depth). What a client's *reader* drops is the
+  client's own doing: rmw_cyclonedds creates it KEEP_LAST 10, and a busy client's own reply can
+  be pushed out of it by replies to the other clients before it is taken, whatever the server
+  does (README "ROS 2"; ``bench/service_load.py --rmw-reader`` measures it).
 - **A request that does not decode is answered.** When its header is readable and the response
   type has ``bool success`` and ``string message`` (as this package's services and
   ``std_srvs`` do), the server replies ``success = false`` with the reason instead of leaving the
@@ -60,6 +72,8 @@ if TYPE_CHECKING:
 __all__ = ["Service", "Client", "MalformedMessageError"]
 
 _MASK64 = (1 << 64) - 1
+#: replies a service's writer keeps for retransmission, if not yet acknowledged (module doc)
+REPLY_HISTORY = 1000
 #: replies remembered per client to tell a duplicate reply from a late one
 _ANSWERED_MEMORY = 4096
 
@@ -68,11 +82,20 @@ class MalformedMessageError(BipedOptError, ValueError):
     """A reply that does not decode (set as the exception of the call's future)."""
 
 
-def _reader_profile(qos: QoSProfile) -> QoSProfile:
-    """The profile of a service's or client's reader: KEEP_ALL when reliable (module doc)."""
-    if qos.reliability == ReliabilityPolicy.BEST_EFFORT:
+def _reader_profile(qos: QoSProfile, keep_all: bool = True) -> QoSProfile:
+    """The profile of a service's or client's reader: KEEP_ALL when reliable (module doc);
+    the profile as given with ``keep_all=False`` (what rmw_cyclonedds creates)."""
+    if not keep_all or qos.reliability == ReliabilityPolicy.BEST_EFFORT:
         return qos
     return replace(qos, history=HistoryPolicy.KEEP_ALL)
+
+
+def _reply_writer_profile(qos: QoSProfile) -> QoSProfile:
+    """The profile of a service's reply writer: KEEP_LAST at least :data:`REPLY_HISTORY` deep
+    when reliable (module doc)."""
+    if qos.reliability == ReliabilityPolicy.BEST_EFFORT or qos.history == HistoryPolicy.KEEP_ALL:
+        return qos
+    return replace(qos, history=HistoryPolicy.KEEP_LAST, depth=max(qos.depth, REPLY_HISTORY))
 
 
 class _RequestReply(Entity):
@@ -83,6 +106,9 @@ class _RequestReply(Entity):
     _writer: DataWriter | None
     srv_type: ServiceType
     srv_name: str
+    #: False gives the reader the profile's own history, as rmw_cyclonedds does (a subclass
+    #: that reproduces an rmw endpoint, e.g. to measure what its clients see)
+    reader_keeps_all = True
 
     def _endpoints(self, node: Node, qos: QoSProfile, key: str) -> tuple[Any, Any]:
         """Create the pair; returns (request topic + qos, reply topic + qos) for the caller to
@@ -96,12 +122,12 @@ class _RequestReply(Entity):
         reading = key == "serviceid"
         self._reader = DataReader(
             participant, request if reading else reply,
-            qos=to_dds_qos(_reader_profile(qos),
+            qos=to_dds_qos(_reader_profile(qos, self.reader_keeps_all),
                            user + type_hash_user_data(request_type if reading else reply_type)))
         self._writer = DataWriter(
             participant, reply if reading else request,
-            qos=to_dds_qos(qos, user + type_hash_user_data(reply_type if reading else
-                                                          request_type)))
+            qos=to_dds_qos(_reply_writer_profile(qos) if reading else qos,
+                           user + type_hash_user_data(reply_type if reading else request_type)))
         self.condition = ReadCondition(self._reader, NOT_READ)
         return request, reply
 
