@@ -31,8 +31,6 @@ BAND = 1e-9  # contact guards this close to zero and closing flip together
 REARM = 1e-10  # a flipped guard counts again once farther than this from zero
 MAX_EVENTS = 16  # the simulator's default budget of contact events
 T_END = 10.0  # and its default horizon
-#: the simulator's status names, in the order of its codes
-STATUS = ("OK", "HORIZON", "MAX_EVENTS", "INCONSISTENT", "APEX_IN_CONTACT", "STEP_FAILURE")
 
 
 class ReferenceError(RuntimeError):
@@ -41,13 +39,14 @@ class ReferenceError(RuntimeError):
 
 @dataclass
 class Outcome:
-    status: str  # "OK", "MAX_EVENTS", "HORIZON"
+    status: str  # the simulator's names: "OK", "MAX_EVENTS", "HORIZON", "INCONSISTENT"
     t_final: float
     y_final: np.ndarray
     outcome: float
     events: list[tuple[float, frozenset[int]]] = field(default_factory=list)
-    #: smallest distance, in units of BAND, between |g| of a guard that did not flip and BAND,
-    #: at any contact event (near 1: the case sits on the edge of the simultaneity band)
+    #: how far, relative to BAND, the closing guards near zero at the contact events were from
+    #: the band's edge: min | |g| / BAND - 1 | (near 0: the case sits on the edge, where a
+    #: rounding error decides whether two impacts merge)
     band_margin: float = math.inf
 
     @property
@@ -81,15 +80,16 @@ class AffineSystem:
         return np.concatenate([q + v * t + self.acc * t * t / 2, v + self.acc * t])
 
     def guards(self, y):
-        """Contact guards and the terminal guard, their rates and second derivatives."""
+        """The contact guards and the terminal guard, and their rates."""
         d = self.d
         q, v = y[:d], y[d:]
         g = np.append(self.A @ q + self.c, self.terminal @ y)
-        rate = np.append(self.A @ v, self.terminal[d:] @ self.acc)
+        rate = np.append(self.A @ v, self.terminal[:d] @ v + self.terminal[d:] @ self.acc)
         return g, rate
 
     def curvature(self, y):
-        return np.append(np.abs(self.A @ self.acc), 0.0)
+        """|g''| of every guard along a flight (constant: the guards are quadratics)."""
+        return np.append(np.abs(self.A @ self.acc), abs(self.terminal[: self.d] @ self.acc))
 
     def jacobian(self, q):
         return self.A
@@ -123,6 +123,7 @@ class Bar:
         return g, rate
 
     def curvature(self, y):
+        """Bounds on |g''| along a flight: z'' = -g, (w sin th)'' = -w om^2 sin th."""
         om = y[5]
         return np.append(np.full(2, self.g + self.w * om * om), 0.0)
 
