@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from biped_opt.cli.args import finite_float, input_file, int_in_range, output_file, path_arg
 
