@@ -75,3 +75,27 @@ def relative_noise(rtol: float) -> Callable[[float, float], float]:
     global error changes smoothly with x except where the step sequence changes, by about one
     step's local error)."""
     return lambda x, value: rtol * max(1.0, abs(value))
+
+
+@dataclass(frozen=True)
+class Central:
+    derivative: np.ndarray | float
+    error: np.ndarray | float  #: truncation (last two extrapolants) + noise, per component
+
+    def tolerance(self, other_error: float = 0.0) -> np.ndarray | float:
+        return SAFETY * (self.error + other_error)
+
+
+def central(f: Callable[[float], object], x: float, h: float, *, rtol: float) -> Central:
+    """Central differences at h, h/2, h/4 extrapolated twice (error O(h^6)); f may be
+    vector-valued. Error: the change made by the last extrapolation, plus the samples' error
+    rtol max(1, |f|) times the scheme's weights, sum |w_k| = 297 / (45 h)."""
+    d, scale = [], 0.0
+    for k in (h, h / 2, h / 4):
+        up, down = np.asarray(f(x + k), dtype=float), np.asarray(f(x - k), dtype=float)
+        scale = np.maximum(scale, np.maximum(np.abs(up), np.abs(down)))
+        d.append((up - down) / (2 * k))
+    r1 = [(4 * d[1] - d[0]) / 3, (4 * d[2] - d[1]) / 3]
+    final = (16 * r1[1] - r1[0]) / 15
+    noise = 297.0 / (45.0 * h) * rtol * np.maximum(1.0, scale)
+    return Central(derivative=final, error=np.abs(final - r1[1]) + noise)
