@@ -7,7 +7,9 @@ the events in every round. This module counts them on the n-leg walker's foot-of
 the level body falls from z = 1 with foot i raised by s d_i. At s = 0 all feet touch down at
 once, the (passive, u_body = 0) walker stays level, and it bounces: every foot lifts off at the
 same instant, then touches down again at the same instant; those are the rounds. Near s = 0 each
-round splits into n events whose order depends on the offsets.
+round splits into n events whose order depends on the offsets. Here k counts rounds; the
+paper's k counts periods of a periodic gait, and a period of this hopping (a touchdown and a
+liftoff) is two rounds.
 
 - :func:`count_pieces` samples the neighbourhood {s d : |d| = 1} of the simultaneous point
   (s = ``radius``, d uniform on the unit sphere of R^n, seeded) and labels each sample by its
