@@ -12,7 +12,8 @@ at s itself, with p = (s, u) and the exact first-order sensitivities of
 - value: dV/ds = D_s c (envelope theorem, Eq. (12): D_u c = 0 on the free decisions and du/ds
   = 0 on the bound ones);
 - policy: du*/ds = -(D_uu c)^-1 D_us c on the free decisions (implicit function theorem,
-  Eq. (13)), D_us c the one-sided difference of D_u c along sigma (Richardson-extrapolated); 0
+  Eq. (13)), D_us c the one-sided difference of D_u c along sigma (Richardson-extrapolated), the
+  Hessian differenced again at the polished optimum; 0
   for decisions on a bound or acting on nothing;
 - outcome: d o/ds + D_u o du*/ds.
 
@@ -48,7 +49,7 @@ Array = npt.NDArray[np.float64]
 
 #: central-difference step of the Hessian D_uu c, relative to each decision's bound interval
 HESSIAN_STEP = 1e-4
-#: one-sided step in s of the mixed derivative D_us c (halved once for Richardson)
+#: one-sided step in s of the mixed derivative D_us c (halved twice for Richardson)
 MIXED_STEP = 1e-4
 #: Newton iterations of the polish at most
 NEWTON_STEPS = 4
@@ -74,10 +75,10 @@ class DerivativeErrors:
     """Error estimates of a :class:`~biped_opt.optimal.derivatives.Derivatives` record's slopes,
     (left, right) as there; each is a size, not a bound (tests multiply it by a safety factor).
 
-    - policy: |H^-1| (|e_mixed| + e_H |du*/ds|), e_mixed = |fine - coarse| the Richardson
-      estimate of D_us c's error and e_H = max |H - H^T| that of the differenced Hessian H (an
-      exact Hessian is symmetric: the asymmetry of central differences of an exact gradient is
-      their error);
+    - policy: |H^-1| (|e_mixed| + e_H |du*/ds|), e_mixed the change between the Richardson
+      extrapolants of D_us c from steps (h, h/2) and (h/2, h/4), and e_H = max |H - H^T| that
+      of the differenced Hessian H (an exact Hessian is symmetric: the asymmetry of central
+      differences of an exact gradient is their error);
     - value: |D_us c| . |u - u*| (D_s c taken off the optimum by the polish's distance) plus the
       variational integration's relative tolerance;
     - outcome: |D_u o| . (policy error) plus the same tolerance;
@@ -150,10 +151,10 @@ def polish_optimum(problem: Problem, s: float, start: SystemOptimalResult, *, si
     """``start`` (an optimum of ``problem`` at s) polished by Newton's method on D_u c = 0 over
     its free decisions on the branch s -> s^side, with exact first derivatives.
 
-    The Hessian is differenced once, at ``start`` (within the optimiser's tolerance of the
-    optimum: its change from there is far below its own truncation error), or taken from
-    ``hessian`` (the iteration then contracts by |I - hessian^-1 H|, fast for a Hessian of a
-    nearby s). Iterates until the Newton step is below POLISH_TOL (relative) or NEWTON_STEPS
+    The Hessian is differenced once, at ``start``, or taken from ``hessian``; Newton's
+    iteration with it contracts by |I - hessian^-1 H| (fast for a Hessian of a nearby point)
+    towards the zero of the exact D_u c, which the Hessian's error does not move. Iterates
+    until the Newton step is below POLISH_TOL (relative) or NEWTON_STEPS
     steps; ``error`` is the Newton step left at the returned point, not applied.
     """
     if side not in (-1, 1):
@@ -236,9 +237,12 @@ def _side(problem: Problem, compiled: CompiledSystem, s: float, side: int, probe
         raise SimulationError(f"{problem.name} at s = {s + side * probe}: no optimum "
                               f"({start.message})")
     polished = polish_optimum(problem, s, start, side=side)
-    u, g, hessian = polished.inputs, polished.gradient, polished.hessian
+    u, g = polished.inputs, polished.gradient
     cols = [names.index(d) for d in polished.free]
     costs = _Costs(problem, compiled, side, cols)
+    # the Hessian again at the polished optimum: the polish's is at the optimum of s + side *
+    # probe, |du*/ds| probe away (2e-6 on the walkers), enough to move the slope by ~1e-6
+    hessian, asym = costs.hessian(s, u) if cols else (polished.hessian, 0.0)
     dc = cost_gradient(problem, g, u)
     slope = np.zeros(len(names))
     slope_error = np.zeros(len(names))
@@ -247,13 +251,14 @@ def _side(problem: Problem, compiled: CompiledSystem, s: float, side: int, probe
     if cols:
         h = MIXED_STEP
         base = dc[[1 + c for c in cols]]  # D_u c at (s, u), from the gradient just taken
-        coarse = (costs.grad_u(s + side * h, u) - base) / (side * h)
-        fine = (costs.grad_u(s + side * h / 2, u) - base) / (side * h / 2)
-        mixed = 2.0 * fine - coarse  # Richardson: O(h^2)
+        quotients = [(costs.grad_u(s + side * step, u) - base) / (side * step)
+                     for step in (h, h / 2, h / 4)]
+        # Richardson on each pair of steps (O(h^2)); the change between the two extrapolants
+        # is the error estimate of the finer one
+        coarse, mixed = (2.0 * quotients[k + 1] - quotients[k] for k in (0, 1))
         slope[cols] = -np.linalg.solve(hessian, mixed)
         inverse = np.abs(np.linalg.inv(hessian))
-        slope_error[cols] = inverse @ (np.abs(fine - coarse)
-                                       + polished.hessian_error * np.abs(slope[cols]))
+        slope_error[cols] = inverse @ (np.abs(mixed - coarse) + asym * np.abs(slope[cols]))
         value_error = float(np.abs(mixed).sum() * polished.error)
     value_error += floor * max(1.0, abs(float(dc[0])))
     outcome_slope = float(g.gradient[0] + g.gradient[1:] @ slope)
