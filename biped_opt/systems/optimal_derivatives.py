@@ -76,9 +76,10 @@ class DerivativeErrors:
     (left, right) as there; each is a size, not a bound (tests multiply it by a safety factor).
 
     - policy: |H^-1| (|e_mixed| + e_H |du*/ds|), e_mixed the change between the Richardson
-      extrapolants of D_us c from steps (h, h/2) and (h/2, h/4), and e_H = max |H - H^T| that
-      of the differenced Hessian H (an exact Hessian is symmetric: the asymmetry of central
-      differences of an exact gradient is their error);
+      extrapolants of D_us c from steps (h, h/2) and (h/2, h/4), and e_H that of the Hessian H
+      (central differences of the exact gradient at steps h and h/2, Richardson-extrapolated):
+      the largest change the extrapolation made or asymmetry left (an exact Hessian is
+      symmetric);
     - value: |D_us c| . |u - u*| (D_s c taken off the optimum by the polish's distance) plus the
       variational integration's relative tolerance;
     - outcome: |D_u o| . (policy error) plus the same tolerance;
@@ -100,7 +101,8 @@ class Polished:
     free: tuple[str, ...]  #: the decisions polished (acting and off their bounds)
     held: tuple[str, ...]  #: acting decisions on a bound (not moved)
     hessian: Array = field(repr=False)  #: D_uu c over ``free`` (central differences)
-    hessian_error: float  #: max |H - H^T| of the differenced Hessian before symmetrising
+    #: the Hessian's error estimate (max of its Richardson change and its asymmetry)
+    hessian_error: float
     #: max |H^-1 D_u c| at ``inputs``: the estimated distance to the zero of D_u c
     error: float
     gradient: OutcomeGradient = field(repr=False)  #: the branch's sensitivities at ``inputs``
@@ -131,19 +133,27 @@ class _Costs:
     def grad_u(self, x: float, u: Array) -> Array:
         return cost_gradient(self.problem, self.branch(x, u), u)[[1 + c for c in self.cols]]
 
-    def hessian(self, x: float, u: Array) -> tuple[Array, float]:
-        """D_uu c over the columns by central differences of D_u c, and its asymmetry."""
+    def hessian(self, x: float, u: Array, extrapolate: bool = True) -> tuple[Array, float]:
+        """D_uu c over the columns by central differences of D_u c with steps h and h/2,
+        Richardson-extrapolated (or step h alone), and an estimate of its error: the largest
+        entry of the change made by the extrapolation or of the asymmetry (an exact Hessian is
+        symmetric)."""
         n = len(self.cols)
-        out = np.zeros((n, n))
-        for j, c in enumerate(self.cols):
-            lo, hi = self.problem.bound(self.problem.description.u.names()[c])
-            step = HESSIAN_STEP * (hi - lo)
-            up, down = u.copy(), u.copy()
-            up[c] += step
-            down[c] -= step
-            out[:, j] = (self.grad_u(x, up) - self.grad_u(x, down)) / (2.0 * step)
-        asym = float(np.max(np.abs(out - out.T))) if n else 0.0
-        return 0.5 * (out + out.T), asym
+        levels = []
+        for scale in ((1.0, 0.5) if extrapolate else (1.0,)):
+            out = np.zeros((n, n))
+            for j, c in enumerate(self.cols):
+                lo, hi = self.problem.bound(self.problem.description.u.names()[c])
+                step = scale * HESSIAN_STEP * (hi - lo)
+                up, down = u.copy(), u.copy()
+                up[c] += step
+                down[c] -= step
+                out[:, j] = (self.grad_u(x, up) - self.grad_u(x, down)) / (2.0 * step)
+            levels.append(out)
+        extrapolated = (4.0 * levels[1] - levels[0]) / 3.0 if extrapolate else levels[0]
+        error = float(max(np.max(np.abs(extrapolated - levels[-1])),
+                          np.max(np.abs(extrapolated - extrapolated.T)))) if n else 0.0
+        return 0.5 * (extrapolated + extrapolated.T), error
 
 
 def polish_optimum(problem: Problem, s: float, start: SystemOptimalResult, *, side: int,
@@ -169,7 +179,7 @@ def polish_optimum(problem: Problem, s: float, start: SystemOptimalResult, *, si
     u = start.inputs.copy()
     asym = 0.0
     if hessian is None:
-        hessian, asym = costs.hessian(s, u)
+        hessian, asym = costs.hessian(s, u, extrapolate=False)  # Newton needs no more
     elif hessian.shape != (len(cols), len(cols)):
         raise InvalidInputError(f"hessian must be {len(cols)} x {len(cols)} (free decisions "
                                 f"{', '.join(free) or 'none'}), got {hessian.shape}")
