@@ -57,7 +57,8 @@ from biped_opt.systems.problems import Problem, get_problem
 
 __all__ = [
     "Objective", "DescentRun", "EstimatorStats", "SmoothingResult", "GradientStudy", "VALUE_TOL",
-    "zeroth_order_terms", "first_order_terms", "smoothed_gradient", "estimator_stats",
+    "zeroth_order_terms", "first_order_terms", "ZEROTH_BASELINES", "smoothed_gradient",
+    "estimator_stats",
     "descend", "where_stopped", "policy_gradient_descent", "find_switches", "study_problems",
     "smooth_problem",
     "run_gradient_study", "report",
@@ -208,13 +209,37 @@ def find_switches(objective: Objective, x: npt.ArrayLike, axis: int, *, num: int
 
 
 # --- estimators -------------------------------------------------------------------------------
-def zeroth_order_terms(objective: Objective, x: npt.ArrayLike, sigma: float, w: Array) -> Array:
-    """Per-sample terms (c(x + sigma w) - c(x)) w / sigma of the score-function estimator (the
-    baseline c(x) leaves it unbiased and lowers its variance)."""
-    x = np.asarray(x, dtype=np.float64).ravel()
+#: baselines b of the zeroth-order terms (c(x + sigma w) - b) w / sigma: the cost at the
+#: unperturbed point (the estimator's), none, and the mean of the draws' costs. Every b that does
+#: not depend on the draw leaves the estimator unbiased (E w = 0) but changes its spread; the
+#: draws' mean depends on them weakly (bias O(1/N)) and is the usual variance-reducing choice
+ZEROTH_BASELINES = ("point", "none", "mean")
+
+
+def _zeroth_terms(c: Array, w: Array, sigma: float, baseline: str) -> Array:
+    """Terms from the costs c = (c(x), c(x + sigma w_1), ...), NaN for failed draws."""
+    draws = c[1:]
+    b = {"point": c[0], "none": 0.0,
+         "mean": float(np.nanmean(draws)) if np.isfinite(draws).any() else math.nan}.get(baseline)
+    if b is None:
+        raise InvalidInputError(f"baseline must be one of {', '.join(ZEROTH_BASELINES)}, "
+                                f"got {baseline!r}")
+    return (draws - b)[:, None] * w / sigma
+
+
+def _costs(objective: Objective, x: Array, sigma: float, w: Array) -> Array:
     c = objective.values(np.vstack([x, x + sigma * w]))
     c[~np.isfinite(c)] = np.nan  # a draw whose maneuver fails gives no term
-    return (c[1:] - c[0])[:, None] * w / sigma
+    return c
+
+
+def zeroth_order_terms(objective: Objective, x: npt.ArrayLike, sigma: float, w: Array,
+                       baseline: str = "point") -> Array:
+    """Per-sample terms (c(x + sigma w) - c(x)) w / sigma of the score-function estimator (the
+    baseline c(x) leaves it unbiased and lowers its variance; ``baseline`` picks another of
+    :data:`ZEROTH_BASELINES`)."""
+    x = np.asarray(x, dtype=np.float64).ravel()
+    return _zeroth_terms(_costs(objective, x, sigma, w), w, sigma, baseline)
 
 
 def first_order_terms(objective: Objective, x: npt.ArrayLike, sigma: float, w: Array) -> Array:
@@ -257,6 +282,8 @@ class EstimatorStats:
     sample_std: float
     exact_calls: int = 0
     failed: int = 0  #: draws whose maneuver failed (left out of the statistics)
+    #: zeroth order: sample_std with each of ZEROTH_BASELINES on the same draws
+    baseline_std: dict[str, float] = field(default_factory=dict)
 
     def std(self, n: int) -> float:
         return self.sample_std / math.sqrt(n)
@@ -266,19 +293,30 @@ def estimator_stats(objective: Objective, x: npt.ArrayLike, sigma: float, refere
                     rng: np.random.Generator, samples: int) -> list[EstimatorStats]:
     """Both estimators at x from ``samples`` draws each (the same draws for both)."""
     w = rng.standard_normal((samples, objective.m))
+    x = np.asarray(x, dtype=np.float64).ravel()
+    costs = _costs(objective, x, sigma, w)
+
+    def spread_of(terms: Array) -> float:
+        ok = np.all(np.isfinite(terms), axis=1)
+        return float(math.sqrt(np.sum(np.var(terms[ok], axis=0, ddof=1)))) if ok.sum() > 1 \
+            else math.nan
+
     out = []
-    for name, terms_of in (("zeroth", zeroth_order_terms), ("first", first_order_terms)):
+    for name in ("zeroth", "first"):
         before = objective.ngrad
-        terms = terms_of(objective, x, sigma, w)
+        terms = _zeroth_terms(costs, w, sigma, "point") if name == "zeroth" else \
+            first_order_terms(objective, x, sigma, w)
+        by_baseline = {b: spread_of(_zeroth_terms(costs, w, sigma, b))
+                       for b in ZEROTH_BASELINES} if name == "zeroth" else {}
         ok = np.all(np.isfinite(terms), axis=1)
         terms = terms[ok]
-        spread = float(math.sqrt(np.sum(np.var(terms, axis=0, ddof=1)))) if ok.sum() > 1 \
-            else math.nan
+        spread = spread_of(terms)
         out.append(EstimatorStats(
             estimator=name, sigma=sigma,
             bias=float(np.linalg.norm(terms.mean(axis=0) - reference)) if ok.any() else math.nan,
             bias_se=spread / math.sqrt(max(int(ok.sum()), 1)), sample_std=spread,
-            exact_calls=objective.ngrad - before, failed=int((~ok).sum())))
+            exact_calls=objective.ngrad - before, failed=int((~ok).sum()),
+            baseline_std=by_baseline))
     return out
 
 
@@ -674,6 +712,19 @@ def report(study: GradientStudy, sample_counts: Sequence[int] = (4, 64)) -> str:
                     f"{e.bias:.3g} +- {e.bias_se:.2g} | "
                     + " | ".join(f"{e.std(n):.3g}" for n in sample_counts)
                     + f" | {e.exact_calls} | {e.failed} |")
+    lines += ["", "zeroth-order spread over first-order spread, by the zeroth-order baseline b "
+              "(same draws): c(u) the cost at the point (the estimator's), none, the draws' mean",
+              "", "| problem | point | sigma | first-order std | b = c(u) | b = 0 | b = mean |",
+              "|---|---|---|---|---|---|---|"]
+    for name, by_point in study.stats.items():
+        for label, stats in by_point.items():
+            for zeroth, first in zip(stats[0::2], stats[1::2]):
+                if not zeroth.baseline_std or first.sample_std == 0:
+                    continue
+                ratios = " | ".join(f"{zeroth.baseline_std[b] / first.sample_std:.3g}x"
+                                    for b in ZEROTH_BASELINES)
+                lines.append(f"| {name} | {label} | {zeroth.sigma:g} | "
+                             f"{first.sample_std:.3g} | {ratios} |")
     lines += ["", "descent from a grid of starts and s (reached: final cost within "
               f"{VALUE_TOL:g} of the global optimum)", "",
               "| problem | method | runs | reached | median iterations | median c - V* | "

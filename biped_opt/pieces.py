@@ -7,7 +7,9 @@ the events in every round. This module counts them on the n-leg walker's foot-of
 the level body falls from z = 1 with foot i raised by s d_i. At s = 0 all feet touch down at
 once, the (passive, u_body = 0) walker stays level, and it bounces: every foot lifts off at the
 same instant, then touches down again at the same instant; those are the rounds. Near s = 0 each
-round splits into n events whose order depends on the offsets.
+round splits into n events whose order depends on the offsets. Here k counts rounds; the
+paper's k counts periods of a periodic gait, and a period of this hopping (a touchdown and a
+liftoff) is two rounds.
 
 - :func:`count_pieces` samples the neighbourhood {s d : |d| = 1} of the simultaneous point
   (s = ``radius``, d uniform on the unit sphere of R^n, seeded) and labels each sample by its
@@ -18,7 +20,13 @@ round splits into n events whose order depends on the offsets.
   switch two events must coincide (on one side their time gap falls below ``TIE_TIME``, or the
   simulator merges them into one simultaneous event: a foot that the coupling keeps down after
   the other lifts off makes the later event's time jump, so the gap need not shrink on both
-  sides).
+  sides). A sampled count is a lower bound: a piece no sample hit is missed. With
+  ``max_samples`` the sample set is doubled (the same seeded stream continued) until a doubling
+  adds no piece or ``max_samples`` is reached; ``growth`` lists the count after every doubling
+  (and of the first quarter and half of the initial samples), ``stable`` whether the last
+  doubling added none. When the last m samples found nothing new, a piece still missed covers
+  less than 3 / m of the directions with 95 % confidence (the rule of three), so a stable count
+  is complete up to pieces of that size.
 - :func:`derivative_pieces` computes, at the simultaneous point, the Bouligand derivative of the
   ``offsets`` maneuver's outcome (the body's pitch at its nadir after touchdown) along the
   offsets, d -> D(d) = lim (o(s d) - o(0)) / s as s -> 0+. It is positively homogeneous and
@@ -111,6 +119,10 @@ class PieceCount:
     confirmed: dict[str, bool]
     #: label -> the smallest time gap between two events at its located boundary
     tie_gap: dict[str, float] = field(repr=False)
+    #: (samples, distinct labels among the first that many) after each doubling
+    growth: tuple[tuple[int, int], ...] = ()
+    #: the last doubling of the samples added no piece
+    stable: bool = False
 
     @property
     def count(self) -> int:
@@ -124,6 +136,7 @@ class PieceCount:
     def as_dict(self) -> dict:
         return {"n": self.n, "k": self.k, "count": self.count, "bound": self.bound,
                 "confirmed": sum(self.confirmed.values()), "samples": self.samples,
+                "growth": [list(g) for g in self.growth], "stable": self.stable,
                 "radius": self.radius, "seed": self.seed, "velocities": self.velocities,
                 "horizon": self.horizon,
                 "rounds": [[r.t, r.kind] for r in self.rounds],
@@ -247,16 +260,36 @@ def _unit_sphere(rng: np.random.Generator, count: int, n: int) -> Array:
     return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
+def _closest_pair(directions: Array, mine: list[int], others: list[int]) -> tuple[int, int]:
+    """(i, j), i in ``mine`` and j in ``others``, with the largest d_i . d_j (the first such)."""
+    best, pair = -math.inf, (mine[0], others[0])
+    rest = directions[others]
+    for start in range(0, len(mine), 256):  # in blocks: thousands by thousands of dot products
+        block = mine[start:start + 256]
+        dots = directions[block] @ rest.T
+        flat = int(np.argmax(dots))
+        if dots.flat[flat] > best:
+            best = float(dots.flat[flat])
+            pair = (block[flat // len(others)], others[flat % len(others)])
+    return pair
+
+
 def count_pieces(n: int, k: int, *, samples: int = 400, radius: float = 1e-3, seed: int = 0,
-                 velocities: bool = False, rounds: tuple[Round, ...] | None = None
-                 ) -> PieceCount:
+                 velocities: bool = False, rounds: tuple[Round, ...] | None = None,
+                 max_samples: int | None = None) -> PieceCount:
     """Pieces of the first k rounds for n legs (see the module docstring); ``velocities``:
-    the neighbourhood perturbs the feet's initial velocities too (2n dimensions)."""
+    the neighbourhood perturbs the feet's initial velocities too (2n dimensions);
+    ``max_samples``: double ``samples`` until a doubling adds no piece, up to this many."""
     _check_n(n)
     if isinstance(k, bool) or not isinstance(k, int) or k < 1:
         raise InvalidInputError(f"pieces: k must be an integer >= 1, got {k!r}")
     if not (isinstance(samples, int) and samples >= 2):
         raise InvalidInputError(f"pieces: samples must be an integer >= 2, got {samples!r}")
+    if max_samples is not None and not (isinstance(max_samples, int)
+                                        and not isinstance(max_samples, bool)
+                                        and max_samples >= samples):
+        raise InvalidInputError(f"pieces: max_samples must be an integer >= samples "
+                                f"({samples}), got {max_samples!r}")
     if not (math.isfinite(radius) and 0 < radius <= 0.01):
         raise InvalidInputError(f"pieces: radius must be in (0, 0.01], got {radius!r}")
     rounds = rounds if rounds is not None else simultaneous_rounds(n)
@@ -265,8 +298,19 @@ def count_pieces(n: int, k: int, *, samples: int = 400, radius: float = 1e-3, se
     _set_offsets(compiled, np.zeros(n), horizon)
     inputs = leg_inputs(n)
     rng = np.random.default_rng(seed)
-    directions = _unit_sphere(rng, samples, 2 * n if velocities else n)
+    dim = 2 * n if velocities else n
+    directions = _unit_sphere(rng, samples, dim)
     labels = [_events(compiled, d, radius, inputs)[0] for d in directions]
+    growth = [(m, len(set(labels[:m]))) for m in (samples // 4, samples // 2) if m >= 1]
+    growth.append((samples, len(set(labels))))
+    while max_samples is not None and len(labels) < max_samples:
+        more = _unit_sphere(rng, min(len(labels), max_samples - len(labels)), dim)
+        labels += [_events(compiled, d, radius, inputs)[0] for d in more]
+        directions = np.vstack([directions, more])
+        growth.append((len(labels), len(set(labels))))
+        if growth[-1][1] == growth[-2][1]:
+            break
+    stable = growth[-1][1] == growth[-2][1] if len(growth) > 1 else False
     counts = Counter(labels)
     confirmed: dict[str, bool] = {}
     gaps: dict[str, float] = {}
@@ -276,8 +320,7 @@ def count_pieces(n: int, k: int, *, samples: int = 400, radius: float = 1e-3, se
         if not others:  # one piece: no boundary to confirm
             confirmed[label], gaps[label] = True, math.nan
             continue
-        a, b = max(((i, j) for i in mine for j in others),
-                   key=lambda ij: float(directions[ij[0]] @ directions[ij[1]]))
+        a, b = _closest_pair(directions, mine, others)
         da, db = directions[a], directions[b]
 
         def along(x: float, da: Array = da, db: Array = db) -> Array:
@@ -289,10 +332,10 @@ def count_pieces(n: int, k: int, *, samples: int = 400, radius: float = 1e-3, se
         gap = min(_events(compiled, along(x), radius, inputs)[1] for x in (lo, hi))
         confirmed[label], gaps[label] = gap < TIE_TIME, gap
     _set_offsets(compiled, np.zeros(n))
-    return PieceCount(n=n, k=k, radius=radius, samples=samples, seed=seed, horizon=horizon,
-                      velocities=velocities,
+    return PieceCount(n=n, k=k, radius=radius, samples=len(labels), seed=seed,
+                      horizon=horizon, velocities=velocities,
                       rounds=tuple(rounds[:k]), pieces=dict(sorted(counts.items())),
-                      confirmed=confirmed, tie_gap=gaps)
+                      confirmed=confirmed, tie_gap=gaps, growth=tuple(growth), stable=stable)
 
 
 def _touchdown_shifts(compiled: CompiledSystem, d: Array, inputs: list[float], t0: float,

@@ -10,6 +10,7 @@ import pytest
 from biped_opt.cli.main import main
 from biped_opt.errors import InvalidInputError
 from biped_opt.gradients import (
+    ZEROTH_BASELINES,
     Objective,
     descend,
     estimator_stats,
@@ -104,6 +105,29 @@ def test_first_order_estimator_misses_a_jump():
     # the exact derivative is used only where the quotients disagree (a sample within the step
     # of the jump, or a component whose gradient is near 0): at most 0.1% of the samples
     assert stats["first"].exact_calls <= 40
+
+
+def test_zeroth_order_spread_depends_on_its_baseline():
+    """The same draws with each baseline: every one leaves the estimate within 4 standard errors
+    of D J_sigma, but the spreads differ (so a ratio of spreads means something only with its
+    baseline). Where the cost is far from 0 (here c ~ 5 at the point, jump 5 beyond x = 0),
+    no baseline is worst; the recorded spreads are the terms' own."""
+    objective = Analytic(jump=5.0)
+    x = np.array([0.3, -0.4])
+    truth = objective.smoothed(x, SIGMA)
+    zeroth = estimator_stats(objective, x, SIGMA, truth, np.random.default_rng(3), 40000)[0]
+    w = np.random.default_rng(3).standard_normal((40000, 2))  # the draws estimator_stats used
+    assert set(zeroth.baseline_std) == set(ZEROTH_BASELINES)
+    assert zeroth.baseline_std["point"] == zeroth.sample_std
+    for b in ZEROTH_BASELINES:
+        terms = zeroth_order_terms(objective, x, SIGMA, w, baseline=b)
+        spread = math.sqrt(np.sum(np.var(terms, axis=0, ddof=1)))
+        assert zeroth.baseline_std[b] == pytest.approx(spread, rel=1e-12)
+        se = terms.std(axis=0, ddof=1) / math.sqrt(len(terms))
+        assert np.all(np.abs(terms.mean(axis=0) - truth) < 4 * se), (b, terms.mean(axis=0))
+    assert zeroth.baseline_std["none"] > 1.5 * zeroth.baseline_std["point"]
+    with pytest.raises(InvalidInputError, match="baseline"):
+        zeroth_order_terms(objective, x, SIGMA, w[:3], baseline="median")
 
 
 @pytest.fixture(scope="module")

@@ -41,6 +41,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="count for k = 1..K rounds, as far as the walker has them (default 3)")
     p.add_argument("--samples", type=int_in_range("--samples", 2, MAX_POINTS), default=400,
                    help="samples of the neighbourhood per count (default 400)")
+    p.add_argument("--max-samples", type=int_in_range("--max-samples", 2, MAX_POINTS),
+                   default=None, metavar="N",
+                   help="double the samples until a doubling finds no new piece, up to N per "
+                        "count (default: --samples only)")
     p.add_argument("--radius", type=positive_float("--radius", maximum=0.01), default=1e-3,
                    help="size of the perturbation s (default 1e-3, at most 0.01)")
     p.add_argument("--seed", type=int_in_range("--seed", 0, MAX_SEED), default=0,
@@ -68,9 +72,11 @@ def run(args: argparse.Namespace) -> int:
         rounds = simultaneous_rounds(n)
         for k in range(1, min(args.rounds, len(rounds)) + 1):
             for velocities in (False, True):
-                counts.append(count_pieces(n, k, samples=args.samples, radius=args.radius,
-                                           seed=args.seed, velocities=velocities,
-                                           rounds=rounds))
+                counts.append(count_pieces(
+                    n, k, samples=args.samples, radius=args.radius, seed=args.seed,
+                    velocities=velocities, rounds=rounds,
+                    max_samples=None if args.max_samples is None
+                    else max(args.max_samples, args.samples)))
         if not args.no_derivative:
             derivatives[n] = derivative_pieces(n, seed=args.seed)
     if args.json:
@@ -90,8 +96,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _print(counts, derivatives, args, distinct_gradients) -> None:
-    print(f"Pieces near simultaneous contact (radius {args.radius:g}, {args.samples} samples, "
-          f"seed {args.seed}): distinct contact-mode sequences over k rounds\n")
+    most = "" if args.max_samples is None else f", doubled up to {args.max_samples}"
+    print(f"Pieces near simultaneous contact (radius {args.radius:g}, {args.samples} samples"
+          f"{most}, seed {args.seed}): distinct contact-mode sequences over k rounds\n")
     print(f"{'n':>2} {'k':>2}  {'rounds':<30} {'heights':>8} {'+veloc.':>8} {'(n!)^k':>7}  "
           "boundaries confirmed")
     by_key = {(c.n, c.k, c.velocities): c for c in counts}
@@ -105,6 +112,12 @@ def _print(counts, derivatives, args, distinct_gradients) -> None:
             confirmed += f", {sum(both.confirmed.values())}/{both.count}"
         print(f"{n:>2} {k:>2}  {rounds:<30} {c.count:>8} "
               f"{both.count if both is not None else '-':>8} {c.bound:>7}  {confirmed}")
+    print("\nCounts are lower bounds (a piece no sample hit is missed). Growth, samples: count "
+          "('stable': the last doubling or half of the samples found no new piece):")
+    for c in counts:
+        growth = "  ".join(f"{m}: {v}" for m, v in c.growth)
+        print(f"{c.n:>2} {c.k:>2}  {'+veloc.' if c.velocities else 'heights':<8} {growth}"
+              f"{'  stable' if c.stable else ''}")
     for n in sorted({c.n for c in counts}):
         available = max(c.k for c in counts if c.n == n)
         if available < args.rounds:

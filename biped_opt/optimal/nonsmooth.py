@@ -22,6 +22,12 @@ can only arise where one of them changes, so the analysis
 4. names the cause from the labels on both sides (mode order change, optimal branch switch,
    change of acting input, bound reached or left).
 
+Where the simulation (or the optimum) fails on one side - its label reads ``FAILED:<status>`` -
+the change is a **failure** boundary, not a jump or kink of the outcome: it is reported once,
+with the failing status in its cause, the working side's limits and slopes, and NaN for the
+failing side (nothing is extrapolated into a failed region). Every point carries its bracket;
+``location_error`` is the distance from the reported point to the bracket's far end.
+
 A change of label hidden between two grid points that cancels out (left and right labels equal)
 is not seen; a finer grid finds it.
 
@@ -31,7 +37,6 @@ is not seen; a finer grid finds it.
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
@@ -39,6 +44,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from biped_opt import strict_json
 from biped_opt.errors import InvalidInputError
 from biped_opt.fixed_sweep import FIXED_INPUTS
 from biped_opt.hybrid import SimulatorOptions, simulate
@@ -57,6 +63,7 @@ __all__ = [
     "find_nonsmooth_fixed",
     "find_nonsmooth_optimal",
     "LOCATE_TOL",
+    "FAILED",
 ]
 
 #: width of the th0 bracket every point is located to
@@ -77,6 +84,8 @@ H0 = 1e-2
 H_MIN = 1e-6
 #: shrink factor of the one-sided step between ladders
 SHRINK = 8.0
+#: the label prefix of a failed simulation or optimum (``FAILED:<status>``)
+FAILED = "FAILED:"
 
 
 def _one_sided_converged(
@@ -116,7 +125,7 @@ class NonsmoothPoint:
     theta0: float
     quantity: str  #: "outcome", "policy" or "value"
     input: str | None  #: the policy component (None for outcome and value)
-    kind: str  #: "jump", "kink" or "second-derivative"
+    kind: str  #: "jump", "kink", "second-derivative" or "failure" (a failed side)
     left: float
     right: float
     cause: str
@@ -126,6 +135,11 @@ class NonsmoothPoint:
     at: float  #: the quantity at theta0 itself
     bracket: tuple[float, float]  #: width <= LOCATE_TOL (wider only for a simultaneous band)
     labels: tuple[str, str]  #: mode order left | right
+
+    @property
+    def location_error(self) -> float:
+        """Distance from ``theta0`` to the far end of its bracket."""
+        return float(max(self.theta0 - self.bracket[0], self.bracket[1] - self.theta0))
 
     def as_dict(self) -> dict:
         return {
@@ -141,6 +155,7 @@ class NonsmoothPoint:
             "second_derivatives": list(self.second_derivatives),
             "at": self.at,
             "bracket": list(self.bracket),
+            "location_error": self.location_error,
             "modes": list(self.labels),
         }
 
@@ -168,7 +183,7 @@ class NonsmoothReport:
         }
 
     def to_json(self, **kwargs: object) -> str:
-        return json.dumps(self.as_dict(), **kwargs)  # type: ignore[arg-type]
+        return strict_json.dumps(self.as_dict(), **kwargs)  # a failing side's NaN: null
 
     def table(self) -> str:
         """A plain-text table, one line per point."""
@@ -394,6 +409,10 @@ def analyse_switches(
         h = min(H0, 0.45 * left_gap, 0.45 * right_gap)
         h_min = max(H_MIN, 64.0 * (hi - lo))
         h = max(h, h_min)
+        failed = (_failure(ev(lo)), _failure(ev(hi)))
+        if any(failed):
+            points.append(_failure_point(ev, x, lo, hi, h, h_min, failed, quantities))
+            continue
         sides = {}
         for q in quantities:
             f = (lambda name: (lambda th: ev(th).values[name]))(q)
@@ -431,6 +450,37 @@ def analyse_switches(
                 )
             )
     return points
+
+
+def _failure(sample: Sample) -> str | None:
+    """The status of a failed sample (branch ``FAILED:<status>``), None for a working one."""
+    return sample.branch[len(FAILED):] if sample.branch.startswith(FAILED) else None
+
+
+def _failure_point(ev: Evaluator, x: float, lo: float, hi: float, h: float, h_min: float,
+                   failed: tuple[str | None, str | None], quantities: list[str]
+                   ) -> NonsmoothPoint:
+    """The boundary of a failed region at x (bracket [lo, hi]): the first quantity's limits
+    and slopes on the working side, NaN on a failing one."""
+    q = quantities[0]
+
+    def f(th: float) -> float:
+        return ev(th).values[q]
+
+    nan = OneSided(side=0, limit=math.nan, derivative=math.nan, derivative_error=math.nan,
+                   second_derivative=math.nan)
+    left, right = (nan if failed[k] else _one_sided_converged(f, x, side, h, h_min)
+                   for k, side in ((0, -1), (1, 1)))
+    where = [f"{side}: {failed[k]}" for k, side in ((0, "left"), (1, "right")) if failed[k]]
+    family, _, comp = q.partition(":")
+    return NonsmoothPoint(
+        theta0=x, quantity=family, input=comp or None, kind="failure",
+        left=left.limit, right=right.limit,
+        cause=f"failure boundary ({'; '.join(where)}): no outcome on the failing side",
+        limits=(left.limit, right.limit), derivatives=(left.derivative, right.derivative),
+        second_derivatives=(left.second_derivative, right.second_derivative),
+        at=math.nan if _failure(ev(x)) else f(x), bracket=(lo, hi),
+        labels=(ev(lo).branch, ev(hi).branch))
 
 
 # --- public API -------------------------------------------------------------------------------

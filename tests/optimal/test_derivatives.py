@@ -4,12 +4,13 @@ Independent checks: Richardson-extrapolated one-sided finite differences of the 
 outcome (:func:`biped_opt.nonsmooth.one_sided`) and of the optimal solver's policy and value,
 MODEL.md's reference slopes and limits, and the biped's mirror symmetry.
 
-Tolerances: the variational sensitivities agree with the extrapolated differences to ~1e-10
-relative (integration at rtol 1e-11, outcomes good to ~1e-13), so 1e-6 relative is a loose,
-robust bound for outcome derivatives. MODEL.md quotes 9 digits, so its slopes are compared to
-1e-6 absolute. Optimal policies are only as accurate as the bounded Brent search (~1e-8, a flat
-minimum), so their differences over steps >= 1e-3 carry ~1e-5 error: policy slopes are compared
-to 1e-4 relative, values (second-order insensitive to the policy error) to 1e-6.
+Tolerances are computed (:mod:`tests.extrapolated`): SAFETY times the reference's error
+estimate - its truncation (the last two extrapolants) plus each sample's error times the
+extrapolation's weights - plus the sensitivity's own (the variational rtol 1e-11, relative).
+Outcomes are simulated at rtol 1e-11; a solver's optimal policy is off the optimum by the
+Newton step |c'(u)| / c''(u) left at it (:func:`_distance`, exact c', differenced c''), its value
+by the simulation's tolerance (the value is stationary in u). MODEL.md quotes 9 digits, so its
+slopes are compared to 1e-6 absolute.
 """
 
 from __future__ import annotations
@@ -19,24 +20,36 @@ import pytest
 
 from biped_opt.errors import InvalidInputError, SimulationError
 from biped_opt.hybrid import simulate
+from biped_opt.hybrid.simulate import DEFAULT_OPTIONS
 from biped_opt.model.modes import ContactMode
-from biped_opt.nonsmooth import locate_switch, one_sided
+from biped_opt.nonsmooth import locate_switch
 from biped_opt.optimal import get_problem, optimal_policy
 from biped_opt.optimal.derivatives import (
+    DEFAULT_VARIATIONAL,
     PARAMETER_NAMES,
     one_sided_derivatives,
     outcome_derivative,
     outcome_sensitivity,
     saltation_matrix,
 )
+from tests.extrapolated import SAFETY, extrapolated, relative_noise
 
 TD_U = (2.0, 0.5, 0.0)
 LO_U = (1.5, 3.0, 0.0)
+#: the simulated outcome's error per sample (relative)
+SIM_NOISE = relative_noise(DEFAULT_OPTIONS.rtol)
 
 
-def _fd_gradient(maneuver: str, theta0: float, inputs: tuple[float, ...]) -> np.ndarray:
-    """Central (two one-sided extrapolations, averaged) differences of th_f per parameter."""
-    out = np.empty(len(PARAMETER_NAMES))
+def _own(x: float) -> float:
+    """A sensitivity's own error: the variational integration's relative tolerance."""
+    return DEFAULT_VARIATIONAL.rtol * max(1.0, abs(x))
+
+
+def _fd_gradient(maneuver: str, theta0: float, inputs: tuple[float, ...]
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Central (two one-sided extrapolations, averaged) differences of th_f per parameter, and
+    their error estimates (the two sides must agree within them: th_f is C^1 here)."""
+    out, err = np.empty(len(PARAMETER_NAMES)), np.empty(len(PARAMETER_NAMES))
     for k in range(len(PARAMETER_NAMES)):
         def f(x: float, k: int = k) -> float:
             if k == 0:
@@ -47,11 +60,12 @@ def _fd_gradient(maneuver: str, theta0: float, inputs: tuple[float, ...]) -> np.
 
         x0 = theta0 if k == 0 else inputs[k - 1]
         h0 = 1e-2 if k == 0 else 5e-2
-        right = one_sided(f, x0, 1, h0=h0, levels=5)
-        left = one_sided(f, x0, -1, h0=h0, levels=5)
-        assert right.derivative == pytest.approx(left.derivative, rel=1e-7, abs=1e-12)
+        right = extrapolated(f, x0, 1, h0=h0, levels=5, noise=SIM_NOISE)
+        left = extrapolated(f, x0, -1, h0=h0, levels=5, noise=SIM_NOISE)
+        assert right.derivative == pytest.approx(left.derivative, abs=right.tolerance(left.error))
         out[k] = 0.5 * (right.derivative + left.derivative)
-    return out
+        err[k] = 0.5 * (right.error + left.error)
+    return out, err
 
 
 @pytest.mark.parametrize(
@@ -67,9 +81,10 @@ def test_gradient_matches_extrapolated_differences(maneuver, theta0, inputs):
     sens = outcome_sensitivity(maneuver, theta0, inputs)
     assert not sens.simultaneous and not sens.continued
     assert sens.outcome == pytest.approx(simulate(maneuver, theta0, inputs).outcome, abs=1e-13)
-    fd = _fd_gradient(maneuver, theta0, inputs)
-    scale = np.max(np.abs(fd))
-    np.testing.assert_allclose(sens.gradient, fd, rtol=1e-6, atol=1e-6 * scale)
+    fd, err = _fd_gradient(maneuver, theta0, inputs)
+    own = np.array([_own(g) for g in sens.gradient])
+    gap = np.abs(sens.gradient - fd)
+    assert np.all(gap <= SAFETY * (err + own)), (gap, err)
     # away from simultaneous events the two sides agree (th_f is C^1 there)
     left = outcome_derivative(maneuver, theta0, inputs, side=-1)
     assert left == pytest.approx(sens.d_theta0, rel=1e-12)
@@ -88,8 +103,9 @@ def test_touchdown_kink_slopes_at_zero():
         return simulate("touchdown", x, TD_U).outcome
 
     for sens, side in ((right, 1), (left, -1)):
-        fd = one_sided(f, 0.0, side, h0=1e-2, levels=6)
-        assert sens.d_theta0 == pytest.approx(fd.derivative, rel=1e-6)
+        fd = extrapolated(f, 0.0, side, h0=1e-2, levels=6, noise=SIM_NOISE)
+        assert sens.d_theta0 == pytest.approx(fd.derivative,
+                                              abs=fd.tolerance(_own(sens.d_theta0)))
         assert fd.limit == pytest.approx(0.0, abs=1e-10)
     # the single-stance inputs act for a zero time on either branch at th0 = 0
     assert right.d_input("u1") == 0.0 and right.d_input("u2") == 0.0
@@ -125,8 +141,9 @@ def test_liftoff_jump_branches_at_zero():
         return simulate("liftoff", x, LO_U).outcome
 
     for sens, side in ((right, 1), (left, -1)):
-        fd = one_sided(f, 0.0, side, h0=1e-2, levels=6)
-        assert sens.d_theta0 == pytest.approx(fd.derivative, rel=1e-6)
+        fd = extrapolated(f, 0.0, side, h0=1e-2, levels=6, noise=SIM_NOISE)
+        assert sens.d_theta0 == pytest.approx(fd.derivative,
+                                              abs=fd.tolerance(_own(sens.d_theta0)))
         assert sens.outcome == pytest.approx(fd.limit, abs=1e-10)
     assert left.d_theta0 == pytest.approx(0.27253, abs=1e-5)
     assert right.d_theta0 == pytest.approx(0.37681, abs=1e-5)
@@ -142,8 +159,9 @@ def test_liftoff_without_inputs_is_continuous_at_zero():
         return simulate("liftoff", x, (0.0, 0.0, 0.0)).outcome
 
     for sens, side in ((right, 1), (left, -1)):
-        fd = one_sided(f, 0.0, side, h0=1e-2, levels=6)
-        assert sens.d_theta0 == pytest.approx(fd.derivative, rel=1e-6)
+        fd = extrapolated(f, 0.0, side, h0=1e-2, levels=6, noise=SIM_NOISE)
+        assert sens.d_theta0 == pytest.approx(fd.derivative,
+                                              abs=fd.tolerance(_own(sens.d_theta0)))
 
 
 def test_saltation_matrix_of_a_bouncing_ball():
@@ -171,8 +189,25 @@ def test_argument_errors():
 
 
 # --- policy and value: Theorem 1, Eqs. (12)-(13) ------------------------------------------------
+def _distance(problem, theta0: float, r) -> float:
+    """The solver's distance from the optimum of its acting decision: the Newton step
+    |c'(u)| / c''(u) left at it (c' exact, c'' by central differences of c'); 0 on a bound."""
+    d = r.active
+    if d is None or r.bound is not None:
+        return 0.0
+
+    def slope(u: float) -> float:
+        s = outcome_sensitivity(problem.maneuver, theta0, problem.inputs({**r.policy, d: u}),
+                                params=problem.params, options=problem.options)
+        return problem.outcome_slope(s.outcome) * s.d_input(d) + 2.0 * problem.alpha(d) * u
+
+    u, h = r.policy[d], 1e-4
+    return abs(slope(u)) / abs((slope(u + h) - slope(u - h)) / (2.0 * h))
+
+
 def _fd_optimal(problem, theta0: float, side: int, h0: float):
-    """One-sided extrapolated derivatives of the solver's value and (active) policy."""
+    """One-sided extrapolated derivatives of the solver's value and (active) policy, with
+    their errors (the policy's samples off by :func:`_distance`, the value's by rtol)."""
     cache: dict[float, object] = {}
 
     def res(t: float):
@@ -180,9 +215,10 @@ def _fd_optimal(problem, theta0: float, side: int, h0: float):
             cache[t] = optimal_policy(problem, t)
         return cache[t]
 
-    value = one_sided(lambda t: res(t).value, theta0, side, h0=h0, levels=4)
+    value = extrapolated(lambda t: res(t).value, theta0, side, h0=h0, levels=4, noise=SIM_NOISE)
     policy = {
-        d: one_sided(lambda t, d=d: res(t).policy[d], theta0, side, h0=h0, levels=4)
+        d: extrapolated(lambda t, d=d: res(t).policy[d], theta0, side, h0=h0, levels=4,
+                        noise=lambda t, _: _distance(problem, t, res(t)))
         for d in problem.decisions
     }
     return value, policy
@@ -194,8 +230,9 @@ def test_touchdown_policy_and_value_smooth_point():
     assert d.branches == ("AIR->LEFT->GROUND", "AIR->LEFT->GROUND")
     value, policy = _fd_optimal(problem, 0.03, 1, 4e-3)
     for k in (0, 1):
-        assert d.value[k] == pytest.approx(value.derivative, rel=1e-6)
-        assert d.policy["u1"][k] == pytest.approx(policy["u1"].derivative, rel=1e-4)
+        assert d.value[k] == pytest.approx(value.derivative, abs=value.tolerance(_own(d.value[k])))
+        assert d.policy["u1"][k] == pytest.approx(policy["u1"].derivative,
+                                                  abs=policy["u1"].tolerance())
         assert d.policy["u2"][k] == pytest.approx(0.0, abs=1e-9)  # u2 does not act
     # Newton's polish on the branch lands on the solver's optimum (its value is flat in u*)
     at = optimal_policy(problem, 0.03)
@@ -217,8 +254,9 @@ def test_touchdown_policy_kink_value_c1_at_zero():
     assert d.value[0] == pytest.approx(d.value[1], rel=1e-9)  # C^1: no first-order kink
     assert d.value[1] == pytest.approx(0.1647, abs=1e-4)
     value, policy = _fd_optimal(problem, 0.0, 1, 1e-3)
-    assert d.value[1] == pytest.approx(value.derivative, rel=1e-5)
-    assert d.policy["u1"][1] == pytest.approx(policy["u1"].derivative, rel=1e-3)
+    assert d.value[1] == pytest.approx(value.derivative, abs=value.tolerance(_own(d.value[1])))
+    assert d.policy["u1"][1] == pytest.approx(policy["u1"].derivative,
+                                              abs=policy["u1"].tolerance())
 
 
 def test_liftoff_policy_jump_value_kink():
@@ -238,7 +276,8 @@ def test_liftoff_policy_jump_value_kink():
     assert abs(d.value[0] - d.value[1]) > 1e-4
     for side, k in ((-1, 0), (1, 1)):
         value, _ = _fd_optimal(problem, ts + side * 2e-9, side, 1e-4)
-        assert d.value[k] == pytest.approx(value.derivative, rel=1e-4)
+        assert d.value[k] == pytest.approx(value.derivative,
+                                           abs=value.tolerance(_own(d.value[k])))
 
 
 def test_variant_value_jump_limits():
@@ -262,9 +301,10 @@ def test_bouligand_derivative_in_a_general_direction(direction):
     def f(s: float) -> float:
         return simulate("liftoff", s * v[0], np.array(LO_U) + s * v[1:]).outcome
 
-    fd = one_sided(f, 0.0, 1, h0=1e-3 / np.max(np.abs(v)), levels=6)
+    fd = extrapolated(f, 0.0, 1, h0=1e-3 / np.max(np.abs(v)), levels=6, noise=SIM_NOISE)
     assert sens.outcome == pytest.approx(fd.limit, abs=1e-10)
-    assert float(sens.gradient @ v) == pytest.approx(fd.derivative, rel=1e-6)
+    b = float(sens.gradient @ v)
+    assert b == pytest.approx(fd.derivative, abs=fd.tolerance(_own(b)))
     trajectory = simulate("liftoff", 1e-7 * v[0], np.array(LO_U) + 1e-7 * v[1:])
     assert sens.mode_sequence == trajectory.mode_sequence
 

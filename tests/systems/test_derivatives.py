@@ -2,10 +2,11 @@
 
 References are one-sided difference quotients of ``CompiledSystem.simulate`` at rtol 1e-13,
 extrapolated to h -> 0 (:func:`biped_opt.nonsmooth.one_sided`: a polynomial through five points
-h0 / 2^k on one side, i.e. Richardson). The outcomes carry ~1e-13 of integration error, which
-the extrapolation amplifies by ~1e3 / h0, so with h0 = 1e-3 the references are good to ~1e-8;
-the variational integration (rtol 1e-11) is good to ~1e-10. Tolerances below are set from these.
-"""
+h0 / 2^k on one side, i.e. Richardson), or central differences extrapolated twice. Each
+comparison's tolerance is computed (:mod:`tests.extrapolated`): SAFETY times the reference's
+truncation estimate (its last two extrapolants) plus the samples' integration error (rtol
+max(1, |f|)) times the scheme's weights, plus the sensitivity's own error (the variational
+integration's rtol 1e-11, relative)."""
 
 from __future__ import annotations
 
@@ -17,8 +18,8 @@ import sympy as sp
 
 from biped_opt.errors import InvalidInputError, SimulationError
 from biped_opt.hybrid.simulate import SimulatorOptions
-from biped_opt.nonsmooth import one_sided
 from biped_opt.optimal import derivatives as biped_derivatives
+from biped_opt.optimal.derivatives import DEFAULT_VARIATIONAL
 from biped_opt.systems import System
 from biped_opt.systems.compiled import compile_system
 from biped_opt.systems.derivatives import (
@@ -27,10 +28,9 @@ from biped_opt.systems.derivatives import (
     one_sided_derivatives,
     outcome_gradient,
 )
+from tests.extrapolated import central, extrapolated, relative_noise
 
 TIGHT = SimulatorOptions(rtol=1e-13, atol=1e-14)
-#: extrapolated one-sided differences (see the module docstring) are good to ~1e-8
-FD_TOL = 5e-8
 #: walker3 touchdown inputs (u1, u2, u3); u_body = 0
 U3 = (2.0, 1.0, 0.5, 0.0)
 
@@ -56,27 +56,30 @@ def _along(compiled, maneuver, p, v, what="outcome"):
     return f
 
 
-def _central(f, x, h):
-    """Central differences at h, h/2, h/4, extrapolated twice (error O(h^6))."""
-    d = [(np.asarray(f(x + k)) - np.asarray(f(x - k))) / (2 * k) for k in (h, h / 2, h / 4)]
-    r1 = [(4 * d[1] - d[0]) / 3, (4 * d[2] - d[1]) / 3]
-    return (16 * r1[1] - r1[0]) / 15
+def _own(x):
+    """The sensitivity's own error: the variational integration's relative tolerance."""
+    return DEFAULT_VARIATIONAL.rtol * np.maximum(1.0, np.abs(x))
+
+
+def _one_sided(f, side):
+    """The extrapolated one-sided quotient at 0 from h0 = 1e-3, samples at TIGHT's rtol."""
+    return extrapolated(f, 0.0, side, h0=1e-3, noise=relative_noise(TIGHT.rtol))
 
 
 @pytest.mark.parametrize("s", [0.05, 0.2])
 def test_rocking_bar_gradient_away_from_zero(bar, s):
     """Away from its jumps the bar's outcome th'(t_f) is smooth: the extrapolated one-sided
     quotients in s from both sides, and extrapolated central differences (h = 1e-3, error
-    O(h^6), good to ~1e-10 here) in s and in the air torque u_th, give the gradient."""
+    O(h^6)) in s and in the air torque u_th, give the gradient."""
     g = outcome_gradient(bar, "drop", s, (0.0,))
     assert not g.simultaneous and not g.continued
     assert g.outcome == pytest.approx(bar.simulate("drop", s).outcome, abs=1e-9)
     for side in (-1, 1):
-        fd = one_sided(_along(bar, "drop", (s, 0.0), (1.0, 0.0)), 0.0, side, h0=1e-3)
-        assert g.d("s") == pytest.approx(fd.derivative, abs=FD_TOL)
+        fd = _one_sided(_along(bar, "drop", (s, 0.0), (1.0, 0.0)), side)
+        assert g.d("s") == pytest.approx(fd.derivative, abs=fd.tolerance(_own(g.d("s"))))
     for k, e in enumerate(np.eye(2)):
-        assert g.gradient[k] == pytest.approx(
-            _central(_along(bar, "drop", (s, 0.0), e), 0.0, 1e-3), abs=2e-9)
+        c = central(_along(bar, "drop", (s, 0.0), e), 0.0, 1e-3, rtol=TIGHT.rtol)
+        assert g.gradient[k] == pytest.approx(c.derivative, abs=c.tolerance(_own(g.gradient[k])))
     if s == 0.2:  # SYSTEMS.md Sec. 2: left, right only
         assert g.outcome == pytest.approx(2.42070065442, abs=1e-10)
         assert g.flips == (0, 1)
@@ -88,8 +91,8 @@ def test_rocking_bar_one_sided_at_the_jump(bar):
     impacts left, right, left (right, left, right) in one instant, then the continued flight."""
     left, right = one_sided_derivatives(bar, "drop", 0.0)
     for side, slope in ((-1, left), (1, right)):
-        fd = one_sided(_along(bar, "drop", (0.0, 0.0), (1.0, 0.0)), 0.0, side, h0=1e-3)
-        assert slope == pytest.approx(fd.derivative, abs=FD_TOL)
+        fd = _one_sided(_along(bar, "drop", (0.0, 0.0), (1.0, 0.0)), side)
+        assert slope == pytest.approx(fd.derivative, abs=fd.tolerance(_own(slope)))
         g = outcome_gradient(bar, "drop", 0.0, direction=(side, 0.0))
         assert g.simultaneous and g.continued
         assert g.outcome == pytest.approx(fd.limit, abs=1e-9)
@@ -114,8 +117,9 @@ def test_walker3_touchdown_slopes_at_the_triple_touchdown(name, left, right):
     assert lo == pytest.approx(left, abs=1e-8)
     assert hi == pytest.approx(right, abs=1e-8)
     f = _along(w, "touchdown", (0.0, *U3), (1.0, 0.0, 0.0, 0.0, 0.0))
-    assert lo == pytest.approx(one_sided(f, 0.0, -1, h0=1e-3).derivative, abs=FD_TOL)
-    assert hi == pytest.approx(one_sided(f, 0.0, 1, h0=1e-3).derivative, abs=FD_TOL)
+    for slope, side in ((lo, -1), (hi, 1)):
+        fd = _one_sided(f, side)
+        assert slope == pytest.approx(fd.derivative, abs=fd.tolerance(_own(slope)))
 
 
 @pytest.mark.parametrize(("maneuver", "u", "jump"), [
@@ -150,7 +154,7 @@ def test_walker2_is_the_biped(maneuver, u, jump):
 def test_gradient_of_outcome_final_state_and_time(walker3):
     """Away from simultaneous events (th0 = 0.1: feet 1, 2, 3 one after another, u_body
     active at the end): d outcome, d y_final and d t_final w.r.t. (s, u1, u2, u3, u_body)
-    against extrapolated central differences (good to ~1e-9 at h = 1e-2)."""
+    against extrapolated central differences (h = 1e-2)."""
     p = np.array([0.1, 2.0, 1.0, 0.5, 0.3])
     g = outcome_gradient(walker3, "touchdown", p[0], tuple(p[1:]))
     assert not g.simultaneous and g.modes == walker3.simulate(
@@ -159,8 +163,9 @@ def test_gradient_of_outcome_final_state_and_time(walker3):
         e = np.eye(p.size)[k]
         for what, value in (("outcome", g.gradient[k]), ("t_final", g.time_gradient[k]),
                             ("y_final", g.state_gradient[:, k])):
-            fd = _central(_along(walker3, "touchdown", p, e, what), 0.0, 1e-2)
-            np.testing.assert_allclose(value, fd, rtol=0, atol=1e-7, err_msg=f"{what}, {k}")
+            c = central(_along(walker3, "touchdown", p, e, what), 0.0, 1e-2, rtol=TIGHT.rtol)
+            gap = np.abs(value - c.derivative)
+            assert np.all(gap <= c.tolerance(_own(value))), (what, k, gap, c.error)
     # u2 and u3 act only while their leg is alone on the ground, which never happens here
     assert abs(g.d("u2")) < 1e-10 and abs(g.d("u3")) < 1e-10
     assert abs(g.d("u_body")) > 1e-3 and abs(g.d("u1")) > 1e-3
@@ -181,8 +186,8 @@ def test_walker3_bouligand_derivative_along_directions(walker3, v):
     """At th0 = 0 (three simultaneous touchdowns) the derivative along v in (s, u) is the
     extrapolated one-sided quotient along v, for directions on both sides of the kink."""
     b = directional_derivative(walker3, "touchdown", 0.0, U3, v)
-    fd = one_sided(_along(walker3, "touchdown", (0.0, *U3), v), 0.0, 1, h0=1e-3)
-    assert b == pytest.approx(fd.derivative, abs=FD_TOL)
+    fd = _one_sided(_along(walker3, "touchdown", (0.0, *U3), v), 1)
+    assert b == pytest.approx(fd.derivative, abs=fd.tolerance(_own(b)))
 
 
 def test_walker3_bouligand_derivative_is_piecewise_linear(walker3):
@@ -244,8 +249,9 @@ def test_three_simultaneous_touchdowns_have_six_linear_pieces():
             v[1 + j] = -(3.0 - rank)
         g = outcome_gradient(c, "drop", 0.0, (0.0, 0.0, 0.0), direction=v)
         assert g.flips == order and g.simultaneous and not g.continued
-        fd = one_sided(_along(c, "drop", (0.0, 0.0, 0.0, 0.0), v), 0.0, 1, h0=1e-3)
-        assert g.gradient @ v == pytest.approx(fd.derivative, abs=FD_TOL)
+        fd = _one_sided(_along(c, "drop", (0.0, 0.0, 0.0, 0.0), v), 1)
+        b = g.gradient @ v
+        assert b == pytest.approx(fd.derivative, abs=fd.tolerance(_own(b)))
         pieces.append(g.gradient)
     gaps = [np.max(np.abs(a - b)) for a, b in itertools.combinations(pieces, 2)]
     assert min(gaps) > 1e-2

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import json
+import math
+
 import pytest
 
-from biped_opt.optimal.nonsmooth import find_nonsmooth_fixed
+from biped_opt.optimal.nonsmooth import LOCATE_TOL, find_nonsmooth_fixed
 from biped_opt.optimal.nonsmooth import find_nonsmooth_optimal as biped_find_optimal
 from biped_opt.optimal.problems import get_problem as biped_problem
 from biped_opt.systems.nonsmooth import find_nonsmooth, find_nonsmooth_optimal
@@ -88,3 +91,28 @@ def test_optimal_table_of_the_decoupled_walker_is_smooth_at_zero() -> None:
     assert [p for p in coupled.points if p.theta0 == 0.0 and p.kind in ("kink", "jump")]
     assert not [p for p in decoupled.points
                 if abs(p.theta0) < 1e-6 and p.kind in ("kink", "jump")]
+
+
+def test_the_edge_of_a_failed_region_is_a_failure_boundary_not_a_kink() -> None:
+    """Three-leg walker pushing off with u = 2 on every leg: beyond |s| = 0.2617480590 the body
+    reaches its apex with a foot still down (status APEX_IN_CONTACT). That edge is reported as a
+    failure boundary naming the status, with NaN (JSON null) on the failing side, never as a
+    kink or jump; the jump at 0 is still found. Located to the engine's 1e-10 bracket."""
+    report = find_nonsmooth("walker3_coupled", "liftoff",
+                            {"u1": 2.0, "u2": 2.0, "u3": 2.0, "u_body": 0.0}, num=41)
+    kinds = [(p.kind, round(p.theta0, 6)) for p in report.points]
+    assert kinds == [("failure", -0.261748), ("jump", 0.0), ("failure", 0.261748)]
+    for p, failing in ((report.points[0], 0), (report.points[2], 1)):
+        assert "APEX_IN_CONTACT" in p.cause and "failure boundary" in p.cause
+        assert p.labels[failing] == "FAILED:APEX_IN_CONTACT"
+        assert math.isnan(p.limits[failing]) and math.isfinite(p.limits[1 - failing])
+        assert p.location_error <= LOCATE_TOL
+        assert p.bracket[0] <= p.theta0 <= p.bracket[1]
+    # mirror images of each other: the same edge at -s and s, to the brackets' widths
+    assert report.points[0].theta0 == pytest.approx(-report.points[2].theta0, abs=2 * LOCATE_TOL)
+    # ... and the limits there, up to the slope times that distance plus the limits' own
+    # extrapolation error (~1e-10: samples at rtol 1e-11, weights of order 10), SAFETY 10
+    slope = abs(report.points[0].derivatives[1])
+    assert report.points[0].limits[1] == pytest.approx(
+        -report.points[2].limits[0], abs=10 * (slope * 2 * LOCATE_TOL + 1e-10))
+    assert json.loads(report.to_json())["points"][0]["limits"][0] is None
