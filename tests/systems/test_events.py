@@ -62,9 +62,9 @@ def bar_reference(th0: float, *, w: float = 0.5, gamma: float = 0.5, m: float = 
             roots[0] = t + vz / g  # the apex, z' = 0
         roots = {j: r for j, r in roots.items() if r is not None and not (j == last and r <= t)}
         j = min(roots, key=roots.get)
-        tt = roots[j]
-        dt = tt - t
-        t, z, th, vz = tt, z + vz * dt - g * dt * dt / 2, th + om * dt, vz - g * dt
+        t_next = roots[j]
+        dt = t_next - t
+        t, z, th, vz = t_next, z + vz * dt - g * dt * dt / 2, th + om * dt, vz - g * dt
         if j == 0:
             return impacts, times, om, t, rising
         rising.append(vz)
