@@ -192,44 +192,61 @@ def _rate_on_dense(p, F, y, x, j, tmp, rates):
 
 
 @nb.njit(**HOT_PATH)
-def _rate_root(p, F, y, j, xa, ra, xb, tmp, rates):
-    """A zero in (xa, xb) of constraint j's rate on the interpolant (ra and the rate at xb of
-    opposite signs):
-    an extremum of a_j inside the step (its apex, or its lowest point). Bisection to 1e-12 of
-    the step: the point only has to be inside the extremum's neighbourhood, not exact."""
-    for _ in range(60):
-        if xb - xa <= 1e-12:
+def _extremum(p, mode, u, code, F, y, j, ra, rb, above, tmp, lam, rates):
+    """Toward the extremum of constraint j's height a_j inside the step, where its rate on the
+    interpolant (ra at the start, rb at the end, of opposite signs) is zero: the apex of a
+    flight (ra > 0) or a lowest point (ra < 0). Regula falsi on the rate (Illinois), which
+    stops at the first iterate where a_j is above the ground (``above`` = 1.0) or at or below
+    it (``above`` = 0.0; a float: a literal bool would compile one copy per value): that is
+    all the caller needs, and a flight's rate is close to linear, so it mostly stops at the
+    first iterate. Returns (x, a_j(x)) of the last iterate (the
+    extremum to 1e-12 of the step when no iterate stopped it)."""
+    xa, xb = 0.0, 1.0
+    side = 0
+    x = 0.5
+    g = 0.0
+    for _ in range(100):
+        x = (xa * rb - xb * ra) / (rb - ra)
+        if not xa < x < xb:
+            x = 0.5 * (xa + xb)
+        g = _guard_on_dense(p, mode, u, code, F, y, x, j, tmp, lam)
+        if (g > 0.0) == (above > 0.0) or xb - xa <= 1e-12:
             break
-        x = 0.5 * (xa + xb)
         r = _rate_on_dense(p, F, y, x, j, tmp, rates)
         if (r > 0.0) == (ra > 0.0):
+            if side == 1:
+                rb *= 0.5
             xa, ra = x, r
+            side = 1
         else:
-            xb = x
-    return 0.5 * (xa + xb)
+            if side == -1:
+                ra *= 0.5
+            xb, rb = x, r
+            side = -1
+    return x, g
 
 
 #: dense-output probes per step for a constraint whose guard was just reset (see
-#: _separation_point): one in every eighth of the step
+#: _separation_point): one in every eighth of the part of the step searched
 _WATCH_PROBES = 8
 
 
 @nb.njit(**HOT_PATH)
-def _separation_point(p, mode, u, code, F, y, j, r0, r1, tmp, lam, rates):
-    """Where on the step constraint j, disarmed at ~0 after an event (a bounce, a liftoff, a
-    foot that left the ground at once), is clearly above the ground: at the apex of its flight
-    when its rate went from separating (r0 > 0) to approaching (r1 < 0), else at the first of
-    the step's _WATCH_PROBES probes with a_j > 0, or at the start if it is above the ground
-    there and coming down. -1.0 when a_j never rose above 0 (it went
-    the wrong way, or the flight is shorter than the guard's rounding)."""
-    if _guard_on_dense(p, mode, u, code, F, y, 0.0, j, tmp, lam) > 0.0 and r0 < 0.0:
-        return 0.0  # on its way down from a flight that began in an earlier step
+def _separation_point(p, mode, u, code, F, y, j, r0, r1, x_end, tmp, lam, rates):
+    """Where in [0, x_end) of the step constraint j, disarmed at ~0 after an event (a bounce, a
+    liftoff, a foot that left the ground at once), is above the ground: at the start if it is
+    above there and coming down (a flight that began in an earlier step); near the apex of its
+    flight when its rate went from separating (r0 > 0) to approaching (r1 < 0); else at the
+    first of _WATCH_PROBES probes with a_j > 0. -1.0 when a_j never rose above 0 (it went the
+    wrong way, or the flight is shorter than the guard's rounding)."""
+    if r0 < 0.0 and _guard_on_dense(p, mode, u, code, F, y, 0.0, j, tmp, lam) > 0.0:
+        return 0.0
     if r0 > 0.0 and r1 < 0.0:
-        x = _rate_root(p, F, y, j, 0.0, r0, 1.0, tmp, rates)
-        if _guard_on_dense(p, mode, u, code, F, y, x, j, tmp, lam) > 0.0:
+        x, g = _extremum(p, mode, u, code, F, y, j, r0, r1, 1.0, tmp, lam, rates)
+        if g > 0.0 and x < x_end:
             return x
     for m in range(1, _WATCH_PROBES):
-        x = m / _WATCH_PROBES
+        x = x_end * m / _WATCH_PROBES
         if _guard_on_dense(p, mode, u, code, F, y, x, j, tmp, lam) > 0.0:
             return x
     return -1.0
@@ -474,13 +491,15 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
         x_first = 2.0
         wrong_way = False
         if any_candidate:
+            # the armed guards first, then the reset constraints, searched only up to the
+            # earliest root found (the common case: the step also holds the terminal event)
             for i in range(NGUARDS):
-                xa = 0.0
-                ga = gv[i]
-                if armed[i] and gv[i] > 0.0 and gv_new[i] <= 0.0:
+                if not armed[i] or gv[i] <= 0.0:
+                    continue
+                if gv_new[i] <= 0.0:
                     xb = 1.0
                     gb = gv_new[i]
-                elif armed[i] and gv[i] > 0.0 and probe[i] <= 1.0:
+                elif probe[i] <= 1.0:
                     xb = -1.0
                     gb = 0.0
                     for m in range(1, 9):
@@ -492,36 +511,42 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
                             break
                     if xb < 0.0:
                         continue
-                elif i >= NCON or mode >> i & 1:
-                    continue
-                elif armed[i]:
-                    if not (gv[i] > 0.0 and rate0[i] < 0.0 and rate1[i] > 0.0):
-                        continue
-                    # the lowest point of a_j inside the step
-                    xb = _rate_root(p, F, y, i, 0.0, rate0[i], 1.0, tmp, rates)
-                    gb = _guard_on_dense(p, mode, u, code, F, y, xb, i, tmp, lam_tmp)
+                elif i < NCON and not mode >> i & 1 and rate0[i] < 0.0 and rate1[i] > 0.0:
+                    # its lowest point is inside the step: at or below the ground?
+                    xb, gb = _extremum(p, mode, u, code, F, y, i, rate0[i], rate1[i], 0.0,
+                                       tmp, lam_tmp, rates)
                     if gb > 0.0:
                         continue
-                elif gv_new[i] <= 0.0:
-                    xa = _separation_point(p, mode, u, code, F, y, i, rate0[i], rate1[i], tmp,
-                                           lam_tmp, rates)
-                    if xa < 0.0:
-                        wrong_way = wrong_way or gv_new[i] < -REARM_TOL
-                        continue
-                    ga = _guard_on_dense(p, mode, u, code, F, y, xa, i, tmp, lam_tmp)
-                    xb = 1.0
-                    gb = gv_new[i]
-                    for m in range(1, _WATCH_PROBES):  # the first probe below, if any
-                        xm = xa + (1.0 - xa) * m / _WATCH_PROBES
-                        gm = _guard_on_dense(p, mode, u, code, F, y, xm, i, tmp, lam_tmp)
-                        if gm <= 0.0:
-                            xb = xm
-                            gb = gm
-                            break
                 else:
                     continue
-                if xa >= x_first:
+                x = _root_on_dense(p, mode, u, code, F, y, i, 0.0, gv[i], xb, gb, tmp, lam_tmp)
+                if x < x_first:
+                    x_first = x
+                    first = i
+            for i in range(NCON):
+                if armed[i] or mode >> i & 1 or gv_new[i] > 0.0:
                     continue
+                x_end = min(x_first, 1.0)
+                g_end = gv_new[i]
+                if x_end < 1.0:
+                    g_end = _guard_on_dense(p, mode, u, code, F, y, x_end, i, tmp, lam_tmp)
+                    if g_end > 0.0:
+                        continue
+                xa = _separation_point(p, mode, u, code, F, y, i, rate0[i], rate1[i], x_end,
+                                       tmp, lam_tmp, rates)
+                if xa < 0.0:
+                    wrong_way = wrong_way or g_end < -REARM_TOL
+                    continue
+                ga = _guard_on_dense(p, mode, u, code, F, y, xa, i, tmp, lam_tmp)
+                xb = x_end
+                gb = g_end
+                for m in range(1, _WATCH_PROBES):  # the first probe at or below, if any
+                    xm = xa + (x_end - xa) * m / _WATCH_PROBES
+                    gm = _guard_on_dense(p, mode, u, code, F, y, xm, i, tmp, lam_tmp)
+                    if gm <= 0.0:
+                        xb = xm
+                        gb = gm
+                        break
                 x = _root_on_dense(p, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, lam_tmp)
                 if x < x_first:
                     x_first = x
