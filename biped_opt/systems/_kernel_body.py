@@ -13,11 +13,17 @@ The algorithm: an adaptive Dormand-Prince 8(5,3) integrator with its 7th-order d
 :mod:`biped_opt.systems._dop853_gen`); guards monitored at the step ends and at every stage (a
 guard that dips below zero inside a step is not missed); event times as roots of the guard on the
 dense output (regula falsi with the Anderson-Bjorck modification, bracket < 1e-13 of the step:
-event times good to ~1e-12); guards within SIMULTANEOUS_TOL of zero and moving toward it flip
-together with the first (simultaneous events, MODEL.md Sec. 3); a flipped guard stays disarmed
-until it is farther than REARM_TOL from zero; restitution: after an impact with gamma > 0 a
-constraint whose velocity Da_j q'+ is positive separates at once. Everything lives in flat float
-arrays; nothing allocates per step.
+event times good to ~1e-12); contact guards within SIMULTANEOUS_TOL of zero and moving toward
+it flip together with the first (simultaneous events, MODEL.md Sec. 3), the terminal guard never
+(it is ordered by time); a constraint in the air whose rate shows a lowest point inside a step
+has that point checked; a flipped guard at ~0 stays disarmed until it is farther than
+REARM_TOL from zero, and is watched inside each step meanwhile (its flight's apex, dense-output
+probes), so that a bounce and a return within one step are two events; restitution: after an
+impact with gamma > 0 a constraint whose velocity Da_j q'+ is positive separates at once; the
+mode after an event is the one the complementarity conditions allow (``_consistent_mode``);
+an air constraint found below its surface at an event ends the run (CONSTRAINT_VIOLATED).
+docs/SYSTEMS.md, "Events", states these rules. Everything lives in flat float arrays; nothing
+allocates per step.
 
 Layouts: ``events[k] = [t, kind, touchdown_mask, liftoff_mask, mode_before, mode_after,
 y_before (2d), y_after (2d)]``; ``samples[k] = [t, y (2d), mode, lambda (n)]``.
