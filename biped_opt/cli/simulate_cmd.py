@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 
 from biped_opt import strict_json
-from biped_opt.cli.args import finite_float
+from biped_opt.cli.args import finite_float, int_at_least, positive_float
 from biped_opt.cli.system_cmds import add_system_arguments
 from biped_opt.errors import InvalidInputError
 from biped_opt.hybrid import simulate
+from biped_opt.hybrid.simulate import DEFAULT_OPTIONS, SimulatorOptions
 from biped_opt.hybrid.trajectory import Trajectory
 from biped_opt.maneuvers import Maneuver, check_theta0, parse_maneuver
 
@@ -37,8 +39,19 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="right leg force in right single stance (default 0)")
     p.add_argument("--u12", type=finite_float("--u12"), default=0.0,
                    help="body torque in double stance (default 0)")
+    p.add_argument("--max-events", type=int_at_least("--max-events", 1), default=None,
+                   help="contact events allowed before giving up (default: the maneuver's, 16)")
+    p.add_argument("--horizon", type=positive_float("--horizon"), default=None,
+                   help="time allowed before giving up (default: the maneuver's, 10)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
+
+
+def budget(args: argparse.Namespace, options: SimulatorOptions) -> SimulatorOptions:
+    """``options`` with --max-events and --horizon applied."""
+    changes = {"max_events": args.max_events, "t_end": args.horizon}
+    changes = {k: v for k, v in changes.items() if v is not None}
+    return dataclasses.replace(options, **changes) if changes else options
 
 
 def trajectory_json(tr: Trajectory) -> dict:
@@ -88,7 +101,8 @@ def run(args: argparse.Namespace) -> int:
         check_theta0(maneuver, args.theta0)
     except InvalidInputError as exc:
         raise InvalidInputError(f"--theta0: {exc}") from None
-    tr = simulate(maneuver, args.theta0, (args.u1, args.u2, args.u12))
+    tr = simulate(maneuver, args.theta0, (args.u1, args.u2, args.u12),
+                  options=budget(args, DEFAULT_OPTIONS))
     if args.json:
         print(strict_json.dumps(trajectory_json(tr)))
     else:
@@ -113,7 +127,8 @@ def run_system(args: argparse.Namespace) -> int:
     if args.maneuver is None:
         raise InvalidInputError("--maneuver is required")
     compiled = compile_system(args.system, **dict(args.param))
-    tr = compiled.simulate(args.maneuver, args.s, dict(args.input))
+    tr = compiled.simulate(args.maneuver, args.s, dict(args.input),
+                           options=budget(args, compiled.maneuver_options(args.maneuver)))
     names = compiled.system.coordinate_names
     d = len(names)
     if args.json:
@@ -121,6 +136,7 @@ def run_system(args: argparse.Namespace) -> int:
             "system": tr.system, "maneuver": tr.maneuver, "s": tr.s,
             "inputs": dict(zip(compiled.inputs, tr.inputs)),
             "parameters": compiled.parameters, "status": tr.status.lower(),
+            "message": tr.message,
             "outcome": tr.outcome, "t_final": tr.t_final,
             "modes": [_mode_names(compiled, m) for m in tr.modes],
             "event_times": list(tr.event_times),
@@ -133,7 +149,7 @@ def run_system(args: argparse.Namespace) -> int:
             "nfev": tr.nfev, "nsteps": tr.nsteps}))
     else:
         print(f"system     {tr.system}  maneuver {tr.maneuver}  s = {tr.s:+.12g}")
-        print(f"status     {tr.status}")
+        print(f"status     {tr.status}: {tr.message}")
         print(f"outcome    {tr.outcome:+.15g}")
         print(f"t_final    {tr.t_final:.15g}")
         modes = [_mode_names(compiled, m) for m in tr.modes]

@@ -37,6 +37,7 @@ class Status(enum.IntEnum):
     INCONSISTENT = 3
     APEX_IN_CONTACT = 4
     STEP_FAILURE = 5
+    CONSTRAINT_VIOLATED = 6
 
     @property
     def message(self) -> str:
@@ -47,10 +48,14 @@ _STATUS_MESSAGES = {
     Status.OK: "the maneuver reached its terminal event",
     Status.HORIZON: "the time horizon was reached before the terminal event",
     Status.MAX_EVENTS: "the maximum number of contact events was reached",
-    Status.INCONSISTENT: "inconsistent contact: a foot in contact would need a negative reaction "
-    "force, or a foot in the air went through the ground",
+    Status.INCONSISTENT: "inconsistent contact: no contact mode satisfies the complementarity "
+    "conditions (in each, a foot in contact would need a negative reaction force or a released "
+    "one would accelerate into the ground), or a foot in the air went through the ground right "
+    "after it was released",
     Status.APEX_IN_CONTACT: "the body reached its apex while a foot was still on the ground",
     Status.STEP_FAILURE: "the integrator's step size underflowed or it took too many steps",
+    Status.CONSTRAINT_VIOLATED: "a constraint was found more than 1e-9 below its surface at an "
+    "event: the trajectory is not a solution",
 }
 
 

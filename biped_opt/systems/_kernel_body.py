@@ -13,11 +13,17 @@ The algorithm: an adaptive Dormand-Prince 8(5,3) integrator with its 7th-order d
 :mod:`biped_opt.systems._dop853_gen`); guards monitored at the step ends and at every stage (a
 guard that dips below zero inside a step is not missed); event times as roots of the guard on the
 dense output (regula falsi with the Anderson-Bjorck modification, bracket < 1e-13 of the step:
-event times good to ~1e-12); guards within SIMULTANEOUS_TOL of zero and moving toward it flip
-together with the first (simultaneous events, MODEL.md Sec. 3); a flipped guard stays disarmed
-until it is farther than REARM_TOL from zero; restitution: after an impact with gamma > 0 a
-constraint whose velocity Da_j q'+ is positive separates at once. Everything lives in flat float
-arrays; nothing allocates per step.
+event times good to ~1e-12); contact guards within SIMULTANEOUS_TOL of zero and moving toward
+it flip together with the first (simultaneous events, MODEL.md Sec. 3), the terminal guard never
+(it is ordered by time); a constraint in the air whose rate shows a lowest point inside a step
+has that point checked; a flipped guard at ~0 stays disarmed until it is farther than
+REARM_TOL from zero, and is watched inside each step meanwhile (its flight's apex, dense-output
+probes), so that a bounce and a return within one step are two events; restitution: after an
+impact with gamma > 0 a constraint whose velocity Da_j q'+ is positive separates at once; the
+mode after an event is the one the complementarity conditions allow (``_consistent_mode``);
+an air constraint found below its surface at an event ends the run (CONSTRAINT_VIOLATED).
+docs/SYSTEMS.md, "Events", states these rules. Everything lives in flat float arrays; nothing
+allocates per step.
 
 Layouts: ``events[k] = [t, kind, touchdown_mask, liftoff_mask, mode_before, mode_after,
 y_before (2d), y_after (2d)]``; ``samples[k] = [t, y (2d), mode, lambda (n)]``.
@@ -36,12 +42,15 @@ MAX_EVENTS = int(Status.MAX_EVENTS)
 INCONSISTENT = int(Status.INCONSISTENT)
 APEX_IN_CONTACT = int(Status.APEX_IN_CONTACT)
 STEP_FAILURE = int(Status.STEP_FAILURE)
+CONSTRAINT_VIOLATED = int(Status.CONSTRAINT_VIOLATED)
 EVENT_WIDTH = 6 + 2 * NSTATE
 SAMPLE_WIDTH = 2 + NSTATE + NCON
 NLAM = max(NCON, 1)
 
 SIMULTANEOUS_TOL = 1e-9
 REARM_TOL = 1e-10
+#: a constraint in the air more than this below its surface at an event is a violation
+VIOLATION_TOL = 1e-9
 #: a constraint separates after an impact when its velocity exceeds this
 SEPARATION_TOL = 1e-12
 
@@ -180,6 +189,132 @@ def _root_on_dense(p, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, lam):
 
 
 @nb.njit(**HOT_PATH)
+def _rate_on_dense(p, F, y, x, j, tmp, rates):
+    """d/dt a_j along the step's interpolant at x: Da_j(q) q' of the interpolated state (the
+    velocities are part of the state, so no derivative of the interpolant is needed)."""
+    _dense_eval(F, y, x, tmp)
+    constraint_rates(p, tmp, 0, rates)
+    return rates[j]
+
+
+@nb.njit(**HOT_PATH)
+def _extremum(p, mode, u, code, F, y, j, ra, rb, above, tmp, lam, rates):
+    """Toward the extremum of constraint j's height a_j inside the step, where its rate on the
+    interpolant (ra at the start, rb at the end, of opposite signs) is zero: the apex of a
+    flight (ra > 0) or a lowest point (ra < 0). Regula falsi on the rate (Illinois), which
+    stops at the first iterate where a_j is above the ground (``above`` = 1.0) or at or below
+    it (``above`` = 0.0; a float: a literal bool would compile one copy per value): that is
+    all the caller needs, and a flight's rate is close to linear, so it mostly stops at the
+    first iterate. Returns (x, a_j(x)) of the last iterate (the
+    extremum to 1e-12 of the step when no iterate stopped it)."""
+    xa, xb = 0.0, 1.0
+    side = 0
+    x = 0.5
+    g = 0.0
+    for _ in range(100):
+        x = (xa * rb - xb * ra) / (rb - ra)
+        if not xa < x < xb:
+            x = 0.5 * (xa + xb)
+        g = _guard_on_dense(p, mode, u, code, F, y, x, j, tmp, lam)
+        if (g > 0.0) == (above > 0.0) or xb - xa <= 1e-12:
+            break
+        r = _rate_on_dense(p, F, y, x, j, tmp, rates)
+        if (r > 0.0) == (ra > 0.0):
+            if side == 1:
+                rb *= 0.5
+            xa, ra = x, r
+            side = 1
+        else:
+            if side == -1:
+                ra *= 0.5
+            xb, rb = x, r
+            side = -1
+    return x, g
+
+
+#: dense-output probes per step for a constraint whose guard was just reset (see
+#: _separation_point): one in every eighth of the part of the step searched
+_WATCH_PROBES = 8
+
+
+@nb.njit(**HOT_PATH)
+def _separation_point(p, mode, u, code, F, y, j, r0, r1, x_end, tmp, lam, rates):
+    """Where in [0, x_end) of the step constraint j, disarmed at ~0 after an event (a bounce, a
+    liftoff, a foot that left the ground at once), is above the ground: at the start if it is
+    above there and coming down (a flight that began in an earlier step); near the apex of its
+    flight when its rate went from separating (r0 > 0) to approaching (r1 < 0); else at the
+    first of _WATCH_PROBES probes with a_j > 0. -1.0 when a_j never rose above 0 (it went the
+    wrong way, or the flight is shorter than the guard's rounding)."""
+    if r0 < 0.0 and _guard_on_dense(p, mode, u, code, F, y, 0.0, j, tmp, lam) > 0.0:
+        return 0.0
+    if r0 > 0.0 and r1 < 0.0:
+        x, g = _extremum(p, mode, u, code, F, y, j, r0, r1, 1.0, tmp, lam, rates)
+        if g > 0.0 and x < x_end:
+            return x
+    for m in range(1, _WATCH_PROBES):
+        x = x_end * m / _WATCH_PROBES
+        if _guard_on_dense(p, mode, u, code, F, y, x, j, tmp, lam) > 0.0:
+            return x
+    return -1.0
+
+
+@nb.njit(**HOT_PATH)
+def _separation_rate(p, mode, u, y, f, j, tmp, rates):
+    """d/dt (Da_j q') along the flow of ``mode`` (f: the vector field there): a_j'', the
+    separation acceleration of a constraint at rest on its surface, by a central difference
+    (only its sign is used)."""
+    eps = 1e-6
+    for m in range(y.shape[0]):
+        tmp[m] = y[m] + eps * f[m]
+    constraint_rates(p, tmp, 0, rates)
+    r_plus = rates[j]
+    for m in range(y.shape[0]):
+        tmp[m] = y[m] - eps * f[m]
+    constraint_rates(p, tmp, 0, rates)
+    return (r_plus - rates[j]) / (2.0 * eps)
+
+
+#: complementarity is checked to this tolerance (reactions, separation accelerations) when a
+#: mode other than the one the event suggests is tried: the sign of a zero is rounding
+_COMPLEMENTARITY_TOL = 1e-10
+
+
+@nb.njit(**HOT_PATH)
+def _consistent_mode(p, mode, u, y, f, lam, tmp, tmp2, rates):
+    """The contact mode that satisfies the complementarity conditions at y, chosen among the
+    subsets of ``mode`` (the constraints at rest on their surface after the event's resets):
+    every active constraint with lambda_j >= 0, every released one with a separation
+    acceleration a_j'' >= 0. Subsets are tried from the largest down (2^n candidates; the
+    Schur complement Da M^-1 Da^T is positive definite, so at most one fits). Returns the mode
+    (f and lam then hold its vector field and reactions), or -1 when none fits."""
+    for size in range(NCON, -1, -1):
+        for cand in range(1 << NCON):
+            if cand & ~mode:
+                continue
+            bits = 0
+            for j in range(NCON):
+                bits += cand >> j & 1
+            if bits != size:
+                continue
+            _field_at(p, cand, y, 0, u, f, 0, lam, 0)
+            ok = True
+            for j in range(NCON):
+                if not mode >> j & 1:
+                    continue
+                if cand >> j & 1:
+                    ok = lam[j] >= -_COMPLEMENTARITY_TOL
+                else:
+                    ok = _separation_rate(p, cand, u, y, f, j, tmp2, rates) \
+                        >= -_COMPLEMENTARITY_TOL
+                if not ok:
+                    break
+            if ok:
+                return cand
+    _field_at(p, mode, y, 0, u, f, 0, lam, 0)
+    return -1
+
+
+@nb.njit(**HOT_PATH)
 def _record_sample(samples, ns, t, y, mode, lam):
     if ns < samples.shape[0]:
         samples[ns, 0] = t
@@ -246,7 +381,7 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
 
     n = NSTATE
     # one allocation carved into views (a dozen small arrays cost more than a step)
-    buf = np.zeros(WORKSPACE + 13 * n + 4 * NLAM + 3 * NGUARDS)
+    buf = np.zeros(WORKSPACE + 13 * n + 6 * NLAM + 3 * NGUARDS)
     W = buf[:WORKSPACE]
     o = WORKSPACE
     F = buf[o:o + 7 * n].reshape((7, n))
@@ -262,7 +397,9 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
     lam = buf[o + NLAM:o + 2 * NLAM]
     lam_new = buf[o + 2 * NLAM:o + 3 * NLAM]
     lam_tmp = buf[o + 3 * NLAM:o + 4 * NLAM]
-    o += 4 * NLAM
+    rate0 = buf[o + 4 * NLAM:o + 5 * NLAM]  # Da q' at the step's start
+    rate1 = buf[o + 5 * NLAM:o + 6 * NLAM]  # and at its end
+    o += 6 * NLAM
     gv = buf[o:o + NGUARDS]
     gv_new = buf[o + NGUARDS:o + 2 * NGUARDS]
     probe = buf[o + 2 * NGUARDS:o + 3 * NGUARDS]
@@ -290,6 +427,7 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
     _field_at(p, mode, y, 0, u, f, 0, lam, 0)
     nfev += 1
     _all_guards(p, mode, u, code, y, lam, gv)
+    constraint_rates(p, y, 0, rate0)
     for i in range(NGUARDS):
         armed[i] = gv[i] > REARM_TOL
     if not term_enabled:
@@ -332,10 +470,22 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
         h = h_step * factor
 
         _all_guards(p, mode, u, code, y_new, lam_new, gv_new)
+        constraint_rates(p, y_new, 0, rate1)
+        # candidates: an armed guard seen <= 0 at the end or at a stage state; a constraint in
+        # the air that is above the ground at both ends but was moving down at the start and
+        # up at the end (its lowest point is inside the step: is it below the ground?); a
+        # constraint disarmed after an event that ends the step at or below the ground (it
+        # may have left and come back within the step)
         any_candidate = False
         for i in range(NGUARDS):
             if armed[i] and gv[i] > 0.0 and (gv_new[i] <= 0.0 or probe[i] <= 1.0):
                 any_candidate = True
+            elif i < NCON and not mode >> i & 1:
+                if armed[i]:
+                    if gv[i] > 0.0 and rate0[i] < 0.0 and rate1[i] > 0.0:
+                        any_candidate = True
+                elif gv_new[i] <= 0.0:
+                    any_candidate = True
 
         dense_ready = False
         if any_candidate or sampling:
@@ -345,9 +495,12 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
 
         first = -1
         x_first = 2.0
+        wrong_way = False
         if any_candidate:
+            # the armed guards first, then the reset constraints, searched only up to the
+            # earliest root found (the common case: the step also holds the terminal event)
             for i in range(NGUARDS):
-                if not (armed[i] and gv[i] > 0.0):
+                if not armed[i] or gv[i] <= 0.0:
                     continue
                 if gv_new[i] <= 0.0:
                     xb = 1.0
@@ -364,9 +517,43 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
                             break
                     if xb < 0.0:
                         continue
+                elif i < NCON and not mode >> i & 1 and rate0[i] < 0.0 and rate1[i] > 0.0:
+                    # its lowest point is inside the step: at or below the ground?
+                    xb, gb = _extremum(p, mode, u, code, F, y, i, rate0[i], rate1[i], 0.0,
+                                       tmp, lam_tmp, rates)
+                    if gb > 0.0:
+                        continue
                 else:
                     continue
                 x = _root_on_dense(p, mode, u, code, F, y, i, 0.0, gv[i], xb, gb, tmp, lam_tmp)
+                if x < x_first:
+                    x_first = x
+                    first = i
+            for i in range(NCON):
+                if armed[i] or mode >> i & 1 or gv_new[i] > 0.0:
+                    continue
+                x_end = min(x_first, 1.0)
+                g_end = gv_new[i]
+                if x_end < 1.0:
+                    g_end = _guard_on_dense(p, mode, u, code, F, y, x_end, i, tmp, lam_tmp)
+                    if g_end > 0.0:
+                        continue
+                xa = _separation_point(p, mode, u, code, F, y, i, rate0[i], rate1[i], x_end,
+                                       tmp, lam_tmp, rates)
+                if xa < 0.0:
+                    wrong_way = wrong_way or g_end < -REARM_TOL
+                    continue
+                ga = _guard_on_dense(p, mode, u, code, F, y, xa, i, tmp, lam_tmp)
+                xb = x_end
+                gb = g_end
+                for m in range(1, _WATCH_PROBES):  # the first probe at or below, if any
+                    xm = xa + (x_end - xa) * m / _WATCH_PROBES
+                    gm = _guard_on_dense(p, mode, u, code, F, y, xm, i, tmp, lam_tmp)
+                    if gm <= 0.0:
+                        xb = xm
+                        gb = gm
+                        break
+                x = _root_on_dense(p, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, lam_tmp)
                 if x < x_first:
                     x_first = x
                     first = i
@@ -390,14 +577,17 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
                 f[k] = f_new[k]
             for j in range(NLAM):
                 lam[j] = lam_new[j]
+                rate0[j] = rate1[j]
             for i in range(NGUARDS):
                 gv[i] = gv_new[i]
                 if not armed[i] and (i < term or term_enabled):
                     if gv[i] > REARM_TOL:
                         armed[i] = True
-                    elif i < term and gv[i] < -REARM_TOL:
-                        status = INCONSISTENT  # a disarmed contact guard went the wrong way
-                        finished = True
+                    elif i < term and mode >> i & 1 and gv[i] < -REARM_TOL:
+                        wrong_way = True  # a contact's reaction turned to pulling at once
+            if wrong_way:
+                status = INCONSISTENT  # a disarmed contact guard went the wrong way
+                finished = True
             continue
 
         # --- event at t_stop: the state is the 7th-order interpolant at the root -----------
@@ -408,11 +598,17 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
         _field_at(p, mode, y, 0, u, f, 0, lam, 0)
         nfev += 1
         _all_guards(p, mode, u, code, y, lam, gv_new)
+        # contact guards near zero and moving toward it flip with a contact guard (MODEL.md
+        # Sec. 3); the terminal guard is ordered by time: it never joins contact events
         for i in range(NGUARDS):
             flips[i] = i == first
-            if i != first and armed[i]:
+            if i != first and armed[i] and i != term and first != term:
                 if abs(gv_new[i]) <= SIMULTANEOUS_TOL:
                     flips[i] = _guard_rate(p, mode, u, code, y, f, i, tmp, lam_tmp) < 0.0
+        for j in range(NCON):
+            if not flips[j] and not mode >> j & 1 and gv_new[j] < -VIOLATION_TOL:
+                status = CONSTRAINT_VIOLATED  # (a root missed before this event)
+                finished = True
         touchdown = 0
         liftoff = 0
         for j in range(NCON):
@@ -421,7 +617,7 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
                     liftoff |= 1 << j
                 else:
                     touchdown |= 1 << j
-        if touchdown | liftoff:
+        if (touchdown | liftoff) and not finished:
             row = events[n_events]
             row[0] = t
             row[1] = EVENT_CONTACT
@@ -432,18 +628,30 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
                 row[6 + k] = y[k]
             if sampling:
                 ns = _record_sample(samples, ns, t, y, mode, lam)
+            term_was_armed = armed[term] and gv_new[term] > 0.0
             mode = mode ^ (touchdown | liftoff)
-            separated = 0
             if touchdown:
                 apply_impact(p, mode, y)
                 # restitution: an impacted constraint moving apart leaves the mode at once
                 constraint_rates(p, y, 0, rates)
                 for j in range(NCON):
                     if touchdown >> j & 1 and rates[j] > SEPARATION_TOL:
-                        separated |= 1 << j
-                mode = mode & ~separated
+                        mode &= ~(1 << j)
             _field_at(p, mode, y, 0, u, f, 0, lam, 0)
             nfev += 1
+            # complementarity: the next mode has every active constraint pressing (lambda >=
+            # 0) and every released one not accelerating into its surface; when the mode the
+            # event suggests has a pulling contact, the others are tried
+            for j in range(NCON):
+                if mode >> j & 1 and lam[j] < 0.0:
+                    chosen = _consistent_mode(p, mode, u, y, f, lam, tmp, tmp2, rates)
+                    nfev += 1 << NCON
+                    if chosen < 0:
+                        status = INCONSISTENT  # no mode fits: every one pulls or penetrates
+                        finished = True
+                    else:
+                        mode = chosen
+                    break
             row[5] = mode
             for k in range(n):
                 row[6 + n + k] = y[k]
@@ -452,20 +660,18 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
                 ns = _record_sample(samples, ns, t, y, mode, lam)
             if touchdown and term_after_touchdown:
                 term_enabled = True
-            for j in range(NCON):
-                if (touchdown & ~separated) >> j & 1 and lam[j] < 0.0:
-                    status = INCONSISTENT  # the new contact would pull into the constraint
-                    finished = True
             _all_guards(p, mode, u, code, y, lam, gv)
+            constraint_rates(p, y, 0, rate0)
             for i in range(NGUARDS):
-                if flips[i] or (i < NCON and separated >> i & 1):
-                    armed[i] = False
-                elif not armed[i] and (i < term or term_enabled):
+                if flips[i] or not armed[i]:
                     # events can follow each other without a plain step between them (a bar's
-                    # impacts 1e-7 apart): a guard that left its band since is armed again here
-                    armed[i] = gv[i] > REARM_TOL
+                    # impacts 1e-7 apart): a guard away from zero since is armed again here;
+                    # one at ~0 (a reset constraint) is watched by the next steps instead
+                    armed[i] = gv[i] > REARM_TOL and (i < term or term_enabled)
             h *= _EVENT_STEP_FRACTION
             trial = True
+            if term_was_armed and gv[term] <= 0.0 and not finished:
+                flips[term] = True  # the reset itself took the terminal guard through 0
             if not finished and n_events >= max_events and not flips[term]:
                 status = MAX_EVENTS
                 finished = True

@@ -20,6 +20,7 @@ The cache lives in ``$BIPED_OPT_CACHE`` if set, else ``$XDG_CACHE_HOME/biped_opt
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import importlib.metadata
 import importlib.util
@@ -213,6 +214,28 @@ class SystemTrajectory:
     nsteps: int
     n_events: int  #: contact events (the first rows of ``events``; a terminal row may follow)
     initial_mode: int
+    #: (max_events, horizon, constraint names): what :attr:`message` explains an end by
+    budget: tuple[int, float, tuple[str, ...]] = (16, 10.0, ())
+
+    @property
+    def message(self) -> str:
+        """How the run ended, in words; a budget used up names its limit, where to raise it
+        and the last events."""
+        status = Status[self.status]
+        max_events, horizon, names = self.budget
+        if status is Status.MAX_EVENTS:
+            text = (f"{max_events} contact events, the maneuver's event budget, were used up "
+                    "before the terminal event (raise max_events on the maneuver, or "
+                    "--max-events)")
+        elif status is Status.HORIZON:
+            text = (f"the horizon t = {horizon:g}, the maneuver's, was reached before the "
+                    "terminal event (raise horizon on the maneuver, or --horizon)")
+        else:
+            text = status.message
+        if status is not Status.OK and self.n_events:
+            text += "; last events: " + ", ".join(
+                _describe_event(row, names) for row in self.events[:self.n_events][-3:])
+        return text
 
     @property
     def success(self) -> bool:
@@ -229,6 +252,17 @@ class SystemTrajectory:
     def event_times(self) -> tuple[float, ...]:
         """Times of the contact events."""
         return tuple(self.events[: self.n_events, 0].tolist())
+
+
+def _describe_event(row: Array, names: tuple[str, ...]) -> str:
+    """One event row in words: ``t = 1.2 touchdown left -> mode right``."""
+    def which(mask: int) -> str:
+        found = [names[j] if j < len(names) else str(j) for j in range(64) if mask >> j & 1]
+        return "+".join(found) if found else "air"
+
+    what = " ".join(f"{kind} {which(int(row[k]))}" for kind, k in (("touchdown", 2),
+                                                                      ("liftoff", 3)) if row[k])
+    return f"t = {row[0]:.10g} {what} -> mode {which(int(row[5]))}"
 
 
 class CompiledSystem:
@@ -251,6 +285,13 @@ class CompiledSystem:
         self._defaults: dict[str, float] = dict(facts["parameters"])
         self.maneuvers: tuple[str, ...] = tuple(facts["maneuvers"])
         self.inputs: tuple[str, ...] = tuple(facts["inputs"])
+        constraints = tuple(facts["constraints"])
+        self._options = [DEFAULT_OPTIONS if (events, horizon) == (DEFAULT_OPTIONS.max_events,
+                                                                  DEFAULT_OPTIONS.t_end)
+                         else dataclasses.replace(DEFAULT_OPTIONS, max_events=events,
+                                                  t_end=horizon)
+                         for events, horizon in facts["budgets"]]
+        self._budgets = [(o.max_events, o.t_end, constraints) for o in self._options]
         self._initial_modes = [int(v) for v in self.module.INITIAL_MODE]
         self._codes = {name: k for k, name in enumerate(self.maneuvers)}
         self._ninputs = len(self.inputs)
@@ -269,7 +310,9 @@ class CompiledSystem:
         module_name, self.module = _module_for(derived)
         return {"module": module_name, "name": system.name, "where": system.where(),
                 "parameters": list(system.defaults.items()), "maneuvers": list(derived.maneuvers),
-                "inputs": list(system.u.names())}
+                "inputs": list(system.u.names()), "constraints": list(system.constraints),
+                "budgets": [[m.description.max_events, m.description.horizon]
+                            for m in derived.maneuvers.values()]}
 
     @property
     def system(self) -> System:
@@ -322,6 +365,11 @@ class CompiledSystem:
     def initial_mode(self, maneuver: str) -> int:
         """The contact mode (bit mask) ``maneuver`` starts in."""
         return self._initial_modes[self._code(maneuver)]
+
+    def maneuver_options(self, maneuver: str) -> SimulatorOptions:
+        """The simulator's settings for ``maneuver``: the defaults with its own event budget
+        and horizon (what :meth:`simulate` uses unless given other options)."""
+        return self._options[self._code(maneuver)]
 
     def _code(self, maneuver: str) -> int:
         code = self._codes.get(maneuver) if type(maneuver) is str else None
@@ -376,8 +424,12 @@ class CompiledSystem:
     def simulate(self, maneuver: str, s: float, inputs: Any = None, *,
                  options: SimulatorOptions = DEFAULT_OPTIONS,
                  sample_dt: float | None = None) -> SystemTrajectory:
-        """One maneuver at s (inputs by name in a dict, or a vector in the declared order)."""
+        """One maneuver at s (inputs by name in a dict, or a vector in the declared order).
+        ``options`` left at ``DEFAULT_OPTIONS`` means :meth:`maneuver_options` (the
+        maneuver's own budget); any other options are taken as given."""
         code = self._code(maneuver)
+        if options is DEFAULT_OPTIONS:
+            options = self._options[code]
         s = float(s)
         if not math.isfinite(s):
             raise InvalidInputError(f"{self._where}: s must be finite, got {s}")
@@ -400,13 +452,18 @@ class CompiledSystem:
         return SystemTrajectory(
             self.name, maneuver, s, tuple(u.tolist()[: self._ninputs]), STATUS_NAMES[status],
             t_f, outcome, y_out, events[: n_ev + (status == 0)], samples[: min(n_s, capacity)],
-            nfev, nsteps, n_ev, self._initial_modes[code])
+            nfev, nsteps, n_ev, self._initial_modes[code],
+            self._budgets[code] if options is self._options[code]
+            else (options.max_events, options.t_end, self._budgets[code][2]))
 
     def simulate_batch(self, maneuver: str, s: npt.ArrayLike, inputs: npt.ArrayLike | None = None,
                        *, options: SimulatorOptions = DEFAULT_OPTIONS) -> dict[str, Array]:
         """Many s (and input vectors, one row each or one for all) in parallel compiled threads:
-        arrays ``outcome``, ``t_final``, ``status``, ``mode_final``, ``n_events``, ``y_final``."""
+        arrays ``outcome``, ``t_final``, ``status``, ``mode_final``, ``n_events``, ``y_final``
+        (``options`` as in :meth:`simulate`)."""
         code = self._code(maneuver)
+        if options is DEFAULT_OPTIONS:
+            options = self._options[code]
         ss = np.atleast_1d(np.asarray(s, dtype=np.float64))
         if not np.all(np.isfinite(ss)):
             raise InvalidInputError(f"{self._where}: s must be finite")

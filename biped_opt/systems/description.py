@@ -22,6 +22,7 @@ any dependence of the forces on J is allowed: that is force coupling.
 from __future__ import annotations
 
 import keyword
+import math
 import re
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -73,6 +74,11 @@ class Symbols:
         return f"{self._kind}s({', '.join(self._by_name)})"
 
 
+#: a maneuver's default budget: contact events, and the time horizon
+DEFAULT_MAX_EVENTS = 16
+DEFAULT_HORIZON = 10.0
+
+
 @dataclass(frozen=True)
 class ManeuverDescription:
     """A maneuver (SYSTEMS.md Sec. 1): an initial-state family x0(s) of one scalar s, the initial
@@ -83,6 +89,8 @@ class ManeuverDescription:
     ``armed_after="touchdown"``: the terminal guard counts only after the first touchdown.
     ``final_mode``: the mode the terminal event must happen in (None: any).
     ``s_range``: the valid range of s (beyond it other mode sequences appear).
+    ``max_events``, ``horizon``: the simulation's budget, contact events and time; a run that
+    uses it up before the terminal event ends with status ``MAX_EVENTS`` or ``HORIZON``.
     """
 
     name: str
@@ -95,6 +103,8 @@ class ManeuverDescription:
     s_range: tuple[float, float] = (-1.0, 1.0)
     description: str = ""
     extra: Mapping[str, Any] = field(default_factory=dict)
+    max_events: int = DEFAULT_MAX_EVENTS
+    horizon: float = DEFAULT_HORIZON
 
 
 class System:
@@ -165,8 +175,10 @@ class System:
                  mode: Iterable[str] = (), armed_after: str | None = None,
                  final_mode: Iterable[str] | None = None,
                  s_range: tuple[float, float] = (-1.0, 1.0), description: str = "",
+                 max_events: int = DEFAULT_MAX_EVENTS, horizon: float = DEFAULT_HORIZON,
                  **extra: Any) -> System:
         """Add a maneuver (see :class:`ManeuverDescription`)."""
+        _check_budget(self.name, name, max_events, horizon)
         _check_name("maneuver name", name, self.name)
         if name in self.maneuvers:
             raise SystemDescriptionError(f"{self.name}: maneuver {name!r} is given twice")
@@ -182,7 +194,8 @@ class System:
             name=name, initial=dict(initial), mode=frozenset(mode), terminal=terminal,
             outcome=outcome, armed_after=armed_after,
             final_mode=None if final_mode is None else frozenset(final_mode),
-            s_range=(lo, hi), description=description, extra=dict(extra))
+            s_range=(lo, hi), description=description, extra=dict(extra),
+            max_events=max_events, horizon=float(horizon))
         return self
 
     def problem(self, name: str, *, maneuver: str, decisions: Mapping[str, Sequence[float]],
@@ -217,3 +230,16 @@ def _check_name(kind: str, name: Any, system: str) -> None:
     if not isinstance(name, str) or not _NAME.match(name) or keyword.iskeyword(name):
         raise SystemDescriptionError(
             f"{system}: {kind} must be a Python identifier, got {name!r}")
+
+
+def _check_budget(system: str, maneuver: str, max_events: Any, horizon: Any) -> None:
+    """A maneuver's event budget is a positive integer, its horizon a positive number."""
+    if isinstance(max_events, bool) or not isinstance(max_events, int) or max_events < 1:
+        raise SystemDescriptionError(
+            f"{system}: maneuver {maneuver!r}: max_events must be a positive integer, "
+            f"got {max_events!r}")
+    if isinstance(horizon, bool) or not isinstance(horizon, (int, float)) \
+            or not math.isfinite(horizon) or horizon <= 0:
+        raise SystemDescriptionError(
+            f"{system}: maneuver {maneuver!r}: horizon must be a positive number, "
+            f"got {horizon!r}")
