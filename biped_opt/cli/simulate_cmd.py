@@ -6,13 +6,17 @@ import argparse
 import dataclasses
 
 from biped_opt import strict_json
-from biped_opt.cli.args import finite_float, int_at_least, positive_float
+from biped_opt.cli.args import finite_float, int_in_range, positive_float
 from biped_opt.cli.system_cmds import add_system_arguments
 from biped_opt.errors import InvalidInputError
 from biped_opt.hybrid import simulate
 from biped_opt.hybrid.simulate import DEFAULT_OPTIONS, SimulatorOptions
 from biped_opt.hybrid.trajectory import Trajectory
 from biped_opt.maneuvers import Maneuver, check_theta0, parse_maneuver
+
+#: bounds of one run's budget on the command line (a run's events and samples grow with them)
+MAX_EVENTS = 10_000
+MAX_HORIZON = 1e4
 
 
 def add_maneuver_argument(parser: argparse.ArgumentParser) -> None:
@@ -39,9 +43,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="right leg force in right single stance (default 0)")
     p.add_argument("--u12", type=finite_float("--u12"), default=0.0,
                    help="body torque in double stance (default 0)")
-    p.add_argument("--max-events", type=int_at_least("--max-events", 1), default=None,
+    p.add_argument("--max-events", type=int_in_range("--max-events", 1, MAX_EVENTS),
+                   default=None,
                    help="contact events allowed before giving up (default: the maneuver's, 16)")
-    p.add_argument("--horizon", type=positive_float("--horizon"), default=None,
+    p.add_argument("--horizon", type=positive_float("--horizon", maximum=MAX_HORIZON),
+                   default=None,
                    help="time allowed before giving up (default: the maneuver's, 10)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)

@@ -40,8 +40,6 @@ OFFSETS = (-1e-9, -3e-10, -1e-10, 1e-10, 3e-10, 1e-9)
 EDGE = 0.05
 
 ITEM0 = "issue 22 item 0: sin/cos of a sum (relative joint angles) miscompiled in the step"
-ITEM1 = "issue 22 item 1: a re-impact of the same end within one integration step is missed"
-ITEM2 = "issue 22 item 2: the terminal event is merged with a contact event within 1e-9"
 
 #: system file, maneuver, reference of s, tested ranges of s
 FLIGHT = {
@@ -171,8 +169,7 @@ def test_simultaneous_impacts(name, expected):
 
 
 @pytest.mark.parametrize(("name", "expected"), [
-    pytest.param("corner", 1, marks=pytest.mark.xfail(strict=True, reason=ITEM2)),
-    pytest.param("plank", 2, marks=pytest.mark.xfail(strict=True, reason=ITEM2)),
+    ("corner", 1), ("plank", 2),
 ])
 def test_apex_next_to_an_impact(name, expected):
     """The apex and an impact at once (the corner's wall impact at h0 = 0.1399, the plank's
@@ -182,7 +179,6 @@ def test_apex_next_to_an_impact(name, expected):
 
 # -- re-impacts closer together than a step ----------------------------------------------------
 
-@pytest.mark.xfail(strict=True, reason=ITEM1)
 def test_plank_reimpacts_within_a_step():
     """0.04 <= s <= 0.058: an end lands again after a flight shorter than the simulator's
     step (5 or 6 impacts), and every coincidence there."""
@@ -196,7 +192,6 @@ def test_plank_reimpacts_within_a_step():
             assert_agrees(system.simulate("fall", s), ref, f"plank s = {s!r}")
 
 
-@pytest.mark.xfail(strict=True, reason=ITEM1)
 def test_library_bar_reimpact():
     """`biped-opt simulate --system rocking_bar --maneuver drop --s=-0.025 --param w=0.7
     --param gamma=0.35`: five impacts, the last of the left end at t = 1.687456."""
@@ -210,7 +205,6 @@ def test_library_bar_reimpact():
     assert_agrees(tr, ref, "rocking_bar s = -0.025")
 
 
-@pytest.mark.xfail(strict=True, reason=ITEM2)
 def test_library_bar_apex_first():
     """th0 = 0.09614845291502618: the apex comes first, an end 2.5e-10 above the ground."""
     bar = compiled("rocking_bar")
