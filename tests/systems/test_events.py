@@ -315,4 +315,4 @@ def test_the_command_line_sets_the_budget(capsys):
     with pytest.raises(SystemExit):
         main(["simulate", "--system", "rocking_bar", "--maneuver", "drop", "--s=0",
               "--max-events", "0"])
-    assert "--max-events must be at least 1" in capsys.readouterr().err
+    assert "--max-events must be between 1 and 10000, got 0" in capsys.readouterr().err
