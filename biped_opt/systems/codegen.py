@@ -21,6 +21,13 @@ Python module that Numba compiles (and caches on disk, keyed by that file):
 Parameters and inputs are arguments (``p``, ``u``), never constants: changing a parameter value
 does not change the source, so it does not recompile. Assignments a function never reads are
 dropped (:func:`_prune`): Numba types every statement of every inlined copy.
+
+Meaning is kept by construction: expressions are printed from SymPy's tree (a power or a
+quotient of a sum keeps its brackets); a system's symbols are written ``q__<name>``,
+``v__<name>``, ``p__<name>``, ``u__<name>``, ``s__<name>`` and the generator's own names never
+contain a double underscore, so a description may name its symbols anything (no reserved
+names); and the step's copies of the vector field, probe and sine/cosine are made on the
+syntax tree (:func:`_expand`), never by pasting an argument's text into a body.
 """
 
 from __future__ import annotations
@@ -813,14 +820,34 @@ def _literal_node(value: float) -> ast.expr:
     return ast.Constant(value)
 
 
-class _Template:
-    """One statement's text with slots for the names a copy renames: ``pieces`` of text
-    between the ``slots`` (the original names), from the statement as ``ast.unparse``
-    writes it. A slot is a whole name token that is a variable (not an attribute after a
-    dot), so filling it with another name, or a bracketed number, changes nothing else."""
+def _segment(lines: list[str], node: ast.AST) -> str:
+    """The source text of ``node`` (``lines``: its module's, ASCII)."""
+    first, last = node.lineno - 1, node.end_lineno - 1
+    if first == last:
+        return lines[first][node.col_offset:node.end_col_offset]
+    return "\n".join([lines[first][node.col_offset:], *lines[first + 1:last],
+                      lines[last][:node.end_col_offset]])
 
-    def __init__(self, node: ast.AST, names: frozenset[str]) -> None:
-        text = ast.unparse(node)
+
+def _statement_text(lines: list[str], stmt: ast.stmt) -> str:
+    """The lines of ``stmt``, which must be alone on them, without its indentation."""
+    rest = lines[stmt.end_lineno - 1][stmt.end_col_offset:].strip()
+    if lines[stmt.lineno - 1][:stmt.col_offset].strip() or (rest and rest[0] != "#"):
+        raise ValueError(f"line {stmt.lineno}: a statement to copy must be alone on its lines")
+    out = []
+    for line in lines[stmt.lineno - 1:stmt.end_lineno]:
+        blank = len(line) - len(line.lstrip())
+        out.append(line[min(blank, stmt.col_offset):])
+    return "\n".join(out)
+
+
+class _Template:
+    """One statement's (or expression's) text with slots for the names a copy renames:
+    ``pieces`` of text between the ``slots`` (the original names). A slot is a whole name
+    token that is a variable (not an attribute after a dot; not in a comment or string), so
+    filling it with another name, or a non-negative number, changes nothing else."""
+
+    def __init__(self, text: str, names: frozenset[str]) -> None:
         starts = [0]
         for line in text.split("\n"):
             starts.append(starts[-1] + len(line) + 1)
@@ -868,6 +895,7 @@ class _Inlinable:
     @classmethod
     def parse(cls, name: str, source: str) -> _Inlinable:
         fn = next(n for n in ast.parse(source).body if isinstance(n, ast.FunctionDef))
+        lines = source.split("\n")
         args = fn.args
         if args.posonlyargs or args.vararg or args.kwonlyargs or args.kwarg or args.defaults:
             raise ValueError(f"{name}: only plain positional parameters can be inlined")
@@ -896,7 +924,7 @@ class _Inlinable:
                       and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name)
                       else None)
             statements.append(_Statement(
-                template=_Template(stmt, renamed),
+                template=_Template(_statement_text(lines, stmt), renamed),
                 stored=frozenset(n.id for n in ast.walk(stmt) if isinstance(n, ast.Name)
                                  and not isinstance(n.ctx, ast.Load)),
                 single=single,
@@ -904,7 +932,8 @@ class _Inlinable:
                 if single else frozenset()))
         top = Counter(s.single for s in statements if s.single)
         return cls(params=params, body=tuple(statements),
-                   returns=None if returns is None else _Template(returns, renamed),
+                   returns=None if returns is None
+                   else _Template(_segment(lines, returns), renamed),
                    rebound=frozenset(stored) & set(params),
                    once=frozenset(v for v, k in top.items() if k == stored[v] == 1),
                    free=frozenset(read - set(stored) - set(params)),
@@ -921,6 +950,7 @@ class _Expander:
         self.tag = tag
         self.taken: set[str] = set().union(*(f.words for f in self.functions.values()))
         self.copies = 0
+        self.lines: list[str] = []
 
     def fresh(self, base: str) -> str:
         """``base``, or ``base_k`` for the first k that makes it a word used nowhere yet."""
@@ -934,7 +964,7 @@ class _Expander:
     def run(self, text: str) -> str:
         tree = ast.parse(text)
         self.taken |= set(_WORD.findall(text))  # (a superset of the names: words of comments)
-        lines = text.split("\n")
+        lines = self.lines = text.split("\n")
         edits: list[tuple[int, int, list[str]]] = []
         for fn in tree.body:
             if isinstance(fn, ast.FunctionDef):
@@ -999,7 +1029,9 @@ class _Expander:
                 values[param] = repr(arg.value)  # so does a number (a negative one is bound)
             else:  # evaluated once, before the body, as a call would
                 values[param] = self.fresh(f"{param}_{self.tag}{self.copies}")
-                out.append(f"{values[param]} = {ast.unparse(arg)}")
+                text = _segment(self.lines, arg)
+                atom = isinstance(arg, (ast.Name, ast.Constant))
+                out.append(f"{values[param]} = {text if atom else f'({text})'}")
         invariant = {param for param, arg in zip(fn.params, call.args)
                      if param not in fn.rebound and isinstance(arg, ast.Name)
                      and arg.id in self.invariant}
@@ -1024,7 +1056,8 @@ class _Expander:
                 values[v] = self.fresh(f"{v}_{self.tag}{self.copies}")
             out.append(_fold_offsets(stmt.template.fill(values)))
         if target is not None:
-            out.append(f"{ast.unparse(target)} = {_fold_offsets(fn.returns.fill(values))}")
+            out.append(f"{_segment(self.lines, target)} = "
+                       f"{_fold_offsets(fn.returns.fill(values))}")
         return out
 
 
