@@ -887,6 +887,7 @@ class _Inlinable:
     params: tuple[str, ...]
     body: tuple[_Statement, ...]
     returns: _Template | None
+    returned: tuple[str | None, ...]  # the returned names (None: not a name)
     rebound: frozenset[str]  # parameters the body assigns
     once: frozenset[str]  # names assigned exactly once, at the top level (may be hoisted)
     free: frozenset[str]  # names it reads and never assigns, parameters aside (globals)
@@ -931,7 +932,9 @@ class _Inlinable:
                 reads=frozenset(n.id for n in ast.walk(stmt.value) if isinstance(n, ast.Name))
                 if single else frozenset()))
         top = Counter(s.single for s in statements if s.single)
-        return cls(params=params, body=tuple(statements),
+        items = returns.elts if isinstance(returns, ast.Tuple) else [returns]
+        returned = tuple(e.id if isinstance(e, ast.Name) else None for e in items)
+        return cls(params=params, body=tuple(statements), returned=returned,
                    returns=None if returns is None
                    else _Template(_segment(lines, returns), renamed),
                    rebound=frozenset(stored) & set(params),
@@ -1021,9 +1024,19 @@ class _Expander:
         self.copies += 1
         out: list[str] = []
         values: dict[str, str] = {}
+        targets = ([t.id for t in target.elts] if isinstance(target, ast.Tuple)
+                   else [target.id] if target is not None else [])
+        names = [a.id for a in call.args if isinstance(a, ast.Name)]
         for param, arg in zip(fn.params, call.args):
             if isinstance(arg, ast.Name) and param not in fn.rebound:
                 values[param] = arg.id  # a name stands for itself
+            elif (isinstance(arg, ast.Name) and names.count(arg.id) == 1
+                  and targets.count(arg.id) == 1 and fn.returned.count(param) == 1
+                  and len(targets) == len(fn.returned)
+                  and fn.returned[targets.index(arg.id)] == param):
+                # a parameter the body assigns and returns into the very variable passed for
+                # it (c0 = probe(..., c0)): that variable can be the parameter throughout
+                values[param] = arg.id
             elif (isinstance(arg, ast.Constant) and type(arg.value) in (int, float)
                   and 0 <= arg.value < math.inf and param not in fn.rebound):
                 values[param] = repr(arg.value)  # so does a number (a negative one is bound)
@@ -1056,8 +1069,9 @@ class _Expander:
                 values[v] = self.fresh(f"{v}_{self.tag}{self.copies}")
             out.append(_fold_offsets(stmt.template.fill(values)))
         if target is not None:
-            out.append(f"{_segment(self.lines, target)} = "
-                       f"{_fold_offsets(fn.returns.fill(values))}")
+            value = _fold_offsets(fn.returns.fill(values))
+            if value.replace("(", "").replace(")", "") != _segment(self.lines, target):
+                out.append(f"{_segment(self.lines, target)} = {value}")
         return out
 
 
