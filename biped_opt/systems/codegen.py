@@ -21,14 +21,27 @@ Python module that Numba compiles (and caches on disk, keyed by that file):
 Parameters and inputs are arguments (``p``, ``u``), never constants: changing a parameter value
 does not change the source, so it does not recompile. Assignments a function never reads are
 dropped (:func:`_prune`): Numba types every statement of every inlined copy.
+
+Meaning is kept by construction: expressions are printed from SymPy's tree (a power or a
+quotient of a sum keeps its brackets); a system's symbols are written ``q__<name>``,
+``v__<name>``, ``p__<name>``, ``u__<name>``, ``s__<name>`` and the generator's own names never
+contain a double underscore, so a description may name its symbols anything (no reserved
+names); and the step's copies of the vector field, probe and sine/cosine are made on the
+syntax tree (:func:`_expand`), never by pasting an argument's text into a body.
 """
 
 from __future__ import annotations
 
+import ast
 import hashlib
 import inspect
+import io
+import math
 import re
+import textwrap
+import tokenize
 from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 
 import sympy as sp
@@ -36,16 +49,53 @@ from sympy.printing.pycode import PythonCodePrinter
 
 from biped_opt.systems import _dop853_gen
 from biped_opt.systems.derive import DerivedSystem
+from biped_opt.systems.description import System, SystemDescriptionError
 
-__all__ = ["render", "source_key", "KERNEL_BODY"]
+__all__ = ["render", "source_key", "KERNEL_BODY", "UnsupportedExpressionError"]
 
 KERNEL_BODY = Path(__file__).with_name("_kernel_body.py")
 #: bump when the generated code's form changes (the cache key includes it)
-FORMAT = 8
+FORMAT = 9
+
+
+class UnsupportedExpressionError(SystemDescriptionError):
+    """An expression of a description has no compiled form (a function generated code
+    cannot call); the message names the system and the function."""
+
+
+def _symbol_names(system: System) -> dict[sp.Symbol, str]:
+    """The names a system's symbols take in generated code: ``q__th`` for the coordinate th,
+    ``v__th`` for its velocity, ``p__m``, ``u__u1`` and ``s__s`` for a parameter, an input and
+    the maneuvers' s. The generator's own names never contain a double underscore, so no
+    name a description chooses (``y``, ``s``, ``j``, ``math``...) can stand for one of them:
+    there are no reserved names."""
+    kinds = (("q", system.q, system.coordinate_names), ("v", system.dq, system.coordinate_names),
+             ("p", tuple(system.p), system.p.names()), ("u", tuple(system.u), system.u.names()),
+             ("s", (system.s,), (str(system.s),)))
+    return {sym: f"{kind}__{name}" for kind, symbols, names in kinds
+            for sym, name in zip(symbols, names)}
 
 
 class _Printer(PythonCodePrinter):
-    """``math.*`` calls and float literals, the form Numba compiles best."""
+    """``math.*`` calls and float literals, the form Numba compiles best; a system's symbols
+    by their names in generated code (setting ``names``, see :func:`_symbol_names`)."""
+
+    _default_settings = {**PythonCodePrinter._default_settings, "names": {}}
+
+    def _print_Symbol(self, expr: sp.Symbol) -> str:
+        name = self._settings["names"].get(expr)
+        return super()._print_Symbol(expr) if name is None else name
+
+    def _print_Piecewise(self, expr: sp.Piecewise) -> str:
+        # NaN where no condition holds, as SymPy evaluates it (not None, which Numba rejects)
+        if expr.args[-1].cond != sp.true:
+            expr = sp.Piecewise(*expr.args, (sp.nan, True))
+        return super()._print_Piecewise(expr)
+
+    def _print_not_supported(self, expr: sp.Basic) -> str:
+        raise UnsupportedExpressionError(
+            f"{type(expr).__name__} ({expr}) has no compiled form: write the system with "
+            "elementary functions (sin, exp, log, sqrt, Abs, Piecewise, ...)")
 
     def _print_Integer(self, expr: sp.Integer) -> str:
         return f"{float(expr)!r}"
@@ -104,11 +154,13 @@ def _share_products(subs: list[tuple[sp.Symbol, sp.Expr]], reduced: list[sp.Expr
 class _Emitter:
     """Lines of one function body with fresh scalar names and structural zeros folded."""
 
-    def __init__(self, indent: str = "    ", *, sincos: bool = False) -> None:
+    def __init__(self, names: dict[sp.Symbol, str], indent: str = "    ", *,
+                 sincos: bool = False) -> None:
         self.lines: list[str] = []
         self.indent = indent
         self.count = 0
-        self.printer = _Printer({"fully_qualified_modules": True})
+        self.names = names
+        self.printer = _Printer({"fully_qualified_modules": True, "names": names})
         self.trig: dict[sp.Expr, tuple[sp.Symbol, sp.Symbol]] = {}
         self.named: dict[str, str] = {}
         self.sincos = sincos
@@ -116,9 +168,17 @@ class _Emitter:
     def line(self, text: str) -> None:
         self.lines.append(self.indent + text)
 
+    def branch(self, offset: int | None = None) -> _Emitter:
+        """An emitter for a branch of this body (one level deeper); ``offset`` starts its
+        fresh names that far from this one's."""
+        br = _Emitter(self.names, self.indent + "    ")
+        if offset is not None:
+            br.count = self.count + offset
+        return br
+
     def fresh(self, prefix: str) -> str:
         self.count += 1
-        return f"_{prefix}{self.count}"  # (user symbols are identifiers without a leading _)
+        return f"_{prefix}{self.count}"  # (a system's symbols: see _symbol_names)
 
     def expr(self, e: sp.Expr) -> str:
         return self.printer.doprint(e)
@@ -229,16 +289,17 @@ def _bindings(derived: DerivedSystem, em: _Emitter, *, velocities: bool, inputs:
     """Lines that read q (and q', u, p) into scalars named after the symbols."""
     system = derived.system
     d = derived.ndof
+    names = em.names
     for i, c in enumerate(system.q):
-        em.line(f"{c} = y[yo + {i}]")
+        em.line(f"{names[c]} = y[yo + {i}]")
     if velocities:
         for i, c in enumerate(system.dq):
-            em.line(f"{c} = y[yo + {d + i}]")
-    for k, name in enumerate(system.p.names()):
-        em.line(f"{system.p[name]} = p[{k}]")
+            em.line(f"{names[c]} = y[yo + {d + i}]")
+    for k, sym in enumerate(system.p):
+        em.line(f"{names[sym]} = p[{k}]")
     if inputs:
-        for k, name in enumerate(system.u.names()):
-            em.line(f"{system.u[name]} = u[{k}]")
+        for k, sym in enumerate(system.u):
+            em.line(f"{names[sym]} = u[{k}]")
     return {}
 
 
@@ -369,7 +430,7 @@ class _Hoisted:
 
     def __init__(self, derived: DerivedSystem, em: _Emitter) -> None:
         self.em = em
-        self.pre = _Emitter()
+        self.pre = _Emitter(em.names)
         self.pre.count = 10**6  # its names live in the vector field's scope too
         self.offset = len(derived.system.p)
         self.slots: dict[str, int] = {}
@@ -395,7 +456,7 @@ class _Hoisted:
                "    declared order), then the quantities that depend on them alone (computed once",
                '    here, in Python, instead of at every evaluation)."""']
         system = derived.system
-        out += [f"    {system.p[name]} = p[{k}]" for k, name in enumerate(system.p.names())]
+        out += [f"    {self.pre.names[sym]} = p[{k}]" for k, sym in enumerate(system.p)]
         return out + self.pre.lines + ["    return np.array([", "        *p,"] + [
             f"        {v}," for v in self.slots] + ["    ], dtype=np.float64)"]
 
@@ -411,7 +472,7 @@ def _vector_field(derived: DerivedSystem) -> tuple[list[str], list[str]]:
            "def vector_field(p, mode, y, yo, u, out, off, lam, lo):",
            '    """(q\', q\'\') of mode ``mode`` at y[yo:yo + 2d] to out[off:off + 2d], the',
            '    reactions to lam[lo:lo + n] (0 for inactive constraints), Eq. (1a)."""']
-    em = _Emitter(sincos=True)
+    em = _Emitter(_symbol_names(derived.system), sincos=True)
     _bindings(derived, em, velocities=True, inputs=True)
     hoist = _Hoisted(derived, em)
     const_m = hoist.constant(derived.mass_matrix)
@@ -562,17 +623,16 @@ def _impact(derived: DerivedSystem) -> list[str]:
            "def apply_impact(p, mode, y):",
            '    """q\'+ = Delta_J q\'- in place on entering mode J, Eq. (1b)."""',
            "    yo = 0"]
-    em = _Emitter()
+    em = _Emitter(_symbol_names(derived.system))
     _bindings(derived, em, velocities=True, inputs=False)
     gamma = em.assign("g", em.expr(derived.restitution)) if derived.restitution != 0 else "0.0"
     L, Da = _factors(derived, em)
     out += em.lines
-    v = [str(c) for c in derived.system.dq]
+    v = [em.names[c] for c in derived.system.dq]
     for mask in range(1, 1 << n):  # the air mode has no impact
         active = [j for j in range(n) if mask >> j & 1]
         out.append(f"    {'if' if mask == 1 else 'elif'} mode == {mask}:")
-        br = _Emitter("        ")
-        br.count = em.count + 1000 * (mask + 1)
+        br = em.branch(1000 * (mask + 1))
         cols, Ls = _schur(br, L, Da, active)
         normal = [br.assign("v", _sum([_mul(Da[a][i], v[i]) for i in range(d)])) for a in active]
         w = _solve(br, Ls, normal, "w")
@@ -587,7 +647,7 @@ def _impact(derived: DerivedSystem) -> list[str]:
 def _scalar_function(name: str, doc: str, args: str, derived: DerivedSystem,
                      exprs: list[sp.Expr], target: str, *, inputs: bool) -> list[str]:
     out = ["@nb.njit(**HOT_PATH)", f"def {name}({args}):", f'    """{doc}"""']
-    em = _Emitter()
+    em = _Emitter(_symbol_names(derived.system))
     _bindings(derived, em, velocities=True, inputs=inputs)
     values = em.exprs(exprs, "e") if exprs else []
     for k, v in enumerate(values):
@@ -598,13 +658,12 @@ def _scalar_function(name: str, doc: str, args: str, derived: DerivedSystem,
 def _per_maneuver(name: str, doc: str, args: str, derived: DerivedSystem,
                   pick, *, inputs: bool) -> list[str]:
     out = ["@nb.njit(**HOT_PATH)", f"def {name}({args}):", f'    """{doc}"""']
-    em = _Emitter()
+    em = _Emitter(_symbol_names(derived.system))
     _bindings(derived, em, velocities=True, inputs=inputs)
     out += em.lines
     for code, m in enumerate(derived.maneuvers.values()):
         out.append(f"    {'if' if code == 0 else 'elif'} code == {code}:")
-        br = _Emitter("        ")
-        br.count = em.count + 1000 * (code + 1)
+        br = em.branch(1000 * (code + 1))
         (value,) = br.exprs([pick(m)], "t")
         out += br.lines
         out.append(f"        return {value}")
@@ -616,12 +675,12 @@ def _initial(derived: DerivedSystem) -> list[str]:
     system = derived.system
     out = ["@nb.njit(**HOT_PATH)", "def initial_state(code, s, p, y0):",
            '    """The initial state (q, q\') of maneuver ``code`` at s into y0."""']
-    for k, name in enumerate(system.p.names()):
-        out.append(f"    {system.p[name]} = p[{k}]")
-    out.append(f"    {system.s} = s")
+    em = _Emitter(_symbol_names(system))
+    out += [f"    {em.names[sym]} = p[{k}]" for k, sym in enumerate(system.p)]
+    out.append(f"    {em.names[system.s]} = s")
     for code, m in enumerate(derived.maneuvers.values()):
         out.append(f"    {'if' if code == 0 else 'elif'} code == {code}:")
-        br = _Emitter("        ")
+        br = em.branch()
         values = br.exprs(list(m.initial), "i")
         for k, v in enumerate(values):
             br.line(f"y0[{k}] = {v}")
@@ -634,13 +693,12 @@ def _guards(derived: DerivedSystem) -> list[str]:
     out = ["@nb.njit(**HOT_PATH)",
            "def constraint_value(j, p, y, yo):",
            '    """a_j(q) at the state y[yo:]."""']
-    em = _Emitter()
+    em = _Emitter(_symbol_names(derived.system))
     _bindings(derived, em, velocities=False, inputs=False)
     out += em.lines
     for j in range(n):
         out.append(f"    {'if' if j == 0 else 'elif'} j == {j}:")
-        br = _Emitter("        ")
-        br.count = em.count + 1000 * (j + 1)
+        br = em.branch(1000 * (j + 1))
         (value,) = br.exprs([derived.constraints[j]], "a")
         out += br.lines
         out.append(f"        return {value}")
@@ -701,15 +759,13 @@ def _probe(derived: DerivedSystem, *, values: bool = False) -> list[str]:
                "def guard_values(p, mode, u, code, y, yo, lam, lo, out):",
                '    """Every guard at the state y[yo:] with known reactions lam[lo:]."""']
     else:
-        # (underscored: a system's own symbols, bound by name below, never start with one;
-        # a damping parameter "c" once shadowed the stage abscissa here)
         cs = ", ".join(f"_c{i}" for i in range(n + 1))
         out = ["@nb.njit(**HOT_PATH, inline=\"always\")",
                f"def probe_stage(p, mode, u, code, y, yo, lam, lo, _c, {cs}):",
                '    """(c0, c1, ...) with ci lowered to the abscissa _c for each guard i <= 0 at',
                '    the stage state y[yo:] (values, not an array: the step keeps them in',
                '    registers)."""']
-    em = _Emitter()
+    em = _Emitter(_symbol_names(derived.system))
     _bindings(derived, em, velocities=True, inputs=True)
     a = em.exprs(list(derived.constraints), "a") if n else []
     terms = em.exprs([m.terminal for m in derived.maneuvers.values()], "t")
@@ -753,96 +809,337 @@ def _prune(lines: list[str]) -> list[str]:
     return out
 
 
-_ASSIGNED = re.compile(r"\s+(\w+(?:, \w+)*) = (.*)")  # (at any depth: a name of the body's)
-_CALL = re.compile(r"( +)(?:([\w, ]+) = )?(\w+)\(\s*([^()]*?)\s*\)$", re.MULTILINE)
+_WORD = re.compile(r"[A-Za-z_]\w*")
 
 
-def _expand(text: str, functions: dict[str, list[str]], invariant: set[str], tag: str = "") -> str:
-    """``text`` with each statement that calls one of ``functions`` (name -> its source lines)
-    replaced by the function's body: parameters become the call's arguments, an array read
-    at a literal offset ``y[yo + 3]`` with ``yo = 256`` becomes ``W[259]``, the body's own names
-    get a suffix per copy (``_<tag><copy>``: a second pass over the expanded text takes another
-    tag), and a returned tuple is assigned to the call's targets. A value
-    that depends only on ``invariant`` names (arguments that do not change through ``text``:
-    p, u, the mode) is computed once, where the first copy of its function stands.
+def _literal_node(value: float) -> ast.expr:
+    """``value`` as a syntax node; a negative one as a negation, which ``ast.unparse``
+    brackets where needed ((-2.0) ** 2, where a negative constant would print as -2.0 ** 2)."""
+    if value < 0 or (value == 0 and math.copysign(1.0, value) < 0):
+        return ast.UnaryOp(ast.USub(), ast.Constant(-value))
+    return ast.Constant(value)
+
+
+def _segment(lines: list[str], node: ast.AST) -> str:
+    """The source text of ``node`` (``lines``: its module's, ASCII)."""
+    first, last = node.lineno - 1, node.end_lineno - 1
+    if first == last:
+        return lines[first][node.col_offset:node.end_col_offset]
+    return "\n".join([lines[first][node.col_offset:], *lines[first + 1:last],
+                      lines[last][:node.end_col_offset]])
+
+
+def _statement_text(lines: list[str], stmt: ast.stmt) -> str:
+    """The lines of ``stmt``, which must be alone on them, without its indentation."""
+    rest = lines[stmt.end_lineno - 1][stmt.end_col_offset:].strip()
+    if lines[stmt.lineno - 1][:stmt.col_offset].strip() or (rest and rest[0] != "#"):
+        raise ValueError(f"line {stmt.lineno}: a statement to copy must be alone on its lines")
+    out = []
+    for line in lines[stmt.lineno - 1:stmt.end_lineno]:
+        blank = len(line) - len(line.lstrip())
+        out.append(line[min(blank, stmt.col_offset):])
+    return "\n".join(out)
+
+
+class _Template:
+    """One statement's (or expression's) text with slots for the names a copy renames:
+    ``pieces`` of text between the ``slots`` (the original names). A slot is a whole name
+    token that is a variable (not an attribute after a dot; not in a comment or string), so
+    filling it with another name, or a non-negative number, changes nothing else."""
+
+    def __init__(self, text: str, names: frozenset[str]) -> None:
+        starts = [0]
+        for line in text.split("\n"):
+            starts.append(starts[-1] + len(line) + 1)
+        self.pieces: list[str] = []
+        self.slots: list[str] = []
+        at, previous = 0, None
+        for tok in tokenize.generate_tokens(io.StringIO(text).readline):
+            if tok.type == tokenize.NAME and tok.string in names and previous != ".":
+                begin = starts[tok.start[0] - 1] + tok.start[1]
+                self.pieces.append(text[at:begin])
+                self.slots.append(tok.string)
+                at = begin + len(tok.string)
+            if tok.type not in (tokenize.NL, tokenize.NEWLINE, tokenize.COMMENT):
+                previous = tok.string
+        self.pieces.append(text[at:])
+
+    def fill(self, values: dict[str, str]) -> str:
+        out = [self.pieces[0]]
+        for name, piece in zip(self.slots, self.pieces[1:]):
+            out += (values[name], piece)
+        return "".join(out)
+
+
+@dataclass(frozen=True)
+class _Statement:
+    template: _Template
+    stored: frozenset[str]  # the names it assigns
+    single: str | None  # its target when it is a top-level ``name = value``
+    reads: frozenset[str]  # the names its value reads (when ``single``)
+
+
+@dataclass(frozen=True)
+class _Inlinable:
+    """A function :func:`_expand` can inline: statements (branches allowed) and at most one
+    ``return``, its last statement; no nested scopes or keyword arguments."""
+
+    params: tuple[str, ...]
+    body: tuple[_Statement, ...]
+    returns: _Template | None
+    returned: tuple[str | None, ...]  # the returned names (None: not a name)
+    rebound: frozenset[str]  # parameters the body assigns
+    once: frozenset[str]  # names assigned exactly once, at the top level (may be hoisted)
+    free: frozenset[str]  # names it reads and never assigns, parameters aside (globals)
+    words: frozenset[str]  # every word of its source
+
+    @classmethod
+    def parse(cls, name: str, source: str) -> _Inlinable:
+        fn = next(n for n in ast.parse(source).body if isinstance(n, ast.FunctionDef))
+        lines = source.split("\n")
+        args = fn.args
+        if args.posonlyargs or args.vararg or args.kwonlyargs or args.kwarg or args.defaults:
+            raise ValueError(f"{name}: only plain positional parameters can be inlined")
+        body = list(fn.body)
+        if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+            body = body[1:]  # the docstring
+        returns = body.pop().value if body and isinstance(body[-1], ast.Return) else None
+        unsupported = (ast.Return, ast.FunctionDef, ast.Lambda, ast.Global, ast.Nonlocal,
+                       ast.ListComp, ast.SetComp, ast.DictComp, ast.GeneratorExp, ast.Yield,
+                       ast.Break, ast.Continue, ast.keyword, ast.NamedExpr, ast.JoinedStr)
+        nodes = [n for stmt in body for n in ast.walk(stmt)]
+        for node in nodes:
+            if isinstance(node, unsupported):
+                raise ValueError(f"{name}: a {type(node).__name__} cannot be inlined (one "
+                                 "return, as the last statement, no nested scopes)")
+        params = tuple(a.arg for a in args.args)
+        stored = Counter(n.id for n in nodes
+                         if isinstance(n, ast.Name) and not isinstance(n.ctx, ast.Load))
+        read = {n.id for n in nodes if isinstance(n, ast.Name)}
+        if returns is not None:
+            read |= {n.id for n in ast.walk(returns) if isinstance(n, ast.Name)}
+        renamed = frozenset(stored) | frozenset(params)
+        statements = []
+        for stmt in body:
+            single = (stmt.targets[0].id if isinstance(stmt, ast.Assign)
+                      and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name)
+                      else None)
+            statements.append(_Statement(
+                template=_Template(_statement_text(lines, stmt), renamed),
+                stored=frozenset(n.id for n in ast.walk(stmt) if isinstance(n, ast.Name)
+                                 and not isinstance(n.ctx, ast.Load)),
+                single=single,
+                reads=frozenset(n.id for n in ast.walk(stmt.value) if isinstance(n, ast.Name))
+                if single else frozenset()))
+        top = Counter(s.single for s in statements if s.single)
+        items = returns.elts if isinstance(returns, ast.Tuple) else [returns]
+        returned = tuple(e.id if isinstance(e, ast.Name) else None for e in items)
+        return cls(params=params, body=tuple(statements), returned=returned,
+                   returns=None if returns is None
+                   else _Template(_segment(lines, returns), renamed),
+                   rebound=frozenset(stored) & set(params),
+                   once=frozenset(v for v, k in top.items() if k == stored[v] == 1),
+                   free=frozenset(read - set(stored) - set(params)),
+                   words=frozenset(_WORD.findall(source)))
+
+
+class _Expander:
+    """The state of one :func:`_expand` pass (see there)."""
+
+    def __init__(self, functions: dict[str, str], invariant: set[str], tag: str) -> None:
+        self.functions = {name: _Inlinable.parse(name, src) for name, src in functions.items()}
+        self.order = list(functions)
+        self.invariant = invariant
+        self.tag = tag
+        self.taken: set[str] = set().union(*(f.words for f in self.functions.values()))
+        self.copies = 0
+        self.lines: list[str] = []
+
+    def fresh(self, base: str) -> str:
+        """``base``, or ``base_k`` for the first k that makes it a word used nowhere yet."""
+        name, k = base, 0
+        while name in self.taken:
+            k += 1
+            name = f"{base}_{k}"
+        self.taken.add(name)
+        return name
+
+    def run(self, text: str) -> str:
+        tree = ast.parse(text)
+        self.taken |= set(_WORD.findall(text))  # (a superset of the names: words of comments)
+        lines = self.lines = text.split("\n")
+        edits: list[tuple[int, int, list[str]]] = []
+        for fn in tree.body:
+            if isinstance(fn, ast.FunctionDef):
+                scope = {"assigned": _assigned(fn.body) | {a.arg for a in fn.args.args},
+                         "hoisted": {}, "first": {}}
+                self.block(fn.body, scope, True, lines, edits)
+        for first, last, new in sorted(edits, reverse=True):
+            lines[first - 1:last] = new
+        return "\n".join(lines)
+
+    def block(self, stmts: list[ast.stmt], scope: dict, top: bool, lines: list[str],
+              edits: list[tuple[int, int, list[str]]]) -> None:
+        for stmt in stmts:
+            call, target = None, None
+            if isinstance(stmt, ast.Expr):
+                call = stmt.value
+            elif isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and (
+                    isinstance(stmt.targets[0], ast.Name) or (
+                        isinstance(stmt.targets[0], ast.Tuple)
+                        and all(isinstance(t, ast.Name) for t in stmt.targets[0].elts))):
+                call, target = stmt.value, stmt.targets[0]
+            if (isinstance(call, ast.Call) and isinstance(call.func, ast.Name)
+                    and call.func.id in self.functions):
+                if (lines[stmt.lineno - 1][:stmt.col_offset].strip()
+                        or lines[stmt.end_lineno - 1][stmt.end_col_offset:].strip()):
+                    raise ValueError(f"line {stmt.lineno}: a call to inline must be a "
+                                     "statement of its own lines")
+                indent = " " * stmt.col_offset
+                new = self.inline(call, target, scope, top)
+                edits.append((stmt.lineno, stmt.end_lineno,
+                              [indent + line for s in new for line in s.split("\n")]))
+                continue
+            for field in ("body", "orelse", "finalbody"):
+                inner = getattr(stmt, field, None)
+                if isinstance(inner, list) and not isinstance(stmt, ast.FunctionDef):
+                    self.block(inner, scope, False, lines, edits)
+            for handler in getattr(stmt, "handlers", ()):
+                self.block(handler.body, scope, False, lines, edits)
+
+    def inline(self, call: ast.Call, target: ast.expr | None, scope: dict, top: bool
+               ) -> list[str]:
+        name = call.func.id
+        fn = self.functions[name]
+        if call.keywords or len(call.args) != len(fn.params) or any(
+                isinstance(a, ast.Starred) for a in call.args):
+            raise ValueError(f"{name}: the call at line {call.lineno} does not match "
+                             f"({', '.join(fn.params)})")
+        shadowed = fn.free & scope["assigned"]
+        if shadowed:
+            raise ValueError(f"{name}: the caller assigns {', '.join(sorted(shadowed))}, "
+                             f"which {name} reads as a global")
+        if target is not None and fn.returns is None:
+            raise ValueError(f"{name}: returns nothing to assign")
+        self.copies += 1
+        out: list[str] = []
+        values: dict[str, str] = {}
+        targets = ([t.id for t in target.elts] if isinstance(target, ast.Tuple)
+                   else [target.id] if target is not None else [])
+        names = [a.id for a in call.args if isinstance(a, ast.Name)]
+        for param, arg in zip(fn.params, call.args):
+            if isinstance(arg, ast.Name) and param not in fn.rebound:
+                values[param] = arg.id  # a name stands for itself
+            elif (isinstance(arg, ast.Name) and names.count(arg.id) == 1
+                  and targets.count(arg.id) == 1 and fn.returned.count(param) == 1
+                  and len(targets) == len(fn.returned)
+                  and fn.returned[targets.index(arg.id)] == param):
+                # a parameter the body assigns and returns into the very variable passed for
+                # it (c0 = probe(..., c0)): that variable can be the parameter throughout
+                values[param] = arg.id
+            elif (isinstance(arg, ast.Constant) and type(arg.value) in (int, float)
+                  and 0 <= arg.value < math.inf and param not in fn.rebound):
+                values[param] = repr(arg.value)  # so does a number (a negative one is bound)
+            else:  # evaluated once, before the body, as a call would
+                values[param] = self.fresh(f"{param}_{self.tag}{self.copies}")
+                text = _segment(self.lines, arg)
+                atom = isinstance(arg, (ast.Name, ast.Constant))
+                out.append(f"{values[param]} = {text if atom else f'({text})'}")
+        invariant = {param for param, arg in zip(fn.params, call.args)
+                     if param not in fn.rebound and isinstance(arg, ast.Name)
+                     and arg.id in self.invariant}
+        first = name not in scope["hoisted"]
+        hoisted: dict[str, str] = scope["hoisted"].setdefault(name, {})
+        if first:
+            scope["first"][name] = {p: values[p] for p in invariant}
+        elif hoisted and any(p not in invariant or values[p] != ident
+                             for p, ident in scope["first"][name].items()):
+            raise ValueError(f"{name}: the call at line {call.lineno} passes other values "
+                             "for the parameters its hoisted statements read")
+        values.update(hoisted)
+        for stmt in fn.body:
+            if stmt.single in hoisted:
+                continue  # computed where the first copy stands
+            if (first and top and stmt.single in fn.once
+                    and all(v in hoisted or v in invariant or v in fn.free
+                            for v in stmt.reads)):
+                hoisted[stmt.single] = values[stmt.single] = self.fresh(
+                    f"{stmt.single}_h{self.tag}{self.order.index(name)}")
+            for v in sorted(stmt.stored - values.keys()):
+                values[v] = self.fresh(f"{v}_{self.tag}{self.copies}")
+            out.append(_fold_offsets(stmt.template.fill(values)))
+        if target is not None:
+            value = _fold_offsets(fn.returns.fill(values))
+            if value.replace("(", "").replace(")", "") != _segment(self.lines, target):
+                out.append(f"{_segment(self.lines, target)} = {value}")
+        return out
+
+
+def _assigned(stmts: list[ast.stmt]) -> set[str]:
+    """The names ``stmts`` assign (at any depth), without walking their expressions."""
+    out: set[str] = set()
+    for stmt in stmts:
+        targets = {ast.Assign: lambda s: s.targets, ast.AugAssign: lambda s: [s.target],
+                   ast.AnnAssign: lambda s: [s.target], ast.For: lambda s: [s.target],
+                   ast.With: lambda s: [i.optional_vars for i in s.items if i.optional_vars]}
+        for kind, get in targets.items():
+            if isinstance(stmt, kind):
+                out |= {n.id for t in get(stmt) for n in ast.walk(t) if isinstance(n, ast.Name)}
+        if isinstance(stmt, (ast.FunctionDef, ast.ClassDef)):
+            out.add(stmt.name)
+            continue
+        for field in ("body", "orelse", "finalbody"):
+            inner = getattr(stmt, field, None)
+            if isinstance(inner, list):
+                out |= _assigned(inner)
+        for handler in getattr(stmt, "handlers", ()):
+            out |= _assigned(handler.body)
+    return out
+
+
+_OFFSET = re.compile(r"\[(\d+) \+ (\d+)\]")
+
+
+def _fold_offsets(text: str) -> str:
+    """``W[128 + 3]`` as ``W[131]`` (a subscript that is a sum of two integer literals)."""
+    return _OFFSET.sub(lambda m: f"[{int(m[1]) + int(m[2])}]", text)
+
+
+def _expand(text: str, functions: dict[str, str], invariant: set[str], tag: str = "") -> str:
+    """``text`` with each statement that calls one of ``functions`` (name -> source), alone or
+    assigned to names (``a, b = f(x)``), replaced by the function's body. Exact by
+    construction, whatever the arguments: the body is read as a syntax tree and written back
+    (``ast.unparse``) with its parameters and locals as slots, and only names or non-negative
+    numbers fill a slot; any other argument (``th + a``, ``-1.0``, ``W[3] * h``) is first
+    bound to a new name, once, as a call evaluates it. Every name the body assigns gets a name
+    of its own per copy (``x`` of the third copy is ``x_<tag>3``, with a further suffix when
+    the text or a body already has that word: a copy can neither read nor overwrite a name of
+    the caller or of another copy); a body's globals must not be assigned by the caller. The
+    returned value is assigned to the call's targets; a literal offset ``y[yo + 3]`` with
+    ``yo = 128`` becomes ``W[131]``. A top-level assignment that depends only on ``invariant``
+    names (arguments that do not change through the text: p, u, the mode), globals and
+    earlier such values is computed once, where the first copy of its function stands
+    (``x_h<tag><k>``). Only the calls' lines change; the rest of ``text`` stays as it is.
 
     The step calls the vector field and the stage probe twelve times each. Numba's own
     inlining of them (inline="always") took a quarter of the module's compile time; the
     expanded text compiles to the same arithmetic, and the parameters, inputs and mode
     factors are read once per step instead of once per stage."""
-    def body_of(lines: list[str]) -> tuple[list[str], list[str], set[str]]:
-        k = next(i for i, line in enumerate(lines) if line.startswith("def "))
-        head = lines[k][lines[k].index("(") + 1:lines[k].index(")")]
-        params = [v.split(":")[0].strip() for v in head.split(", ")]
-        k = start = k + 1
-        if lines[k].strip().startswith('"""'):  # the docstring, to its closing quotes
-            while '"""' not in (lines[k].strip()[3:] if k == start else lines[k]):
-                k += 1
-            k += 1
-        body = lines[k:]
-        local = {n for line in body if (d := _ASSIGNED.fullmatch(line))
-                 for n in d[1].split(", ")} - set(params)
-        return params, body, local
-
-    bodies = {name: body_of(lines) for name, lines in functions.items()}
-    hoisted: dict[str, set[str]] = {}  # per function: its names computed once
-    copies = 0
-    word = re.compile(r"(?<![\w.])([A-Za-z_]\w*)\b")
-
-    def replace(m: re.Match) -> str:
-        nonlocal copies
-        indent, targets, name, args = m[1], m[2], m[3], m[4]
-        if name not in bodies:
-            return m[0]
-        params, body, local = bodies[name]
-        values = dict(zip(params, (a.strip() for a in args.split(","))))
-        copies += 1
-        first = name not in hoisted
-        once = hoisted.setdefault(name, set())
-        once_tag = f"h{tag}{list(bodies).index(name)}"
-
-        def rename(line: str) -> str:
-            def at(a: re.Match) -> str:
-                return f"{values[a[1]]}[{int(values[a[2]]) + int(a[3])}]"
-            line = re.sub(r"\b(\w+)\[(\w+) \+ (\d+)\]",
-                          lambda a: at(a) if a[1] in values and a[2] in values else a[0], line)
-            return word.sub(lambda w: (
-                f"{w[1]}_{once_tag}" if w[1] in once else f"{w[1]}_{tag}{copies}" if w[1] in local
-                else values.get(w[1], w[1])), line)
-
-        def constant(line: str) -> bool:
-            d = _DEFINITION.fullmatch(line)
-            if d is None or ", " in d[1] or not line.startswith("    ") or line[4] == " ":
-                return False
-            used = set(word.findall(d[2]))
-            return all(w in once or (w in params and values[w] in invariant)
-                       or (w not in params and w not in local) for w in used)
-
-        out = []
-        for line in body:
-            if line.startswith("    return"):
-                value = rename(line[len("    return"):].strip())
-                if targets and value != targets:
-                    out.append(f"{indent}{targets} = {value}")
-                continue
-            if first and constant(line):
-                once.add(_DEFINITION.fullmatch(line)[1])
-            elif _DEFINITION.fullmatch(line) and _DEFINITION.fullmatch(line)[1] in once:
-                continue
-            out.append(indent + rename(line[4:]))
-        return "\n".join(out)
-
-    return _CALL.sub(replace, text)
+    return _Expander(functions, invariant, tag).run(text)
 
 
-def _sincos_source() -> list[str]:
+def _sincos_source() -> str:
     """The source of :func:`biped_opt.model.biped.sincos` (what ``_sincos`` is in a generated
-    module) with its module's constants written as literals, for :func:`_expand`."""
+    module) with its module's float constants written as literals, for :func:`_expand`."""
     from biped_opt.model import biped as model
 
-    lines = inspect.getsource(model.sincos).splitlines()
-    return [re.sub(r"\b_[SC]\d+\b|\b_QUARTER_PI\b",
-                   lambda m: repr(float(getattr(model, m[0]))), line) for line in lines]
+    class Literals(ast.NodeTransformer):
+        def visit_Name(self, node: ast.Name) -> ast.expr:
+            value = getattr(model, node.id, None)
+            return _literal_node(value) if type(value) is float else node
+
+    tree = Literals().visit(ast.parse(textwrap.dedent(inspect.getsource(model.sincos))))
+    return ast.unparse(tree)
 
 
 def _int_array(values: list[int]) -> str:
@@ -882,32 +1179,38 @@ def render(derived: DerivedSystem) -> str:
         f"INITIAL_MODE = {_int_array([m.mode for m in maneuvers])}",
         "",
     ]
-    vector_field, prepare = _vector_field(derived)
-    parts = [
-        head,
-        prepare,
-        vector_field,
-        _reaction(vector_field, n),
-        _impact(derived),
-        _scalar_function("constraint_rates", "Da(q) q' into out[:n].",
-                         "p, y, yo, out", derived, list(derived.jacobian * sp.Matrix(system.dq))
-                         if n else [], "out", inputs=False),
-        _per_maneuver("terminal_value", "The terminal guard of maneuver ``code``.",
-                      "code, p, u, y, yo", derived, lambda m: m.terminal, inputs=True),
-        _per_maneuver("outcome_value", "The outcome of maneuver ``code`` at the state y.",
-                      "code, p, y, yo", derived, lambda m: m.outcome, inputs=False),
-        _initial(derived),
-        _guards(derived),
-    ]
+    try:
+        vector_field, prepare = _vector_field(derived)
+        parts = [
+            head,
+            prepare,
+            vector_field,
+            _reaction(vector_field, n),
+            _impact(derived),
+            _scalar_function("constraint_rates", "Da(q) q' into out[:n].", "p, y, yo, out",
+                             derived, list(derived.jacobian * sp.Matrix(system.dq))
+                             if n else [], "out", inputs=False),
+            _per_maneuver("terminal_value", "The terminal guard of maneuver ``code``.",
+                          "code, p, u, y, yo", derived, lambda m: m.terminal, inputs=True),
+            _per_maneuver("outcome_value", "The outcome of maneuver ``code`` at the state y.",
+                          "code, p, y, yo", derived, lambda m: m.outcome, inputs=False),
+            _initial(derived),
+            _guards(derived),
+        ]
+        probe = _probe(derived)
+    except UnsupportedExpressionError as exc:
+        raise UnsupportedExpressionError(f"{system.where()}: {exc}") from None
     text = "\n\n\n".join("\n".join(_prune(part)) for part in parts) + "\n"
     step = _dop853_gen.render(n=2 * d, imports="", rhs="vector_field", probe="probe_stage",
                               nlam=max(n, 1), registers=True, nguards=n + 1,
                               probe_head="p, mode, u, term_sign", dense_rhs="_field_at")
     step = step[step.index("\nSTRIDE = ") + 1:]
-    step = _expand(step, {"vector_field": _prune(vector_field),
-                          "probe_stage": _prune(_probe(derived))},
+    # the vector field with its sines and cosines expanded (one pass over the small text),
+    # then expanded into the step
+    field = _expand("\n".join(_prune(vector_field)), {"_sincos": _sincos_source()},
+                    invariant=set(), tag="s")
+    step = _expand(step, {"vector_field": field, "probe_stage": "\n".join(_prune(probe))},
                    invariant={"p", "u", "mode", "term_sign"})
-    step = _expand(step, {"_sincos": _sincos_source()}, invariant=set(), tag="s")
     body = KERNEL_BODY.read_text()
     body = body[body.index("\n# --- kernel ---\n") + 1:]
     return text + "\n\n" + step + "\n\n" + body
