@@ -80,7 +80,8 @@ def sincos(x: float) -> tuple[float, float]:
     chains make the whole simulation ~8% faster.
 
     Written with one return and no early exit: the generated systems' DOP853 step has this
-    body expanded as text into each of its stages (:func:`biped_opt.systems.codegen._expand`).
+    body expanded into each of its stages, on its syntax tree with every argument bound to a
+    name first (:func:`biped_opt.systems.codegen._expand`).
     """
     x2 = x * x
     x4 = x2 * x2

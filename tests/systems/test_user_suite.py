@@ -39,7 +39,6 @@ OFFSETS = (-1e-9, -3e-10, -1e-10, 1e-10, 3e-10, 1e-9)
 #: the references' and the simulator's accuracy (~1e-12 in a guard): such an offset is skipped
 EDGE = 0.05
 
-ITEM0 = "issue 22 item 0: sin/cos of a sum (relative joint angles) miscompiled in the step"
 
 #: system file, maneuver, reference of s, tested ranges of s
 FLIGHT = {
@@ -219,7 +218,6 @@ def test_library_bar_apex_first():
 CHAIN_TILTS = (-0.15, -0.05, 0.1)
 
 
-@pytest.mark.xfail(strict=True, reason=ITEM0)
 def test_chain_conserves_energy_in_flight():
     """No damping and no input: before the first impact the energy (the reference's own T + V)
     of every sampled state is the initial one to 1e-9 (DOP853 at rtol 1e-11 drifts ~1e-12)."""
@@ -232,7 +230,6 @@ def test_chain_conserves_energy_in_flight():
         assert np.ptp(energy) < 1e-9, f"tilt {tilt}: energy drifts by {np.ptp(energy)}"
 
 
-@pytest.mark.xfail(strict=True, reason=ITEM0)
 def test_chain_against_solve_ivp():
     """The drop at three tilts: impacts, event times and outcome against solve_ivp."""
     chain = reference_chain.Chain()
@@ -241,7 +238,6 @@ def test_chain_against_solve_ivp():
         assert_agrees(compiled("chain").simulate("drop", tilt), ref, f"chain tilt {tilt}")
 
 
-@pytest.mark.xfail(strict=True, reason=ITEM0)
 def test_chain_feet_landing_together():
     """The chain is mirror-symmetric at tilt 0, so both feet land at once there (s* = 0, also
     where the reference's event order swaps); within 1e-9 of it the simulator follows the
