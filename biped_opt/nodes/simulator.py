@@ -147,6 +147,7 @@ class SimulatorNode(ros.Node):
                     float(self.get_parameter("theta0").value),
                     list(self.get_parameter("inputs").value),
                     float(self.get_parameter("real_time_factor").value),
+                    publish_now=False,  # (the timer publishes once the ready line is out)
                 )
             except BipedOptError as exc:  # a bad parameter: the node stops (status 2)
                 raise InvalidParameterError(f"cannot start from the parameters: {exc}") \
@@ -171,7 +172,8 @@ class SimulatorNode(ros.Node):
         return simulate(m, th, u, sample_dt=1.0 / rate)
 
     def start(
-        self, maneuver: str, theta0: float, inputs: Any, real_time_factor: float
+        self, maneuver: str, theta0: float, inputs: Any, real_time_factor: float,
+        publish_now: bool = True,
     ) -> Any:
         if not (convert.finite(real_time_factor) and real_time_factor >= 0):
             raise InvalidInputError(
@@ -194,7 +196,8 @@ class SimulatorNode(ros.Node):
         )
         with self._lock:
             self._playback = playback
-        self._on_tick()
+        if publish_now:
+            self._on_tick()
         return tr
 
     def _on_tick(self) -> None:
