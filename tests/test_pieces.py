@@ -67,16 +67,18 @@ def test_at_zero_offsets_it_is_the_level_touchdown():
 
 def test_rounds_of_the_unperturbed_walker():
     """The dropped walker lands at t = 1 (a fall of z - l0 = 0.5 under g = 1: t = sqrt(2 * 0.5)),
-    bounces and lands again; the one-leg walker's second landing is inconsistent (its stretched
-    leg pulls the landing foot up), so it has two rounds."""
+    bounces and lands again. The one-leg walker's second landing would need a pulling ground
+    force (its stretched leg pulls the landing foot up), so by complementarity the foot leaves
+    the ground at once and lands again: its rounds go on (they ended there, as an
+    inconsistency, before the next mode was chosen by complementarity)."""
     two = simultaneous_rounds(2)
     assert [r.kind for r in two] == ["touchdown", "liftoff", "touchdown"]
     assert two[0].t == pytest.approx(1.0, abs=1e-12)
     one = simultaneous_rounds(1)
-    assert [r.kind for r in one] == ["touchdown", "liftoff"]
+    assert [r.kind for r in one][:4] == ["touchdown", "liftoff", "touchdown", "touchdown"]
     assert one[0].t == pytest.approx(1.0, abs=1e-12)
-    with pytest.raises(InvalidInputError, match="2 simultaneous rounds"):
-        count_pieces(1, 3)
+    with pytest.raises(InvalidInputError, match="3 simultaneous rounds"):
+        count_pieces(2, 4)
 
 
 @pytest.mark.parametrize(("n", "velocities", "expected"), [
@@ -178,7 +180,7 @@ def test_cli_table_figure_and_json(tmp_path, capsys):
     assert main(["pieces", "--legs", "1", "2", "--rounds", "3", "--samples", "40",
                  "--no-derivative", "--figure", str(figure)]) == 0
     out = capsys.readouterr().out
-    assert " 2  2  touchdown, liftoff" in out and "n = 1: the unperturbed walker has 2" in out
+    assert " 2  2  touchdown, liftoff" in out and " 1  3  touchdown, liftoff, touchdown" in out
     assert figure.stat().st_size > 10_000
     assert main(["pieces", "--legs", "2", "--rounds", "1", "--samples", "20", "--json"]) == 0
     import json

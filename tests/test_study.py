@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -180,11 +181,18 @@ def test_table_as_mcap_read_back_by_mcap_ros2(tmp_path: Path, capsys) -> None:
         reader = make_reader(fh, decoder_factories=[DecoderFactory()])
         decoded = [m for _, _, _, m in reader.iter_decoded_messages(topics=["/biped/study"])]
         (meta,) = [m for m in reader.iter_metadata() if m.name == "biped_opt.study"]
-    assert len(decoded) == len(table) == 3 + 5  # gamma 0.3: three jumps; 0.5: five
+    # gamma 0.5: the bar's five jumps (SYSTEMS.md Sec. 2); gamma 0.3: the chatter of the ends'
+    # shrinking bounces, every one of them found since re-impacts inside a step are, makes many
+    assert len(decoded) == len(table)
+    assert sum(float(r["gamma"]) == 0.5 for r in table) == 5
+    assert sum(float(r["gamma"]) == 0.3 for r in table) >= 3
     for msg, row in zip(decoded, table):
         assert msg.point == int(row["point"]) and msg.kind == row["kind"]
         assert list(msg.parameter_names) == ["gamma"]
         assert msg.parameter_values[0] == float(row["gamma"])
-        assert msg.s == float(row["s"]) and msg.size == float(row["size"])
+        # (a failure boundary has no size: empty in the table, NaN in the message)
+        size = math.nan if row["size"] == "" else float(row["size"])
+        assert msg.s == float(row["s"])
+        assert msg.size == size or (math.isnan(size) and math.isnan(msg.size))
         assert msg.cause == row["cause"] and msg.rows == int(row["rows"])
     assert json.loads(meta.metadata["study"])["grid"] == {"gamma": [0.3, 0.5]}
