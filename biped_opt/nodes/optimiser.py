@@ -268,10 +268,7 @@ class OptimiserNode(ros.Node):
             return self._cached((maneuver, th, biped),
                                 lambda: Answer.of(biped, optimal_policy(biped, th)))
         # names only, checked before anything is compiled (see biped_opt.nodes.sources)
-        if problem:
-            check_name("problem", problem, "problem")
-        check_name("maneuver", maneuver_text, "maneuver")
-        self._sources.check_library_request(system, problem, maneuver_text)
+        self._sources.check_request(system, problem, maneuver_text)
         s = convert.request_s(theta0)
         name = problem or maneuver_text
         on = self._compiler.get(
@@ -330,9 +327,11 @@ class OptimiserNode(ros.Node):
                                     f"{str(exc)[:100]})") from None
         fields = Study.fields_from_spec(spec, where="study", limits=self._study_limits)
         system, problem = fields["system"], fields["problem"] or ""
-        self._sources.system("study: system", system)
-        if problem:
-            check_name("study: problem", problem, "problem")
+        try:  # (a study names its system: "" is not the biped here)
+            check_name("system", system)
+            self._sources.check_request(system, problem)
+        except BipedOptError as exc:
+            raise InvalidInputError(f"study: {exc}") from None
         self._compiler.get(("study", system, problem),
                            f"system {system}" + (f" (problem {problem})" if problem else ""),
                            self._job("study", system, problem))

@@ -148,23 +148,30 @@ class Sources:
                     return path
         return None
 
-    def check_library_request(self, system: str, problem: str, maneuver: str) -> None:
-        """What can be checked of a request on a library system without compiling anything
-        (its description is cheap to build): the maneuver, and the problem declared or a file
-        of system_paths. Refuses at once what a compile would only refuse later."""
+    def check_request(self, system: str, problem: str, maneuver: str | None = None) -> None:
+        """A request's names (``system`` "": the biped; ``maneuver`` None: a study's, which
+        names no compile), and what can be checked of them on a library system without
+        compiling anything (its description is cheap to build): the problem declared or a file
+        of system_paths, else the maneuver. Refuses at once what a compile would only refuse
+        later, so that names no compile can serve never reach the compile queue."""
         from biped_opt.nodes.convert import check_maneuver_of
 
+        if problem:
+            check_name("problem", problem, "problem")
+        if maneuver is not None:
+            check_name("maneuver", maneuver, "maneuver")
         source = self.system("system", system) if system else "biped"
         if Path(source).suffix == ".py":
             return  # (a file's description runs its code: that waits for the compiler)
         described = self.describe("system", source)
-        if not problem:
+        if problem:
+            if problem not in described.problems and self.problem_file("problem", problem) is None:
+                raise InvalidInputError(
+                    f"problem: {described.name} declares no problem {quoted(problem)} "
+                    f"(problems: {', '.join(described.problems) or 'none'})"
+                    + ("" if self.system_paths else " and this node has no system_paths"))
+        elif maneuver is not None:
             check_maneuver_of(described, maneuver)
-        elif problem not in described.problems and self.problem_file("problem", problem) is None:
-            raise InvalidInputError(
-                f"problem: {described.name} declares no problem {quoted(problem)} "
-                f"(problems: {', '.join(described.problems) or 'none'})"
-                + ("" if self.system_paths else " and this node has no system_paths"))
 
     def describe(self, field: str, source: str) -> System:
         """The description of a resolved system, its size checked before anything derives."""

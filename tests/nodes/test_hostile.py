@@ -183,6 +183,25 @@ def test_no_request_runs_a_file_it_names(optimiser, evil):
     assert not any("queued a compile" in line for line in node.lines)
 
 
+def test_names_no_compile_can_serve_are_refused_before_the_compile_queue(optimiser):
+    """A problem or maneuver a library system does not have, in a request or a work item, is
+    refused at once: queued, each such name would cost a compile process and hold a place in
+    the compile queue that valid systems then wait for."""
+    node, policy, study = optimiser
+    for number in range(6):  # (more than compile_queue = 4)
+        reply = _reply(send_raw(policy, policy_body("drop", 0.1, "rocking_bar", f"no{number}")))
+        assert not reply.success and reply.message.startswith(
+            f"problem: rocking_bar declares no problem 'no{number}'"), reply.message
+        reply = _study_point(study, {"system": "rocking_bar", "problem": f"no{number}",
+                                     "grid": {"gamma": [0.5]}, "num": 5})
+        assert not reply.success and reply.message.startswith(
+            f"study: problem: rocking_bar declares no problem 'no{number}'"), reply.message
+    reply = _reply(send_raw(policy, policy_body("hop", 0.1, "rocking_bar")))
+    assert not reply.success and reply.message.startswith(
+        "maneuver: rocking_bar has no maneuver 'hop'"), reply.message
+    assert not any("queued a compile" in line for line in node.lines)
+
+
 def test_a_huge_grid_is_refused_before_it_is_built(optimiser):
     """400^4 = 2.56e10 points: refused by counting (limit max_points), the node's memory
     unchanged (building even the list of points would take terabytes; 20 MB is noise)."""
