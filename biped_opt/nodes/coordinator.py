@@ -55,7 +55,7 @@ from biped_opt import ros
 from biped_opt.errors import BipedOptError, InvalidInputError, InvalidParameterError, quoted
 from biped_opt.nodes.compiler import BUSY, failure_message
 from biped_opt.nodes.run import announce_ready, answers, float_parameter, int_parameter
-from biped_opt.nodes.sources import declare_request_limits, name_of
+from biped_opt.nodes.sources import declare_request_limits, name_of, request_study
 from biped_opt.record.study_table import StudySummary, StudyTable, spec_path
 from biped_opt.study import Study, StudyRow
 
@@ -196,16 +196,7 @@ class StudyCoordinator(ros.Node):
     def goal_study(self, text: str) -> Study:
         """The study of a goal (JSON or YAML): bounded by the node's limits, its system and
         problem resolved by name (see the module docstring), checked before it is built."""
-        import yaml
-
-        if len(text) > self._max_request:
-            raise InvalidInputError(f"study: {len(text)} characters; at most "
-                                    f"{self._max_request} (parameter max_request_chars)")
-        try:
-            spec = yaml.safe_load(text)
-        except (yaml.YAMLError, RecursionError) as exc:
-            raise InvalidInputError(
-                f"study: neither JSON nor YAML ({type(exc).__name__})") from None
+        spec = request_study(text, self._max_request, yaml_too=True)
         fields = Study.fields_from_spec(spec, where="study", limits=self._study_limits)
         try:
             fields["system"], fields["problem"] = self._sources.study(fields["system"],

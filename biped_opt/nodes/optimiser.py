@@ -97,6 +97,7 @@ from biped_opt.nodes.sources import (
     check_name,
     declare_request_limits,
     name_of,
+    request_study,
 )
 from biped_opt.optimal import OptimalControlProblem, OptimalResult, get_problem, optimal_policy
 from biped_opt.optimal.derivatives import outcome_sensitivity
@@ -317,14 +318,7 @@ class OptimiserNode(ros.Node):
         if text in self._studies:
             self._studies.move_to_end(text)
             return self._studies[text]
-        if len(text) > self._max_request:
-            raise InvalidInputError(f"study: {len(text)} characters; at most "
-                                    f"{self._max_request} (parameter max_request_chars)")
-        try:
-            spec = json.loads(text)
-        except (ValueError, RecursionError) as exc:
-            raise InvalidInputError(f"study: not JSON ({type(exc).__name__}: "
-                                    f"{str(exc)[:100]})") from None
+        spec = request_study(text, self._max_request)
         fields = Study.fields_from_spec(spec, where="study", limits=self._study_limits)
         system, problem = fields["system"], fields["problem"] or ""
         try:  # (a study names its system: "" is not the biped here)

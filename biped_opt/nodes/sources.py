@@ -14,6 +14,7 @@ is derived: a library walker by its name, a file's system right after its descri
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
@@ -28,7 +29,7 @@ if TYPE_CHECKING:
     from biped_opt.systems.problems import Problem
 
 __all__ = ["MAX_NAME", "PROBLEM_SUFFIXES", "SystemLimits", "Sources", "check_name", "name_of",
-           "directories", "declare_request_limits"]
+           "directories", "declare_request_limits", "request_study"]
 
 #: longest system, problem or worker name a request may give
 MAX_NAME = 64
@@ -52,6 +53,29 @@ def check_name(field: str, text: str, what: str = "system") -> str:
         raise InvalidInputError(
             f"{field}: {quoted(text)} is not a {what} name ({size}letters, digits and _){where}")
     return text
+
+
+def request_study(text: str, max_chars: int, *, yaml_too: bool = False) -> Any:
+    """What the study text of a work item (JSON) or of a goal (``yaml_too``: JSON or YAML)
+    holds, its length checked first (parameter max_request_chars); anything the parser
+    refuses (also a recursion too deep or an integer of more digits than Python converts) is
+    one line."""
+    if len(text) > max_chars:
+        raise InvalidInputError(f"study: {len(text)} characters; at most {max_chars} "
+                                "(parameter max_request_chars)")
+    if not yaml_too:
+        try:
+            return json.loads(text)
+        except (ValueError, RecursionError) as exc:
+            raise InvalidInputError(f"study: not JSON ({type(exc).__name__}: "
+                                    f"{str(exc)[:100]})") from None
+    import yaml
+
+    try:
+        return yaml.safe_load(text)
+    except (yaml.YAMLError, ValueError, RecursionError) as exc:
+        raise InvalidInputError(
+            f"study: neither JSON nor YAML ({type(exc).__name__})") from None
 
 
 def name_of(source: str) -> str:

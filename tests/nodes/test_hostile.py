@@ -296,6 +296,11 @@ def test_a_goal_chooses_no_file_and_no_code(tmp_path, evil):
         assert not result.success and "max_points" in result.message
         result = _goal(peer.node, "[" * 100_000, "t.csv")
         assert not result.success and "max_request_chars" in result.message
+        # an integer of more digits than Python converts (4300): the parser's ValueError is a
+        # bad goal, not an internal error
+        result = _goal(peer.node, "num: " + "9" * 5000, "t.csv")
+        assert not result.success and result.message == \
+            "study: neither JSON nor YAML (ValueError)", result.message
         assert not (evil / "marker").exists()
         assert not out.exists()  # nothing written, not even the directory, for a refusal
     finally:
