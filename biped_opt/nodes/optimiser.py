@@ -189,13 +189,13 @@ class OptimiserNode(ros.Node):
             warm_up_kernels(self)
         systems = string_list_parameter(self, "systems")
         files = [Path(s).expanduser().resolve() for s in systems
-                 if Path(s).suffix in (".py", *PROBLEM_SUFFIXES)]
+                 if Path(s).suffix in PROBLEM_SUFFIXES]
         if files:  # (the operator's files: their directories join system_paths)
             folders = tuple(dict.fromkeys([*self._sources.system_paths,
                                            *(f.parent for f in files)]))
             self._sources = dataclasses.replace(self._sources, system_paths=folders)
-        for system in systems:
-            if Path(system).suffix not in PROBLEM_SUFFIXES:
+        for system in systems:  # (a .yaml problem file only adds its directory)
+            if Path(system).suffix not in (".yaml", ".yml"):
                 self._warm_up_system(name_of(system))
         self._group = ros.ReentrantCallbackGroup()
         self._service = self.create_service(

@@ -80,7 +80,7 @@ def request_study(text: str, max_chars: int, *, yaml_too: bool = False) -> Any:
 
 def name_of(source: str) -> str:
     """The name a request gives for a library name or a system/problem file (its stem)."""
-    return Path(source).stem if Path(source).suffix in (".py", *PROBLEM_SUFFIXES) else source
+    return Path(source).stem if Path(source).suffix in PROBLEM_SUFFIXES else source
 
 
 def directories(values: Iterable[Any]) -> tuple[Path, ...]:

@@ -347,6 +347,27 @@ def test_system_files_of_system_paths_are_served_by_name(configured):
     assert reply.success and list(reply.decision_names) == ["u_th"], reply.message
 
 
+def test_a_system_file_the_operator_lists_in_systems_is_compiled_before_serving(tmp_path):
+    """``systems`` naming the operator's file by path compiles it at start-up (its directory
+    joins system_paths): the first request by its stem is answered, not ``busy``."""
+    (tmp_path / "listed_bar.py").write_text(
+        "from biped_opt.systems.library import rocking_bar\nSYSTEM = rocking_bar()\n")
+    domain = unique_domain_id()
+    host = Host(lambda c: OptimiserNode(context=c, parameter_overrides=[
+        ros.Parameter("warm_up", value=False),
+        ros.Parameter("systems", value=[str(tmp_path / "listed_bar.py")])]), domain, threads=4)
+    peer = Host(lambda c: ros.Node("peer", context=c), domain)
+    try:
+        policy = peer.node.create_client(ros.srvs.OptimalPolicy, "/biped/optimal_policy")
+        assert policy.wait_for_service(timeout_sec=30)
+        reply = _reply(policy.call_async(ros.srvs.OptimalPolicy.Request(
+            maneuver="drop", theta0=0.1, system="listed_bar")), timeout=60)
+        assert reply.success and list(reply.decision_names) == ["u_th"], reply.message
+    finally:
+        peer.close()
+        host.close()
+
+
 @pytest.mark.parametrize(("system", "reason"), [
     ("exits", "SystemExit"), ("interrupts", "KeyboardInterrupt"),
     ("recurses", "RecursionError"), ("exhausts", "MemoryError")])
