@@ -53,8 +53,14 @@ from typing import Any
 
 from biped_opt import ros
 from biped_opt.errors import BipedOptError, InvalidInputError, InvalidParameterError, quoted
-from biped_opt.nodes.compiler import BUSY, failure_message
-from biped_opt.nodes.run import announce_ready, answers, float_parameter, int_parameter
+from biped_opt.nodes.compiler import BUSY
+from biped_opt.nodes.run import (
+    announce_ready,
+    answers,
+    float_parameter,
+    int_parameter,
+    refusal,
+)
 from biped_opt.nodes.sources import declare_request_limits, name_of, request_study
 from biped_opt.record.study_table import StudySummary, StudyTable, spec_path
 from biped_opt.study import Study, StudyRow
@@ -234,9 +240,7 @@ class StudyCoordinator(ros.Node):
         except BaseException as exc:  # a bad goal, or a bug: one failed goal either way
             if not answers(exc):
                 raise
-            message = failure_message(exc)
-            if not isinstance(exc, BipedOptError):
-                message = f"internal error: {message}"
+            message = refusal(exc)
             self.get_logger().warning(f"study goal failed: {message}")
             result.success, result.message = False, message
             goal_handle.abort()

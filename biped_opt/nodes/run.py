@@ -14,8 +14,9 @@ from typing import Any
 from biped_opt import ros
 from biped_opt.errors import BipedOptError, InvalidParameterError
 from biped_opt.hybrid import kernels_cached, warm_up
+from biped_opt.nodes.compiler import failure_message
 
-__all__ = ["LOG_THROTTLE_S", "announce_ready", "refuse", "run_node", "stop_on_sigterm",
+__all__ = ["LOG_THROTTLE_S", "announce_ready", "refuse", "refusal", "run_node", "stop_on_sigterm",
            "warm_up_kernels", "answers", "int_parameter", "float_parameter",
            "string_list_parameter"]
 
@@ -104,20 +105,24 @@ def announce_ready(node: Any, *, serves: tuple[str, ...] = (), calls: tuple[str,
     node.get_logger().info("ready: " + "; ".join(parts))
 
 
+def refusal(exc: BaseException) -> str:
+    """The reply's message for ``exc``: a :class:`BipedOptError` is a bad request (its message
+    names the field); anything else (a bug, MemoryError, RecursionError, SystemExit of a system
+    file's code) is ``internal error: ...``, one line."""
+    message = failure_message(exc)
+    return message if isinstance(exc, BipedOptError) else f"internal error: {message}"
+
+
 def refuse(node: Any, service: str, response: Any, exc: BaseException) -> Any:
-    """``response`` as a refusal: ``success = false`` and why. A :class:`BipedOptError` is a bad
-    request (its message names the field); anything else (a bug, MemoryError, RecursionError,
-    SystemExit of a system file's code) must cost one request, not the node (``internal error:
-    ...``). Logged, one line a second at most."""
+    """``response`` as a refusal (:func:`refusal`: ``success = false`` and why): a bad request
+    or a bug costs one request, not the node. Logged, one line a second at most."""
+    message = refusal(exc)
     if isinstance(exc, BipedOptError):
-        node.get_logger().warning(f"rejected {service} request: {exc}",
+        node.get_logger().warning(f"rejected {service} request: {message}",
                                   throttle_duration_sec=LOG_THROTTLE_S)
-        message = str(exc)
     else:
-        what = f"{type(exc).__name__}{': ' if str(exc) else ''}{str(exc)[:300]}"
-        node.get_logger().error(f"{service} request failed: {what}",
+        node.get_logger().error(f"{service} request failed: {message}",
                                 throttle_duration_sec=LOG_THROTTLE_S)
-        message = f"internal error: {what}"
     response.success, response.message = False, message
     return response
 
