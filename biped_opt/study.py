@@ -120,6 +120,18 @@ def _short(value: Any) -> str:
     return text if len(text) <= 40 else text[:40] + "..."
 
 
+def _point_count(grid: Sequence[tuple[str, Sequence[float]]], sample: Sequence[Any],
+                 samples: int) -> int:
+    """How many parameter points a grid and samples make (counted, never built)."""
+    return math.prod(len(v) for _, v in grid) * (samples if sample else 1)
+
+
+def _check_points(where: str, points: int, limit: int) -> None:
+    if points > limit:
+        raise InvalidParameterError(f"{where}: {points} parameter points (grid x samples); at "
+                                    f"most {limit} (limit max_points)")
+
+
 def _pairs(where: str, value: Any) -> dict[str, Any]:
     if value is None:
         return {}
@@ -198,11 +210,7 @@ class Study:
             sample.append((key, (lo, hi)))
         samples = _count(f"{where}: samples", spec.get("samples", 0), 0, limits.max_values,
                          "max_values")
-        points = math.prod(len(v) for _, v in grid) * (max(samples, 1) if sample else 1)
-        if points > limits.max_points:
-            raise InvalidParameterError(
-                f"{where}: {points} parameter points (grid x samples); at most "
-                f"{limits.max_points} (limit max_points)")
+        _check_points(where, _point_count(grid, sample, samples), limits.max_points)
         s_range = spec.get("s_range")
         if s_range is not None:
             if not isinstance(s_range, (list, tuple)) or len(s_range) != 2:
@@ -232,10 +240,8 @@ class Study:
     def __post_init__(self) -> None:
         from biped_opt.systems.problems import describe
 
-        if self.size > LIMITS.max_points:  # (before anything is described or built)
-            raise InvalidParameterError(
-                f"study {self.name!r}: {self.size} parameter points; at most "
-                f"{LIMITS.max_points} (limit max_points)")
+        # (before anything is described or built)
+        _check_points(f"study {self.name!r}", self.size, LIMITS.max_points)
         system = describe(self.system)
         where = f"study {self.name!r} on {system.where()}"
         if self.maneuver is None and self.problem is None:
@@ -269,7 +275,7 @@ class Study:
     @property
     def size(self) -> int:
         """How many parameter points :meth:`points` makes (counted, not built)."""
-        return math.prod(len(v) for _, v in self.grid) * (self.samples if self.sample else 1)
+        return _point_count(self.grid, self.sample, self.samples)
 
     # -- the parameter points -------------------------------------------------------------------
     @property
