@@ -3,8 +3,6 @@ one clear error per bad value (the CLI's exit 2), limits named in the message.""
 
 from __future__ import annotations
 
-import math
-
 import pytest
 import yaml
 
@@ -74,7 +72,8 @@ def test_a_directly_built_study_is_bounded_too():
     with pytest.raises(InvalidParameterError, match=r"limit max_points"):
         Study(system="rocking_bar", maneuver="drop",
               grid=tuple((k, tuple(float(i) for i in range(1000))) for k in ("gamma", "k", "mb")))
-    assert LIMITS.max_points == 1_000_000 and math.isfinite(LIMITS.max_num)
+    # the limits of a study file that README states (10^6 points, s grids of 100,001)
+    assert (LIMITS.max_points, LIMITS.max_num) == (1_000_000, 100_001)
 
 
 @pytest.mark.parametrize("extra", ["num: abc", "seed: 1.5e400", "seed: -1", "num: 1e12",
