@@ -83,6 +83,19 @@ def name_of(source: str) -> str:
     return Path(source).stem if Path(source).suffix in PROBLEM_SUFFIXES else source
 
 
+def _in_library(name: str) -> bool:
+    """Whether ``name`` is a library system (``walkerN[_law]`` included)."""
+    from biped_opt.systems.files import WALKER
+    from biped_opt.systems.library import LIBRARY
+
+    return name in LIBRARY or WALKER.match(name) is not None
+
+
+def _beside(text: str) -> bool:
+    """Whether a problem file's ``system`` names a file beside it (``x.py``, x a plain name)."""
+    return text.endswith(".py") and _NAME.fullmatch(text[:-3]) is not None
+
+
 def directories(values: Iterable[Any]) -> tuple[Path, ...]:
     """The ``system_paths`` parameter's directories, absolute; a missing one is an error."""
     out = []
@@ -145,11 +158,10 @@ class Sources:
     def system(self, field: str, text: str) -> str:
         """What :func:`biped_opt.systems.problems.describe` loads for the system name ``text``:
         the library name itself or the absolute path of ``<dir>/<name>.py``."""
-        from biped_opt.systems.files import WALKER
         from biped_opt.systems.library import LIBRARY
 
         name = check_name(field, text)
-        if name in LIBRARY or WALKER.match(name):
+        if _in_library(name):
             self.limits.check_walker(field, name)
             return name
         for folder in self.system_paths:
@@ -190,12 +202,16 @@ class Sources:
         described = self.describe("system", source)
         if problem:
             if problem not in described.problems and self.problem_file("problem", problem) is None:
-                raise InvalidInputError(
-                    f"problem: {described.name} declares no problem {quoted(problem)} "
-                    f"(problems: {', '.join(described.problems) or 'none'})"
-                    + ("" if self.system_paths else " and this node has no system_paths"))
+                raise self._no_problem(described, problem)
         elif maneuver is not None:
             check_maneuver_of(described, maneuver)
+
+    def _no_problem(self, described: System, problem: str) -> InvalidInputError:
+        return InvalidInputError(
+            f"problem: {described.name} declares no problem {quoted(problem)} "
+            f"(problems: {', '.join(described.problems) or 'none'}) and "
+            + ("system_paths has no such file" if self.system_paths
+               else "this node has no system_paths"))
 
     def describe(self, field: str, source: str) -> System:
         """The description of a resolved system, its size checked before anything derives."""
@@ -251,7 +267,7 @@ class Sources:
         if value is None:
             return source or "biped"
         text = str(value)
-        if text.endswith(".py") and _NAME.fullmatch(text[:-3] or "-"):
+        if _beside(text):
             return str(path.parent / text)
         return self.system(f"{path.name}: system", text)
 
@@ -261,8 +277,6 @@ class Sources:
         checked); the problem a declared name (kept) or the path of its file, whose ``system``
         key must be absent, a library name or ``x.py`` beside it (what the study's loader
         reads itself)."""
-        from biped_opt.systems.files import WALKER
-        from biped_opt.systems.library import LIBRARY
         from biped_opt.systems.problems import read_yaml
 
         source = self.system("system", system)
@@ -271,21 +285,16 @@ class Sources:
             return source, problem or None
         path = self.problem_file("problem", problem)
         if path is None:
-            raise InvalidInputError(
-                f"problem: {described.name} declares no problem {quoted(problem)} "
-                f"(problems: {', '.join(described.problems) or 'none'}) and system_paths has "
-                "no such file")
+            raise self._no_problem(described, problem)
         if path.suffix != ".py":
             spec = read_yaml(path)
             value = spec.get("system") if isinstance(spec, Mapping) else None
             text = "" if value is None else str(value)
-            if text and not (text in LIBRARY or WALKER.match(text) or (
-                    text.endswith(".py") and _NAME.fullmatch(text[:-3] or "-"))):
+            if text and not (_in_library(text) or _beside(text)):
                 raise InvalidInputError(
                     f"problem: {path.name}: system: a study's problem file names a library "
                     f"system or a file beside it (x.py), got {quoted(text)}")
-            if WALKER.match(text):
-                self.limits.check_walker(f"problem: {path.name}: system", text)
+            self.limits.check_walker(f"problem: {path.name}: system", text)
         return source, str(path)
 
 

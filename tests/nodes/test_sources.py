@@ -1,0 +1,54 @@
+"""What a request may name (biped_opt.nodes.sources), checked without a node: names only, the
+library's systems and problems refused at once when they cannot be served, a study's problem
+file naming a library system or a file beside it, sizes checked by a walker's name."""
+
+from __future__ import annotations
+
+import pytest
+
+from biped_opt.errors import InvalidInputError
+from biped_opt.nodes.sources import Sources, SystemLimits
+
+BAR_PROBLEM = "maneuver: drop\ndecisions: {u_th: [-0.5, 0.5]}\n"
+
+
+@pytest.mark.parametrize(("names", "message"), [
+    (("rocking_bar", "nothing", "drop"), "problem: rocking_bar declares no problem 'nothing' "
+                                         "(problems: drop) and this node has no system_paths"),
+    (("rocking_bar", "", "hop"), "maneuver: rocking_bar has no maneuver 'hop'"),
+    (("rocking_bar", "../p.yaml", "drop"), "problem: '../p.yaml' is not a problem name"),
+    (("rocking_bar", "", "a b"), "maneuver: 'a b' is not a maneuver name"),
+    (("bar.py", "", "drop"), "system: 'bar.py' is not a system name"),
+    (("walker9", "", "touchdown"), "system: walker9 has 9 legs and 21 coordinates; this node "
+                                   "serves at most 6 legs"),
+])
+def test_a_request_naming_what_no_compile_can_serve_is_refused(names, message):
+    with pytest.raises(InvalidInputError) as err:
+        Sources().check_request(*names)
+    assert str(err.value).startswith(message), err.value
+
+
+def test_a_work_item_names_no_maneuver_and_a_served_request_passes():
+    Sources().check_request("rocking_bar", "")  # (a study's maneuver is checked by Study)
+    Sources().check_request("rocking_bar", "drop", "drop")
+    Sources().check_request("", "", "touchdown")  # "": the biped
+
+
+def test_a_study_problem_file_names_a_library_system_or_a_file_beside_it(tmp_path):
+    sources = Sources((tmp_path,), SystemLimits(max_legs=3))
+    (tmp_path / "near.yaml").write_text("system: bar.py\n" + BAR_PROBLEM)
+    (tmp_path / "library.yaml").write_text("system: rocking_bar\n" + BAR_PROBLEM)
+    (tmp_path / "far.yaml").write_text("system: ../bar.py\n" + BAR_PROBLEM)
+    (tmp_path / "large.yaml").write_text("system: walker5\n" + BAR_PROBLEM)
+    assert sources.study("rocking_bar", "near") == ("rocking_bar", str(tmp_path / "near.yaml"))
+    assert sources.study("rocking_bar", "library")[1] == str(tmp_path / "library.yaml")
+    assert sources.study("rocking_bar", "drop") == ("rocking_bar", "drop")  # declared
+    with pytest.raises(InvalidInputError, match=r"^problem: far.yaml: system: a study's "
+                                                r"problem file names a library system"):
+        sources.study("rocking_bar", "far")
+    with pytest.raises(InvalidInputError, match=r"^problem: large.yaml: system: walker5 has 5 "
+                                                r"legs"):
+        sources.study("rocking_bar", "large")
+    with pytest.raises(InvalidInputError, match=r"declares no problem 'none' \(problems: drop\) "
+                                                r"and system_paths has no such file$"):
+        sources.study("rocking_bar", "none")
