@@ -17,6 +17,7 @@ from biped_opt import ros
 from biped_opt.errors import BipedOptError, InvalidInputError, quoted
 from biped_opt.hybrid.trajectory import Trajectory
 from biped_opt.maneuvers import Maneuver, check_theta0, parse_maneuver
+from biped_opt.nodes.sources import PROBLEM_SUFFIXES
 
 if TYPE_CHECKING:  # the systems' modules (SymPy) load only where a system is used
     from biped_opt.systems.compiled import CompiledSystem, SystemTrajectory
@@ -42,8 +43,6 @@ __all__ = [
 
 NS = 1_000_000_000
 FRAME_ID = "biped"
-#: suffixes of the files a request may name (systems .py, problems .yaml/.yml/.py)
-FILE_SUFFIXES = (".py", ".yaml", ".yml")
 
 
 def stamp(ns: int) -> Any:
@@ -218,7 +217,7 @@ def finite(value: float) -> bool:
 
 
 def _is_file(text: str) -> bool:
-    return Path(text).suffix in FILE_SUFFIXES
+    return Path(text).suffix in PROBLEM_SUFFIXES
 
 
 def request_problem(system: str, problem: str, maneuver: str) -> Problem:
