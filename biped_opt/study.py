@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import reprlib
 import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -115,8 +116,14 @@ def _text(where: str, value: Any, limits: StudyLimits) -> str:
     return value
 
 
+#: a value's repr for a message, bounded however large or deep the value is (a few lines of
+#: YAML aliases make a list of billions of elements, whose full repr would take gigabytes)
+_REPR = reprlib.Repr()
+_REPR.maxlevel, _REPR.maxlist, _REPR.maxdict, _REPR.maxstring = 2, 4, 4, 40
+
+
 def _short(value: Any) -> str:
-    text = repr(value)
+    text = _REPR.repr(value)
     return text if len(text) <= 40 else text[:40] + "..."
 
 
@@ -136,14 +143,14 @@ def _pairs(where: str, value: Any) -> dict[str, Any]:
     if value is None:
         return {}
     if not isinstance(value, Mapping):
-        raise InvalidParameterError(f"{where} must map names to values, got {value!r}")
+        raise InvalidParameterError(f"{where} must map names to values, got {_short(value)}")
     return dict(value)
 
 
 def _finite(where: str, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
             or not math.isfinite(float(value)):
-        raise InvalidParameterError(f"{where} must be a finite number, got {value!r}")
+        raise InvalidParameterError(f"{where} must be a finite number, got {_short(value)}")
     return float(value)
 
 

@@ -87,3 +87,27 @@ def test_the_cli_exits_2_with_one_line_and_writes_nothing(tmp_path, capsys, extr
     assert status == 2 and "Traceback" not in err
     assert len(err.strip().splitlines()) == 1 and str(spec) in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.yaml"]
+
+
+#: one YAML value of nested aliases, 9 lists of 9 per level: 9^7 (4.8 million) leaves from 7
+#: short lines, and each line more is 9 times more (a goal's text is YAML)
+BOMB = "[&b0 [1, 1, 1, 1, 1, 1, 1, 1, 1], " + ", ".join(
+    f"&b{i} [{', '.join([f'*b{i - 1}'] * 9)}]" for i in range(1, 7)) + "]"
+
+
+@pytest.mark.parametrize("extra", [f"num: {BOMB}", f"name: {BOMB}", f"inputs: {{u_th: {BOMB}}}",
+                                   f"sample: {BOMB}", f"s_range: [{BOMB}, 1]"])
+def test_a_value_of_nested_aliases_is_refused_without_being_expanded(extra):
+    """The message shows a bounded part of the value: its full repr here would be 17.5 MB (a
+    line more of aliases, ~160 MB), so a peak under 1 MB proves it was never built."""
+    import tracemalloc
+
+    spec = yaml.safe_load(BASE + extra)
+    tracemalloc.start()
+    try:
+        with pytest.raises(InvalidParameterError) as err:
+            Study.from_spec(spec)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 1_000_000 and len(str(err.value)) < 200, (peak, str(err.value)[:200])
