@@ -60,7 +60,8 @@ def _header(study: Study) -> list[str]:
 
 #: characters a table row never holds: a row is one line, and NUL is no text
 _NOT_IN_ROWS = str.maketrans({"\n": " ", "\r": " ", "\0": " "})
-#: the columns that hold numbers ("" for NaN), and the one that holds a positive count
+#: the result columns that hold numbers ("" for NaN); ``rows``, a positive count, is checked
+#: on its own
 _NUMBERS = ("s", "left", "right", "size")
 
 
