@@ -24,9 +24,10 @@ MAX_POINTS = 1_000_000
 MAX_SEED = 2**32 - 1
 
 
-def _given(text: str) -> str:
-    """A value as an error message shows it: cut when long, so the message stays one line."""
-    return repr(text) if len(text) <= 40 else f"{text[:20]!r}... ({len(text)} characters)"
+def _given(text: str, most: int = 40, head: int = 20) -> str:
+    """A value as an error message shows it: cut to its first ``head`` characters when longer
+    than ``most``, with its length, so the message stays one line."""
+    return repr(text) if len(text) <= most else f"{text[:head]!r}... ({len(text)} characters)"
 
 
 def finite_float(name: str) -> Callable[[str], float]:
@@ -112,8 +113,7 @@ def _why(exc: OSError | ValueError) -> str:
 
 
 def _shown(path: Path) -> str:
-    text = str(path)
-    return repr(text) if len(text) <= _SHOWN else f"{text[:40]!r}... ({len(text)} characters)"
+    return _given(str(path), _SHOWN, 40)
 
 
 def _cannot_create_in(directory: Path) -> str:

@@ -158,10 +158,11 @@ def _names(text: str) -> None:
         raise ValueError("not a list of names")
 
 
-def _numbers(text: str) -> None:
+def _numbers(text: str) -> list[Any]:
     value = _loads(text)
     if not isinstance(value, list) or not all(_finite(v) for v in value):
         raise ValueError("not a list of finite numbers")
+    return value
 
 
 def _number(text: str) -> None:
@@ -179,10 +180,8 @@ def _flag(text: str) -> None:
 
 
 def _inputs(text: str) -> None:
-    if text:
-        _numbers(text)
-        if len(_loads(text)) > 64:
-            raise ValueError("more inputs than any system has")
+    if text and len(_numbers(text)) > 64:
+        raise ValueError("more inputs than any system has")
 
 
 def _pairs_of(value: Any, names: list[str], what: str, check: Any) -> None:
