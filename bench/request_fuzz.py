@@ -404,11 +404,11 @@ def _stop(proc: subprocess.Popen) -> str:
 
 
 def _peak_mib(pid: int) -> float:
-    with open(f"/proc/{pid}/status", encoding="ascii") as fh:
-        for line in fh:
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) / 1024
-    return float("nan")
+    """A node's peak resident memory [MiB]; NaN once it has exited (no memory left to read)."""
+    try:
+        return rss_kib(pid, "VmHWM") / 1024
+    except RuntimeError:
+        return float("nan")
 
 
 def run_hostile(args: argparse.Namespace) -> dict:
