@@ -290,13 +290,6 @@ def heavy_requests(count: int = 5, system: str = HEAVY_SYSTEM) -> list[Any]:
                                            system=system) for k in range(count)]
 
 
-def raw_request(service: Any, request: Any, guid: int = 1, seq: int = 1) -> bytes:
-    """The bytes a request is on the wire (XCDR1 with the 16-byte header), as sent."""
-    sample = service.RequestWire(body=request)
-    sample.header.guid, sample.header.seq = guid, seq
-    return sample.serialize()
-
-
 class _Peer:
     """The attacker: a node of its own with clients of the optimiser's two services and an
     action client of the coordinator's study."""
