@@ -59,13 +59,13 @@ def angles(client: int, clients: int, calls: int) -> list[float]:
     return [float(v) for v in grid[client::clients]]
 
 
-def rss_kib(pid: int) -> int:
-    """Resident set size of a process [KiB] (Linux /proc)."""
+def rss_kib(pid: int, field: str = "VmRSS") -> int:
+    """Resident set size of a process [KiB] (Linux /proc); ``field="VmHWM"``: its peak."""
     with open(f"/proc/{pid}/status", encoding="ascii") as fh:
         for line in fh:
-            if line.startswith("VmRSS:"):
+            if line.startswith(f"{field}:"):
                 return int(line.split()[1])
-    raise RuntimeError(f"no VmRSS for process {pid}")
+    raise RuntimeError(f"no {field} for process {pid}")
 
 
 # -- one client process --------------------------------------------------------------------------

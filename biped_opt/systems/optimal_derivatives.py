@@ -101,8 +101,6 @@ class Polished:
     free: tuple[str, ...]  #: the decisions polished (acting and off their bounds)
     held: tuple[str, ...]  #: acting decisions on a bound (not moved)
     hessian: Array = field(repr=False)  #: D_uu c over ``free`` (central differences)
-    #: the Hessian's error estimate (max of its Richardson change and its asymmetry)
-    hessian_error: float
     #: max |H^-1 D_u c| at ``inputs``: the estimated distance to the zero of D_u c
     error: float
     gradient: OutcomeGradient = field(repr=False)  #: the branch's sensitivities at ``inputs``
@@ -177,9 +175,8 @@ def polish_optimum(problem: Problem, s: float, start: SystemOptimalResult, *, si
     cols = [names.index(d) for d in free]
     costs = _Costs(problem, compiled_for(problem), side, cols)
     u = start.inputs.copy()
-    asym = 0.0
     if hessian is None:
-        hessian, asym = costs.hessian(s, u, extrapolate=False)  # Newton needs no more
+        hessian, _ = costs.hessian(s, u, extrapolate=False)  # Newton needs no more
     elif hessian.shape != (len(cols), len(cols)):
         raise InvalidInputError(f"hessian must be {len(cols)} x {len(cols)} (free decisions "
                                 f"{', '.join(free) or 'none'}), got {hessian.shape}")
@@ -193,7 +190,7 @@ def polish_optimum(problem: Problem, s: float, start: SystemOptimalResult, *, si
         u[cols] = u[cols] + step
         g = costs.branch(s, u)
     return Polished(inputs=u, decisions=problem.decision_names, free=free, held=held,
-                    hessian=hessian, hessian_error=asym, error=error, gradient=g,
+                    hessian=hessian, error=error, gradient=g,
                     value=float(problem.cost(g.outcome, g.y_final, u)), count=costs.count)
 
 

@@ -18,7 +18,6 @@ from bench.request_fuzz import (
     grid_study,
     heavy_requests,
     plant_files,
-    raw_request,
 )
 from biped_opt import ros
 from biped_opt.study import Study
@@ -79,7 +78,10 @@ def test_requests_serialize_to_raw_wire_bytes(tmp_path):
             json.loads(case.message.study)  # the goal's study is JSON a coordinator parses
             continue
         srv = SERVICES[case.kind]
-        raw = raw_request(srv, case.message, guid=7, seq=3)
+        # the sample a client writes for the request (what the hostile mode's clients send)
+        sample = srv.RequestWire(body=case.message)
+        sample.header.guid, sample.header.seq = 7, 3
+        raw = sample.serialize()
         # XCDR1 little endian, then the rmw_cyclonedds header {guid, seq}
         assert raw[:2] == b"\x00\x01"
         back = srv.RequestWire.deserialize(raw)

@@ -37,8 +37,11 @@ def test_biped_problems_match_the_biped_derivatives(name: str, biped_name: str,
         assert ours.outcome[k] == pytest.approx(ref.outcome[k], abs=2 * SAFETY * err.outcome[k])
         for d, pair in ref.policy.items():
             if d in ours.at_bound[k] or ours.policy[d][k] == 0.0:
-                # held or not acting: ours is 0 by construction, the biped's a difference
-                # quotient of a zero gradient over the mixed step, its rounding
+                # held or not acting: ours is 0 by construction, the biped's the rounding of
+                # its differences of a zero gradient (in the decision, over its own
+                # second_order_step 1e-3, then solved against D_uu c; at most 4.4e-10 measured
+                # on these cases): bounded as our mixed difference of a gradient good to rtol
+                # over MIXED_STEP would be, times SAFETY
                 tol = SAFETY * DEFAULT_VARIATIONAL.rtol / MIXED_STEP
             else:
                 tol = 2 * SAFETY * err.policy[d][k]
