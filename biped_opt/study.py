@@ -88,8 +88,10 @@ class StudyLimits:
 
 #: the limits of a study file (a node's parameters may be tighter)
 LIMITS = StudyLimits()
-#: largest seed (numpy's generators take 0 <= seed < 2**64; 2**63 keeps it an int64)
-MAX_SEED = 2**63 - 1
+#: largest seed of a study file (numpy's generators take 0 <= seed < 2**64; 2**63 keeps it an
+#: int64 in the table and the StudyRow message; the command line's own seeds keep numpy's legacy
+#: 0..2**32 - 1, biped_opt.cli.args.MAX_SEED)
+MAX_STUDY_SEED = 2**63 - 1
 
 
 def _count(where: str, value: Any, low: int, high: int, limit: str = "") -> int:
@@ -237,7 +239,7 @@ class Study:
                          for k, v in _pairs(f"{where}: inputs", spec.get("inputs")).items()),
             problem=optional["problem"],
             grid=tuple(grid), sample=tuple(sample), samples=samples,
-            seed=_count(f"{where}: seed", spec.get("seed", 0), 0, MAX_SEED),
+            seed=_count(f"{where}: seed", spec.get("seed", 0), 0, MAX_STUDY_SEED),
             s_range=s_range,  # type: ignore[arg-type]
             num=_count(f"{where}: num", spec.get("num", 201), 3, limits.max_num, "max_num"),
             num_optimal=_count(f"{where}: num_optimal", spec.get("num_optimal", 41), 3,
