@@ -76,6 +76,7 @@ def prepare(job: dict[str, Any]) -> Any:
     from biped_opt.systems.compiled import shared
     from biped_opt.systems.nonsmooth import find_nonsmooth
     from biped_opt.systems.optimal import compiled_for, optimal_policy
+    from biped_opt.systems.optimal_derivatives import value_slopes
 
     if job["kind"] == "study":
         compiled = shared(source)
@@ -84,13 +85,11 @@ def prepare(job: dict[str, Any]) -> Any:
         if compiled.maneuvers:
             find_nonsmooth(compiled, compiled.maneuvers[0], s=np.linspace(-0.1, 0.1, 5))
     if problem is not None:  # the optimiser's calls
-        from biped_opt.nodes.optimiser import system_value_derivative
-
         compiled_for(problem).simulate(problem.maneuver, 0.0)
         try:
             result = optimal_policy(problem, 0.05)
             if result.success:
-                system_value_derivative(problem, result)
+                value_slopes(problem, result)
         except BipedOptError:
             pass  # (s = 0.05 is only an exercise: a point it cannot solve proves nothing)
     return problem if job["kind"] == "policy" else None

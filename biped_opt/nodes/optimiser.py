@@ -76,7 +76,6 @@ from biped_opt.errors import (
     BipedOptError,
     InvalidInputError,
     InvalidParameterError,
-    SimulationError,
 )
 from biped_opt.maneuvers import Maneuver
 from biped_opt.nodes import convert
@@ -106,7 +105,7 @@ if TYPE_CHECKING:  # the systems' modules (SymPy) load only where a system is us
     from biped_opt.systems.optimal import SystemOptimalResult
     from biped_opt.systems.problems import Problem
 
-__all__ = ["Answer", "OptimiserNode", "main", "value_derivative", "system_value_derivative"]
+__all__ = ["Answer", "OptimiserNode", "main", "value_derivative"]
 
 #: default of the ``cache_size`` parameter [entries]
 CACHE_SIZE = 4096
@@ -126,32 +125,6 @@ def value_derivative(problem: OptimalControlProblem, result: OptimalResult) -> t
             direction=(side, 0.0, 0.0, 0.0), params=problem.params,
         )
         out.append(problem.outcome_slope(s.outcome) * s.gradient[0])
-    return out[0], out[1]
-
-
-def system_value_derivative(problem: Problem, result: SystemOptimalResult
-                            ) -> tuple[float, float]:
-    """[left, right] dV/ds of a problem on any system by the envelope theorem: the partial in s
-    of c = w (outcome - target)^2 + sum_k W_k (y_k(t_f) - r_k)^2 + sum alpha u^2 at the optimal
-    inputs (the input terms do not depend on s), each side with the outcome's and final state's
-    limits and sensitivities on the branch s -> s^- or s^+. NaN on a side the sensitivities
-    cannot be had (a grazing terminal event, a failed simulation)."""
-    from biped_opt.systems.derivatives import outcome_gradient
-    from biped_opt.systems.optimal import compiled_for
-    from biped_opt.systems.optimal_derivatives import cost_gradient
-
-    compiled = compiled_for(problem)
-    e_s = np.zeros(1 + len(compiled.inputs))
-    e_s[0] = 1.0
-    out = []
-    for side in (-1.0, 1.0):
-        try:
-            g = outcome_gradient(compiled, problem.maneuver, result.s, result.inputs,
-                                 direction=side * e_s)
-        except SimulationError:
-            out.append(NAN)
-            continue
-        out.append(float(cost_gradient(problem, g, result.inputs)[0]))
     return out[0], out[1]
 
 
@@ -414,7 +387,9 @@ class Answer:
 
     @classmethod
     def of_system(cls, problem: Problem, result: SystemOptimalResult) -> Answer:
-        dv = system_value_derivative(problem, result) if result.success else (NAN, NAN)
+        from biped_opt.systems.optimal_derivatives import value_slopes
+
+        dv = value_slopes(problem, result) if result.success else (NAN, NAN)
         return cls(
             success=bool(result.success), message=result.message,
             policy=tuple(float(result.policy[d]) for d in problem.decision_names),

@@ -43,7 +43,7 @@ from biped_opt.systems.optimal import SystemOptimalResult, compiled_for, optimal
 from biped_opt.systems.problems import Problem
 
 __all__ = ["optimal_derivatives", "optimal_derivatives_with_errors", "DerivativeErrors",
-           "Polished", "polish_optimum", "cost_gradient"]
+           "Polished", "polish_optimum", "cost_gradient", "value_slopes"]
 
 Array = npt.NDArray[np.float64]
 
@@ -152,6 +152,27 @@ class _Costs:
         error = float(max(np.max(np.abs(extrapolated - levels[-1])),
                           np.max(np.abs(extrapolated - extrapolated.T)))) if n else 0.0
         return 0.5 * (extrapolated + extrapolated.T), error
+
+
+def value_slopes(problem: Problem, result: SystemOptimalResult) -> tuple[float, float]:
+    """[left, right] dV/ds of a problem on any system by the envelope theorem: the partial in s
+    of c = w (outcome - target)^2 + sum_k W_k (y_k(t_f) - r_k)^2 + sum alpha u^2 at the optimal
+    inputs (the input terms do not depend on s), each side with the outcome's and final state's
+    limits and sensitivities on the branch s -> s^- or s^+. NaN on a side the sensitivities
+    cannot be had (a grazing terminal event, a failed simulation)."""
+    compiled = compiled_for(problem)
+    e_s = np.zeros(1 + len(compiled.inputs))
+    e_s[0] = 1.0
+    out = []
+    for side in (-1.0, 1.0):
+        try:
+            g = outcome_gradient(compiled, problem.maneuver, result.s, result.inputs,
+                                 direction=side * e_s)
+        except SimulationError:
+            out.append(math.nan)
+            continue
+        out.append(float(cost_gradient(problem, g, result.inputs)[0]))
+    return out[0], out[1]
 
 
 def polish_optimum(problem: Problem, s: float, start: SystemOptimalResult, *, side: int,

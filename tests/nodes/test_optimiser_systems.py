@@ -17,13 +17,13 @@ from biped_opt.errors import BipedOptError
 from biped_opt.fixed_sweep import theta_grid
 from biped_opt.nodes.compiler import BUSY
 from biped_opt.nodes.graph import Graph
-from biped_opt.nodes.optimiser import system_value_derivative
 from biped_opt.nodes.recorder import SweepRequest
 from biped_opt.optimal import get_problem as biped_problem
 from biped_opt.optimal import optimal_policy as biped_optimal_policy
 from biped_opt.record.report import load_sweep
 from biped_opt.systems.compiled import CompiledSystem
 from biped_opt.systems.optimal import optimal_policy
+from biped_opt.systems.optimal_derivatives import value_slopes
 from biped_opt.systems.problems import get_problem
 from tests.conftest import unique_domain_id
 
@@ -104,7 +104,7 @@ def test_replies_equal_the_core(graph, name):
             assert list(reply.mode_sequence) == []  # the biped's ContactMode field
             assert all(math.isnan(v) for v in reply.inputs)  # the biped's [u1, u2, u12]
             np.testing.assert_allclose(reply.value_derivative,
-                                       system_value_derivative(problem, core), rtol=0, atol=TOL)
+                                       value_slopes(problem, core), rtol=0, atol=TOL)
     if name == "walker3_coupled":  # the walker's modes as masks over foot1..3
         reply = _policy(graph.probe, maneuver=maneuver, theta0=0.1, system=name)
         assert list(reply.contact_modes) == [0, 1, 3, 7]
@@ -123,7 +123,7 @@ def test_value_derivative_matches_finite_differences(name):
     h = 1e-4
     for s in values:
         core = optimal_policy(problem, s)
-        left, right = system_value_derivative(problem, core)
+        left, right = value_slopes(problem, core)
         up, down = optimal_policy(problem, s + h), optimal_policy(problem, s - h)
         assert up.branch == down.branch == core.branch  # smooth here: one piece
         fd = (up.value - down.value) / (2 * h)
