@@ -232,9 +232,23 @@ def _extremum(p, mode, u, code, F, y, j, ra, rb, above, tmp, lam, rates):
     return x, g
 
 
-#: dense-output probes per step for a constraint whose guard was just reset (see
-#: _separation_point): one in every eighth of the part of the step searched
-_WATCH_PROBES = 8
+#: dense-output probes per searched part of a step (see _first_probe): one in every eighth of
+#: the part before a stage probe's sign change, or of the part a constraint whose guard was
+#: just reset is watched in (see _separation_point)
+_PROBES = 8
+
+
+@nb.njit(**HOT_PATH)
+def _first_probe(p, mode, u, code, F, y, i, xa, xb, last, above, tmp, lam):
+    """The first of the points xa + (xb - xa) m / _PROBES, m = 1 .. last, where guard i on the
+    interpolant is above zero (``above`` = 1.0) or at or below it (``above`` = 0.0; a float,
+    as in _extremum): (x, g there), or (-1.0, 0.0) when none is."""
+    for m in range(1, last + 1):
+        x = xa + (xb - xa) * m / _PROBES
+        g = _guard_on_dense(p, mode, u, code, F, y, x, i, tmp, lam)
+        if (g > 0.0) == (above > 0.0):
+            return x, g
+    return -1.0, 0.0
 
 
 @nb.njit(**HOT_PATH)
@@ -243,7 +257,7 @@ def _separation_point(p, mode, u, code, F, y, j, r0, r1, x_end, tmp, lam, rates)
     liftoff, a foot that left the ground at once), is above the ground: at the start if it is
     above there and coming down (a flight that began in an earlier step); near the apex of its
     flight when its rate went from separating (r0 > 0) to approaching (r1 < 0); else at the
-    first of _WATCH_PROBES probes with a_j > 0. -1.0 when a_j never rose above 0 (it went the
+    first of _PROBES - 1 probes with a_j > 0. -1.0 when a_j never rose above 0 (it went the
     wrong way, or the flight is shorter than the guard's rounding)."""
     if r0 < 0.0 and _guard_on_dense(p, mode, u, code, F, y, 0.0, j, tmp, lam) > 0.0:
         return 0.0
@@ -251,11 +265,7 @@ def _separation_point(p, mode, u, code, F, y, j, r0, r1, x_end, tmp, lam, rates)
         x, g = _extremum(p, mode, u, code, F, y, j, r0, r1, 1.0, tmp, lam, rates)
         if g > 0.0 and x < x_end:
             return x
-    for m in range(1, _WATCH_PROBES):
-        x = x_end * m / _WATCH_PROBES
-        if _guard_on_dense(p, mode, u, code, F, y, x, j, tmp, lam) > 0.0:
-            return x
-    return -1.0
+    return _first_probe(p, mode, u, code, F, y, j, 0.0, x_end, _PROBES - 1, 1.0, tmp, lam)[0]
 
 
 @nb.njit(**HOT_PATH)
@@ -506,15 +516,8 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
                     xb = 1.0
                     gb = gv_new[i]
                 elif probe[i] <= 1.0:
-                    xb = -1.0
-                    gb = 0.0
-                    for m in range(1, 9):
-                        xm = probe[i] * m / 8.0
-                        gm = _guard_on_dense(p, mode, u, code, F, y, xm, i, tmp, lam_tmp)
-                        if gm <= 0.0:
-                            xb = xm
-                            gb = gm
-                            break
+                    xb, gb = _first_probe(p, mode, u, code, F, y, i, 0.0, probe[i], _PROBES,
+                                          0.0, tmp, lam_tmp)
                     if xb < 0.0:
                         continue
                 elif i < NCON and not mode >> i & 1 and rate0[i] < 0.0 and rate1[i] > 0.0:
@@ -544,15 +547,12 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
                     wrong_way = wrong_way or g_end < -REARM_TOL
                     continue
                 ga = _guard_on_dense(p, mode, u, code, F, y, xa, i, tmp, lam_tmp)
-                xb = x_end
-                gb = g_end
-                for m in range(1, _WATCH_PROBES):  # the first probe at or below, if any
-                    xm = xa + (x_end - xa) * m / _WATCH_PROBES
-                    gm = _guard_on_dense(p, mode, u, code, F, y, xm, i, tmp, lam_tmp)
-                    if gm <= 0.0:
-                        xb = xm
-                        gb = gm
-                        break
+                # the first probe at or below, else the end of the searched part
+                xb, gb = _first_probe(p, mode, u, code, F, y, i, xa, x_end, _PROBES - 1, 0.0,
+                                      tmp, lam_tmp)
+                if xb < 0.0:
+                    xb = x_end
+                    gb = g_end
                 x = _root_on_dense(p, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, lam_tmp)
                 if x < x_first:
                     x_first = x

@@ -215,7 +215,7 @@ class SystemTrajectory:
     n_events: int  #: contact events (the first rows of ``events``; a terminal row may follow)
     initial_mode: int
     #: (max_events, horizon, constraint names): what :attr:`message` explains an end by
-    budget: tuple[int, float, tuple[str, ...]] = (16, 10.0, ())
+    budget: tuple[int, float, tuple[str, ...]]
 
     @property
     def message(self) -> str:
@@ -285,19 +285,16 @@ class CompiledSystem:
         self._defaults: dict[str, float] = dict(facts["parameters"])
         self.maneuvers: tuple[str, ...] = tuple(facts["maneuvers"])
         self.inputs: tuple[str, ...] = tuple(facts["inputs"])
-        constraints = tuple(facts["constraints"])
-        self._options = [DEFAULT_OPTIONS if (events, horizon) == (DEFAULT_OPTIONS.max_events,
-                                                                  DEFAULT_OPTIONS.t_end)
-                         else dataclasses.replace(DEFAULT_OPTIONS, max_events=events,
-                                                  t_end=horizon)
+        self._constraints: tuple[str, ...] = tuple(facts["constraints"])
+        self._options = [dataclasses.replace(DEFAULT_OPTIONS, max_events=events, t_end=horizon)
                          for events, horizon in facts["budgets"]]
-        self._budgets = [(o.max_events, o.t_end, constraints) for o in self._options]
         self._initial_modes = [int(v) for v in self.module.INITIAL_MODE]
         self._codes = {name: k for k, name in enumerate(self.maneuvers)}
         self._ninputs = len(self.inputs)
         self._no_samples = np.empty((0, self.module.SAMPLE_WIDTH))
         self._cfgs: dict[tuple[SimulatorOptions, float], Array] = {}
-        self._default_cfg = self._cfg(DEFAULT_OPTIONS, 0.0)
+        # each maneuver's own options without samples, the common call: found without hashing
+        self._maneuver_cfgs = [self._cfg(o, 0.0) for o in self._options]
         self.set_parameters(**parameters)
 
     def _build(self, spec: System | str) -> dict[str, Any]:
@@ -444,7 +441,8 @@ class CompiledSystem:
             cfg = self._cfg(options, dt)
         else:
             samples = self._no_samples
-            cfg = self._default_cfg if options is DEFAULT_OPTIONS else self._cfg(options, 0.0)
+            cfg = (self._maneuver_cfgs[code] if options is self._options[code]
+                   else self._cfg(options, 0.0))
         events = np.empty((options.max_events + 1, m.EVENT_WIDTH))
         y_out = np.empty(m.NSTATE)
         status, t_f, _mode_f, n_ev, n_s, nfev, nsteps, _nrej, outcome = m.simulate_maneuver(
@@ -453,8 +451,7 @@ class CompiledSystem:
             self.name, maneuver, s, tuple(u.tolist()[: self._ninputs]), STATUS_NAMES[status],
             t_f, outcome, y_out, events[: n_ev + (status == 0)], samples[: min(n_s, capacity)],
             nfev, nsteps, n_ev, self._initial_modes[code],
-            self._budgets[code] if options is self._options[code]
-            else (options.max_events, options.t_end, self._budgets[code][2]))
+            (options.max_events, options.t_end, self._constraints))
 
     def simulate_batch(self, maneuver: str, s: npt.ArrayLike, inputs: npt.ArrayLike | None = None,
                        *, options: SimulatorOptions = DEFAULT_OPTIONS) -> dict[str, Array]:

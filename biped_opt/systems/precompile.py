@@ -38,6 +38,7 @@ SIGNATURES: dict[str, str] = {
     "dense_coefficients": "A, i8, A, A, A, f8, A, A, A, F",
     "_guard_rate": "A, i8, A, i8, A, A, i8, A, A",
     "apply_impact": "A, i8, A",
+    "_first_probe": "A, i8, A, i8, F, A, i8, f8, f8, i8, f8, A, A",
     "_separation_point": "A, i8, A, i8, F, A, i8, f8, f8, f8, A, A, A",
     "_extremum": "A, i8, A, i8, F, A, i8, f8, f8, f8, A, A, A",
     "_consistent_mode": "A, i8, A, A, A, A, A, A, A",

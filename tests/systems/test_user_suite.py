@@ -183,12 +183,18 @@ def test_plank_reimpacts_within_a_step():
     step (5 or 6 impacts), and every coincidence there."""
     system = compiled("plank")
     points = list(np.linspace(0.04, 0.057, 9))
-    for c in reference_flight.coincidences(reference_flight.plank, 0.039, 0.058, 20):
+    coincidences = reference_flight.coincidences(reference_flight.plank, 0.039, 0.058, 20)
+    for c in coincidences:
         points += [c + offset for offset in OFFSETS]
+    checked = 0
     for s in points:
         ref = reference_flight.simulate(reference_flight.plank(s))
         if ref.band_margin >= EDGE:
             assert_agrees(system.simulate("fall", s), ref, f"plank s = {s!r}")
+            checked += 1
+    # (not skipped away: as for the other coincidences, at least 4 of the 6 offsets of each;
+    # measured: all 27 points of the 3 coincidences and the grid are decidable)
+    assert coincidences and checked >= len(points) - 2 * len(coincidences)
 
 
 def test_library_bar_reimpact():
