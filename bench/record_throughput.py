@@ -19,7 +19,7 @@ import time
 import numpy as np
 
 from biped_opt import simulate
-from biped_opt.fixed_sweep import theta_grid
+from biped_opt.piecewise import theta_grid
 from biped_opt.record import SweepWriter
 
 NS = 1_000_000_000

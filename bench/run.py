@@ -184,8 +184,8 @@ def run_benchmark(
     interpreters and reports their entries as None.
     """
     import biped_opt
-    from biped_opt.fixed_sweep import theta_grid
     from biped_opt.optimal.sweep import sweep_fixed
+    from biped_opt.piecewise import theta_grid
 
     cases = make_cases(n_cases, seed)
     rounds = 1 if quick else 5

@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from biped_opt.nodes.coordinator import coordinator_on_domain  # noqa: E402
-from biped_opt.study import Study, evaluate_point  # noqa: E402
+from biped_opt.studies.study import Study, evaluate_point  # noqa: E402
 
 
 def study(side: int, num: int, name: str = "scaling") -> Study:

@@ -35,7 +35,7 @@ SYSTEMS = ("biped", "walker3", "rocking_bar")
 _COMPILE_SCRIPT = """
 import sys, time
 t0 = time.perf_counter()
-from biped_opt.systems.compiled import compile_system
+from biped_opt.simulation.compiled import compile_system
 system = compile_system(sys.argv[1])
 name = system.maneuvers[0]
 tr = system.simulate(name, 0.01)
@@ -100,7 +100,7 @@ def _compile_cost(name: str) -> dict[str, float]:
 def run_systems_benchmark(systems=SYSTEMS, *, n_cases: int = 40, rounds: int = 3,
                           reference_cases: int = 10, seed: int = 20200401,
                           compile_cost: bool = True) -> dict:
-    from biped_opt.systems.compiled import compile_system
+    from biped_opt.simulation.compiled import compile_system
 
     rng = np.random.default_rng(seed)
     result: dict = {"n_cases": n_cases, "rounds": rounds, "reference_cases": reference_cases,

@@ -13,10 +13,10 @@ from biped_opt.errors import (
 from biped_opt.hybrid import SimulatorOptions, Status, Trajectory, simulate, simulate_batch
 from biped_opt.maneuvers import Maneuver
 from biped_opt.model import BipedParams, ContactMode
-
-__version__ = "0.1.0"
+from biped_opt.version import __version__
 
 __all__ = [
+    "__version__",
     "BipedOptError",
     "BipedParams",
     "ContactMode",

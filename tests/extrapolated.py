@@ -1,6 +1,6 @@
 """Reference derivatives by extrapolated one-sided differences, with the error they carry.
 
-:func:`biped_opt.nonsmooth.one_sided` fits the polynomial through f(x0 + side h0 / 2^k),
+:func:`biped_opt.piecewise.one_sided` fits the polynomial through f(x0 + side h0 / 2^k),
 k < levels, and reads its slope at x0 (Richardson extrapolation). Its error has two parts, both
 computed here rather than assumed:
 
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from biped_opt.nonsmooth import one_sided
+from biped_opt.piecewise import one_sided
 
 #: estimates are sizes, not bounds: a difference up to this many times their sum is agreement
 SAFETY = 10.0

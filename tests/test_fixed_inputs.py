@@ -1,14 +1,13 @@
 """The fixed-input nonsmoothness of MODEL.md Sec. 6: touchdown kink and liftoff jump at th0 = 0,
-measured with the extrapolated one-sided limits and slopes of biped_opt.nonsmooth."""
+measured with the extrapolated one-sided limits and slopes of biped_opt.piecewise."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from biped_opt.fixed_sweep import theta_grid
 from biped_opt.hybrid import simulate
-from biped_opt.nonsmooth import one_sided
+from biped_opt.piecewise import one_sided, theta_grid
 
 
 def _outcome(maneuver, u):

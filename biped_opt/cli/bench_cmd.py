@@ -19,10 +19,10 @@ import sys
 from pathlib import Path
 from types import ModuleType
 
-import biped_opt
 from biped_opt import strict_json
 from biped_opt.cli.args import MAX_POINTS, MAX_SEED, int_in_range
 from biped_opt.errors import BipedOptError
+from biped_opt.version import PACKAGE_DIR
 
 __all__ = ["BenchUnavailableError", "load_bench", "register", "run", "format_table"]
 
@@ -33,7 +33,7 @@ class BenchUnavailableError(BipedOptError, ImportError):
 
 def checkout_root() -> Path:
     """Directory holding the ``biped_opt`` package that is running (the checkout, if editable)."""
-    return Path(biped_opt.__file__).resolve().parent.parent
+    return PACKAGE_DIR.parent
 
 
 def load_bench() -> ModuleType:

@@ -93,14 +93,14 @@ def control_experiment(folder: Path) -> Path:
     """The paper's claim as a controlled experiment (SYSTEMS.md Secs. 2-3), printed and drawn:
     the two-leg walker with coupled and decoupled inputs at the paper's fixed inputs, and the
     rocking bar's jumps. Returns the figure's path."""
+    from biped_opt.control.derivatives import one_sided_derivatives
     from biped_opt.plots.systems import (
         LIFTOFF_INPUTS,
         TOUCHDOWN_INPUTS,
         control_experiment_data,
         control_experiment_figure,
     )
-    from biped_opt.systems.compiled import CompiledSystem
-    from biped_opt.systems.derivatives import one_sided_derivatives
+    from biped_opt.simulation.compiled import CompiledSystem
 
     print("\nThe control experiment: same walker, coupled vs decoupled inputs (SYSTEMS.md)\n",
           flush=True)
@@ -132,7 +132,7 @@ def control_experiment(folder: Path) -> Path:
 def piece_counts() -> None:
     """Paper Sec. V-B, small and fast: the smooth pieces of the 1- and 2-leg walker around the
     simultaneous touchdown over k = 1, 2 rounds (``biped-opt pieces`` does n = 1..4, k = 1..3)."""
-    from biped_opt.pieces import count_pieces
+    from biped_opt.analysis.pieces import count_pieces
 
     print("\nSmooth pieces near simultaneous contact vs the paper's (n!)^k "
           "(100 seeded samples each; biped-opt pieces for n up to 4)\n", flush=True)
@@ -148,8 +148,8 @@ def piece_counts() -> None:
 def gradient_methods(folder: Path) -> None:
     """Paper Sec. V-A, small: gradient methods on the liftoff problem, whose cost jumps in u12
     (``biped-opt gradients`` runs every problem, larger)."""
+    from biped_opt.analysis.gradients import report, run_gradient_study
     from biped_opt.cli.gradients_cmd import EPS_VALUES, SAMPLE_COUNTS, SIGMAS
-    from biped_opt.gradients import report, run_gradient_study
     from biped_opt.plots.gradients import gradient_figure
 
     print("\nGradient methods at a jump of the liftoff cost (biped-opt gradients --quick "
@@ -176,7 +176,7 @@ def two_node_study(out: Path) -> list[Path]:
     from biped_opt.nodes.optimiser import OptimiserNode
     from biped_opt.plots.study import study_figures
     from biped_opt.record.study_table import read_table
-    from biped_opt.study import Study
+    from biped_opt.studies.study import Study
 
     def optimiser(name: str):
         return hosted(lambda context: OptimiserNode(

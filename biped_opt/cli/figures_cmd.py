@@ -68,9 +68,9 @@ def run_system(args: argparse.Namespace) -> int:
     """Any system's figures; every argument is checked before the output directory is made."""
     import time
 
-    from biped_opt.systems.compiled import CompiledSystem
-    from biped_opt.systems.nonsmooth import s_grid
-    from biped_opt.systems.optimal import compiled_for
+    from biped_opt.analysis.nonsmooth import s_grid
+    from biped_opt.control.solve import compiled_for
+    from biped_opt.simulation.compiled import CompiledSystem
 
     for flag in ("fixed_num", "optimal_num"):
         if getattr(args, flag) is not None:

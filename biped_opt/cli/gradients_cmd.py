@@ -7,8 +7,8 @@ import sys
 from pathlib import Path
 
 from biped_opt import strict_json
+from biped_opt.analysis.gradients import PROBLEMS, report, run_gradient_study
 from biped_opt.cli.args import MAX_SEED, int_in_range, output_directory, path_arg
-from biped_opt.gradients import PROBLEMS, report, run_gradient_study
 
 SIGMAS = (0.003, 0.03)
 SAMPLE_COUNTS = (4, 64)

@@ -139,7 +139,7 @@ def derivatives_json(problem: OptimalControlProblem, theta0: float) -> dict:
 
 def _finite_difference_derivatives(problem: OptimalControlProblem, theta0: float) -> dict:
     from biped_opt.maneuvers import spec
-    from biped_opt.nonsmooth import one_sided
+    from biped_opt.piecewise import one_sided
 
     cache: dict[float, OptimalResult] = {}
 

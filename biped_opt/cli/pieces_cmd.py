@@ -25,7 +25,7 @@ MAX_ROUNDS = 10
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from biped_opt.pieces import MAX_LEGS
+    from biped_opt.analysis.pieces import MAX_LEGS
 
     p = sub.add_parser(
         "pieces", help="count the smooth pieces near simultaneous contact vs (n!)^k",
@@ -59,7 +59,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from biped_opt.pieces import (
+    from biped_opt.analysis.pieces import (
         count_pieces,
         derivative_pieces,
         distinct_gradients,

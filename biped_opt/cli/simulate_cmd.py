@@ -123,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
 
 def run_system(args: argparse.Namespace) -> int:
     """``simulate --system``: any system's maneuver through its compiled simulator."""
-    from biped_opt.systems.compiled import compile_system
+    from biped_opt.simulation.compiled import compile_system
 
     if args.theta0 is not None or any(getattr(args, n) for n in ("u1", "u2", "u12")):
         raise InvalidInputError("--theta0/--u1/--u2/--u12: the biped's options; with --system "

@@ -2,15 +2,14 @@
 or on the optimiser nodes of a ROS 2 domain.
 
 ``biped-opt study STUDY.yaml --out TABLE.csv [--workers N | --ros]``: the study file holds the
-keys of :meth:`biped_opt.study.Study.from_spec` (system, maneuver and inputs and/or problem, grid
-and/or sample with samples and seed, s_range, num, num_optimal, name). With ``--ros`` a
-coordinator (:mod:`biped_opt.nodes.coordinator`) hands the points to every optimiser node on the
-domain (``ROS_DOMAIN_ID``), on any machine. Run again with the same arguments to continue an
-interrupted study; SIGINT/SIGTERM stop it after the points under way (exit status 130, as a
-shell gives an interrupted command). A table damaged since (a row that is not UTF-8, holds a NUL
-byte, names a point the study does not have or other parameter values) loses those rows and
-their points are computed again, which the run says in one line.
-"""
+keys of :meth:`~biped_opt.studies.study.Study.from_spec` (system, maneuver and inputs and/or
+problem, grid and/or sample with samples and seed, s_range, num, num_optimal, name). With
+``--ros`` a coordinator (:mod:`biped_opt.nodes.coordinator`) hands the points to every optimiser
+node on the domain (``ROS_DOMAIN_ID``), on any machine. Run again with the same arguments to
+continue an interrupted study; SIGINT/SIGTERM stop it after the points under way (exit status
+130, as a shell gives an interrupted command). A table damaged since (a row that is not UTF-8,
+holds a NUL byte, names a point the study does not have or other parameter values) loses those
+rows and their points are computed again, which the run says in one line. """
 
 from __future__ import annotations
 
@@ -56,8 +55,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def load_study(path: Path):
     """A Study from a YAML file; errors name the file."""
-    from biped_opt.study import Study
-    from biped_opt.systems.problems import read_yaml
+    from biped_opt.control.problems import read_yaml
+    from biped_opt.studies.study import Study
 
     if not path.is_file():
         raise InvalidInputError(f"{path}: no such study file")
@@ -70,7 +69,7 @@ def load_study(path: Path):
 def run(args: argparse.Namespace) -> int:
     from biped_opt.cli.signals import stop_requested
     from biped_opt.cli.sweep_cmd import progress_from_args
-    from biped_opt.optimal.sweep import Progress
+    from biped_opt.progress import Progress
     from biped_opt.record.study_table import run_study
 
     study = load_study(args.spec)

@@ -72,8 +72,8 @@ def uses_system(args: argparse.Namespace) -> bool:
 
 def problem_from_system_args(args: argparse.Namespace, *, required: bool = True):
     """The Problem of --system/--problem/--maneuver with --param overrides, or None."""
+    from biped_opt.control.problems import describe, load_problem
     from biped_opt.errors import BipedOptError
-    from biped_opt.systems.problems import describe, load_problem
 
     try:
         if args.problem is not None:
@@ -113,7 +113,7 @@ def problem_from_system_args(args: argparse.Namespace, *, required: bool = True)
 
 
 def _compiled(args: argparse.Namespace):
-    from biped_opt.systems.compiled import CompiledSystem
+    from biped_opt.simulation.compiled import CompiledSystem
 
     if args.system is None:
         raise InvalidInputError("--system is required")
@@ -123,7 +123,7 @@ def _compiled(args: argparse.Namespace):
 
 
 def _grid(args: argparse.Namespace, compiled: Any, maneuver: str, num: int):
-    from biped_opt.systems.nonsmooth import s_grid
+    from biped_opt.analysis.nonsmooth import s_grid
 
     return s_grid(compiled, maneuver, args.num or num, args.s_min, args.s_max)
 
@@ -135,13 +135,13 @@ def _progress(args: argparse.Namespace) -> bool:
 
 
 def run_optimise(args: argparse.Namespace) -> int:
-    from biped_opt.systems.optimal import optimal_policy
+    from biped_opt.control.solve import optimal_policy
 
     problem = problem_from_system_args(args)
     if args.s is None:
         raise InvalidInputError("--s is required with --system")
+    from biped_opt.control.theorem1 import optimal_derivatives
     from biped_opt.errors import SimulationError
-    from biped_opt.systems.optimal_derivatives import optimal_derivatives
 
     r = optimal_policy(problem, args.s)
     derivatives = None
@@ -179,8 +179,8 @@ def run_optimise(args: argparse.Namespace) -> int:
 
 def run_sweep(args: argparse.Namespace) -> int:
     if args.optimal or args.problem is not None:
-        from biped_opt.optimal.sweep import _bar
-        from biped_opt.systems.optimal import compiled_for, optimal_sweep
+        from biped_opt.control.solve import compiled_for, optimal_sweep
+        from biped_opt.progress import bar as _bar
 
         problem = problem_from_system_args(args)
         grid = _grid(args, compiled_for(problem), problem.maneuver, 201)
@@ -196,8 +196,8 @@ def run_sweep(args: argparse.Namespace) -> int:
         data = {"problem": problem.as_dict(), "points": rows}
         ok = all(r.success for r in results)
     else:
-        from biped_opt.systems.compiled import STATUS_NAMES
-        from biped_opt.systems.optimal import branch_of
+        from biped_opt.control.solve import branch_of
+        from biped_opt.simulation.compiled import STATUS_NAMES
 
         compiled = _compiled(args)
         maneuver = args.maneuver
@@ -223,12 +223,12 @@ def run_sweep(args: argparse.Namespace) -> int:
 
 
 def run_nonsmooth(args: argparse.Namespace) -> int:
-    from biped_opt.systems.nonsmooth import find_nonsmooth, find_nonsmooth_optimal
+    from biped_opt.analysis.nonsmooth import find_nonsmooth, find_nonsmooth_optimal
 
     progress = _progress(args)
     if args.optimal or args.problem is not None:
         problem = problem_from_system_args(args)
-        from biped_opt.systems.optimal import compiled_for
+        from biped_opt.control.solve import compiled_for
 
         grid = _grid(args, compiled_for(problem), problem.maneuver, 201)
         report = find_nonsmooth_optimal(problem, grid, progress=progress)

@@ -5,7 +5,7 @@
 arrays, the path sweeps and optimisation grids take. Both validate their inputs once, up front,
 and call the compiled module that :mod:`biped_opt.systems` generates from the biped's
 description (``systems/library/biped.py``): the biped is simulated by the same kernel as every
-other system (:mod:`biped_opt.systems._kernel_body`), reached here through :func:`kernel`.
+other system (:mod:`biped_opt.codegen.kernel`), reached here through :func:`kernel`.
 """
 
 from __future__ import annotations
@@ -19,12 +19,13 @@ from types import ModuleType
 import numpy as np
 import numpy.typing as npt
 
-from biped_opt.errors import InvalidInputError, InvalidParameterError, SimulationError
+from biped_opt.errors import InvalidInputError, SimulationError
 from biped_opt.hybrid.trajectory import Status, Trajectory
 from biped_opt.maneuvers import Maneuver, check_theta0, parse_maneuver, spec
 from biped_opt.model.biped import NSTATE
 from biped_opt.model.modes import ContactMode
 from biped_opt.model.params import BipedParams
+from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
 
 __all__ = [
     "SimulatorOptions", "BatchResult", "simulate", "simulate_batch", "check_inputs", "warm_up",
@@ -34,30 +35,6 @@ __all__ = [
 Array = npt.NDArray[np.float64]
 
 
-@dataclass(frozen=True, kw_only=True)
-class SimulatorOptions:
-    """Integrator and bookkeeping settings of the hybrid simulator."""
-
-    rtol: float = 1e-11  # relative tolerance of the DOP853 error estimate
-    atol: float = 1e-12  # absolute tolerance
-    h_max: float = 0.5  # largest step [time]; the RK stages probe guards inside each step
-    t_end: float = 10.0  # time horizon [time]
-    max_events: int = 16  # contact events allowed before giving up
-
-    def __post_init__(self) -> None:
-        for name in ("rtol", "atol", "h_max", "t_end"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise InvalidParameterError(f"{name} must be a positive number, got {value!r}")
-        if self.rtol < 1e-15:
-            raise InvalidParameterError(f"rtol must be at least 1e-15, got {self.rtol}")
-        if not isinstance(self.max_events, int) or self.max_events < 1:
-            raise InvalidParameterError(
-                f"max_events must be a positive integer, got {self.max_events!r}"
-            )
-
-
-DEFAULT_OPTIONS = SimulatorOptions()
 INPUT_NAMES = ("u1", "u2", "u12")
 
 
@@ -124,7 +101,7 @@ def _prepared(m: ModuleType, names: tuple[str, ...], params: BipedParams) -> Arr
 @functools.cache
 def kernel() -> BipedKernel:
     """The biped's compiled module (imported, or generated and compiled, on first use)."""
-    from biped_opt.systems import compiled as generated
+    from biped_opt.simulation import compiled as generated
 
     compiled = generated.compile_system("biped")
     m = compiled.module
@@ -142,9 +119,9 @@ def kernel() -> BipedKernel:
 @functools.lru_cache(maxsize=64)
 def kernel_config(options: SimulatorOptions, sample_dt: float = 0.0,
                   touched_down: bool = False) -> Array:
-    """The biped kernel's ``cfg`` vector (:func:`biped_opt.systems.compiled.kernel_config`),
+    """The biped kernel's ``cfg`` vector (:func:`biped_opt.simulation.compiled.kernel_config`),
     cached (not to be written)."""
-    from biped_opt.systems import compiled
+    from biped_opt.simulation import compiled
 
     return compiled.kernel_config(kernel().module, options, sample_dt, touched_down)
 
@@ -291,7 +268,7 @@ def simulate_batch(
 def kernels_cached() -> bool:
     """True when the biped's compiled module is on disk and Numba's cache holds its kernels
     for the current sources (a start then loads them in about a second instead of compiling)."""
-    from biped_opt.systems.compiled import cached_module
+    from biped_opt.simulation.compiled import cached_module
 
     m = cached_module("biped")
     if m is None:

@@ -3,7 +3,7 @@
 from biped_opt.model.biped import Biped
 from biped_opt.model.modes import ContactMode
 from biped_opt.model.params import BipedParams
-from biped_opt.model.system import (
+from biped_opt.systems.mechanics import (
     MechanicalSystem,
     accelerations,
     impact_map,

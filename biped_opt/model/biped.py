@@ -10,8 +10,8 @@ body torque u12 only in double stance J = {1, 2}. This *force coupling* (paper S
 makes outcomes nonsmooth when the order of contact events changes.
 
 The physics is written here by hand, as compiled functions on flat float arrays, and wrapped by
-:class:`Biped` for the generic framework of :mod:`biped_opt.model.system`: the biped's reference
-model. The simulator runs the module generated from the biped's description
+:class:`Biped` for the generic framework of :mod:`~biped_opt.systems.mechanics`: the biped's
+reference model. The simulator runs the module generated from the biped's description
 (``systems/library/biped.py``); the tests check that description's Eq. (1) against this model,
 and this model's constraint handling against Eq. (1) computed with general linear algebra. The
 biped's variational equations (:mod:`biped_opt.optimal.derivatives`) evaluate it directly.
@@ -29,8 +29,9 @@ import numpy as np
 import numpy.typing as npt
 
 from biped_opt._jit import HOT_PATH
+from biped_opt.codegen.runtime import sincos
 from biped_opt.model.params import BipedParams
-from biped_opt.model.system import MechanicalSystem
+from biped_opt.systems.mechanics import MechanicalSystem
 
 __all__ = [
     "NDOF",
@@ -59,44 +60,6 @@ FOOT_DZ = (11, 13)
 BODY_DZ = 8  #: index in y of the body's vertical velocity z'
 
 
-# Taylor coefficients of sin and cos. On |x| <= pi/4 the first omitted terms (x^17/17!, x^18/18!)
-# are below 7e-17 relative, so the polynomials are as accurate as the libm functions (the tests
-# check 2.3e-16 over the range).
-_S3, _S5, _S7, _S9 = -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0, 1.0 / 362880.0
-_S11, _S13, _S15 = -1.0 / 39916800.0, 1.0 / 6227020800.0, -1.0 / 1307674368000.0
-_C2, _C4, _C6, _C8 = -0.5, 1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0
-_C10, _C12 = -1.0 / 3628800.0, 1.0 / 479001600.0
-_C14, _C16 = -1.0 / 87178291200.0, 1.0 / 20922789888000.0
-_QUARTER_PI = math.pi / 4.0
-
-
-@nb.njit(**HOT_PATH, inline="always")
-def sincos(x: float) -> tuple[float, float]:
-    """(sin x, cos x): polynomials in Estrin's form for |x| <= pi/4, libm beyond.
-
-    The body pitch stays well inside pi/4 in every maneuver, and the vector field needs its sine
-    and cosine at every evaluation. The libm calls sit on the evaluation's critical path (and
-    force the compiler to spill registers around them); the polynomials' short dependency
-    chains make the whole simulation ~8% faster.
-
-    Written with one return and no early exit: the generated systems' DOP853 step has this
-    body expanded into each of its stages, on its syntax tree with every argument bound to a
-    name first (:func:`biped_opt.systems.codegen._expand`).
-    """
-    x2 = x * x
-    x4 = x2 * x2
-    x8 = x4 * x4
-    s_lo = (_S3 + _S5 * x2) + x4 * (_S7 + _S9 * x2)
-    s_hi = (_S11 + _S13 * x2) + x4 * _S15
-    c_lo = (_C2 + _C4 * x2) + x4 * (_C6 + _C8 * x2)
-    c_hi = (_C10 + _C12 * x2) + x4 * (_C14 + _C16 * x2)
-    if abs(x) <= _QUARTER_PI:
-        s = x + x * x2 * (s_lo + x8 * s_hi)
-        c = 1.0 + x2 * (c_lo + x8 * c_hi)
-    else:  # (NaN too)
-        s = math.sin(x)
-        c = math.cos(x)
-    return s, c
 
 
 @nb.njit(**HOT_PATH, inline="always")

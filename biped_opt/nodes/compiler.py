@@ -63,7 +63,7 @@ def prepare(job: dict[str, Any]) -> Any:
     if job["kind"] == "policy":
         problem = sources.problem(job["system"], job["problem"], job["maneuver"])
     else:  # a study: the fixed-input kernels, and its problem's if it has one
-        from biped_opt.systems.problems import load_problem
+        from biped_opt.control.problems import load_problem
 
         source, problem_source = sources.study(job["system"], job["problem"])
         problem = None if problem_source is None else load_problem(problem_source,
@@ -73,10 +73,10 @@ def prepare(job: dict[str, Any]) -> Any:
     # (only now the compiler's modules: a description that fails has failed already)
     import numpy as np
 
-    from biped_opt.systems.compiled import shared
-    from biped_opt.systems.nonsmooth import find_nonsmooth
-    from biped_opt.systems.optimal import compiled_for, optimal_policy
-    from biped_opt.systems.optimal_derivatives import value_slopes
+    from biped_opt.analysis.nonsmooth import find_nonsmooth
+    from biped_opt.control.solve import compiled_for, optimal_policy
+    from biped_opt.control.theorem1 import value_slopes
+    from biped_opt.simulation.compiled import shared
 
     if job["kind"] == "study":
         compiled = shared(source)
@@ -159,7 +159,7 @@ class Compiler:
     # -- the background thread ---------------------------------------------------------------
     def _run(self) -> None:
         try:  # (SymPy and the systems' modules: a first request need not wait for them)
-            import biped_opt.systems.problems  # noqa: F401
+            import biped_opt.control.problems  # noqa: F401
         except Exception:  # pragma: no cover (the same error reaches the first request)
             pass
         while True:

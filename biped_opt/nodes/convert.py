@@ -20,8 +20,8 @@ from biped_opt.maneuvers import Maneuver, check_theta0, parse_maneuver
 from biped_opt.nodes.sources import PROBLEM_SUFFIXES
 
 if TYPE_CHECKING:  # the systems' modules (SymPy) load only where a system is used
-    from biped_opt.systems.compiled import CompiledSystem, SystemTrajectory
-    from biped_opt.systems.problems import Problem
+    from biped_opt.control.problems import Problem
+    from biped_opt.simulation.compiled import CompiledSystem, SystemTrajectory
 
 __all__ = [
     "NS",
@@ -221,13 +221,13 @@ def _is_file(text: str) -> bool:
 
 
 def request_problem(system: str, problem: str, maneuver: str) -> Problem:
-    """The :class:`~biped_opt.systems.problems.Problem` of an operator's parameters on any
+    """The :class:`~biped_opt.control.problems.Problem` of an operator's parameters on any
     system (the recorder's): ``system`` a library name or a system file (``""``: the biped, or
     the system a problem file names), ``problem`` one the system declares or a problem file
     (``""``: the one named like ``maneuver``), which must be on ``maneuver``. Each error names
     the field. (A request from the domain names files only through
     :mod:`biped_opt.nodes.sources`.)"""
-    from biped_opt.systems.problems import describe, load_problem
+    from biped_opt.control.problems import describe, load_problem
 
     described = None
     if system or not _is_file(problem):

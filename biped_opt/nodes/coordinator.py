@@ -1,6 +1,6 @@
 """``study_coordinator`` node: a parameter study fanned out over the optimiser nodes of the domain.
 
-A work item is a few parameter points of a :class:`~biped_opt.study.Study` (up to
+A work item is a few parameter points of a :class:`~biped_opt.studies.study.Study` (up to
 :data:`BATCH`, fewer as the queue runs short). Every optimiser node serves them on a service of
 its own, ``~/study/<worker>`` of type ``StudyPoint`` (the study as JSON and the points' indices
 in; their rows as JSON out). The coordinator finds those services
@@ -63,7 +63,7 @@ from biped_opt.nodes.run import (
 )
 from biped_opt.nodes.sources import declare_request_limits, name_of, request_study
 from biped_opt.record.study_table import StudySummary, StudyTable, spec_path
-from biped_opt.study import Study, StudyRow
+from biped_opt.studies.study import Study, StudyRow
 
 __all__ = ["StudyCoordinator", "StudyFailedError", "WORK_ITEM_TYPE", "encode_rows",
            "decode_rows", "coordinator_on_domain", "run_on_domain", "main"]

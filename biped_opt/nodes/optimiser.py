@@ -14,11 +14,11 @@ it (one line a second at most) and keeps serving. Requests are served concurrent
 callback group, multi-threaded executor).
 
 **Any system.** A request whose ``system`` or ``problem`` is set is solved by
-:func:`biped_opt.systems.optimal.optimal_policy` with ``theta0`` as the maneuver's s; the reply
+:func:`biped_opt.control.solve.optimal_policy` with ``theta0`` as the maneuver's s; the reply
 names the decisions (``decision_names``), gives the full input vector in the system's order
 (``system_inputs``) and the contact modes as bit masks (``contact_modes``). Its
 ``value_derivative`` is the envelope theorem's dc/ds at the optimal inputs with the outcome's and
-final state's one-sided sensitivities (:func:`biped_opt.systems.derivatives.outcome_gradient`),
+final state's one-sided sensitivities (:func:`biped_opt.control.derivatives.outcome_gradient`),
 NaN on a side where they are not defined.
 
 **What a request may name** (:mod:`biped_opt.nodes.sources`): ``system`` a library system
@@ -102,8 +102,8 @@ from biped_opt.optimal import OptimalControlProblem, OptimalResult, get_problem,
 from biped_opt.optimal.derivatives import outcome_sensitivity
 
 if TYPE_CHECKING:  # the systems' modules (SymPy) load only where a system is used
-    from biped_opt.systems.optimal import SystemOptimalResult
-    from biped_opt.systems.problems import Problem
+    from biped_opt.control.problems import Problem
+    from biped_opt.control.solve import SystemOptimalResult
 
 __all__ = ["Answer", "OptimiserNode", "main", "value_derivative"]
 
@@ -252,7 +252,7 @@ class OptimiserNode(ros.Node):
         key = ("system", id(on.description), json.dumps(on.as_dict(), sort_keys=True), s)
 
         def answer() -> Answer:
-            from biped_opt.systems.optimal import optimal_policy as system_optimal_policy
+            from biped_opt.control.solve import optimal_policy as system_optimal_policy
 
             return Answer.of_system(on, system_optimal_policy(on, s))
 
@@ -286,7 +286,7 @@ class OptimiserNode(ros.Node):
     def _study(self, text: str) -> tuple[Any, list[dict[str, float]]]:
         """The study of a work item and its points (the last few studies kept); its size is
         checked before anything is built, its system prepared by the compiler."""
-        from biped_opt.study import Study
+        from biped_opt.studies.study import Study
 
         if text in self._studies:
             self._studies.move_to_end(text)
@@ -311,7 +311,7 @@ class OptimiserNode(ros.Node):
 
     def _on_study_point(self, request: Any, response: Any) -> Any:
         from biped_opt.nodes.coordinator import encode_rows
-        from biped_opt.study import evaluate_point
+        from biped_opt.studies.study import evaluate_point
 
         start = time.perf_counter()
         try:
@@ -387,7 +387,7 @@ class Answer:
 
     @classmethod
     def of_system(cls, problem: Problem, result: SystemOptimalResult) -> Answer:
-        from biped_opt.systems.optimal_derivatives import value_slopes
+        from biped_opt.control.theorem1 import value_slopes
 
         dv = value_slopes(problem, result) if result.success else (NAN, NAN)
         return cls(

@@ -31,7 +31,7 @@ of such a system asks the optimiser for ``problem`` (one the system declares or 
 ``""``: the one named like the maneuver) at every s and simulates its optimal inputs; its
 SweepPoints hold the decisions (policy), the optimal value and ``optimal = true``, and the
 ``biped_opt.sweep`` metadata record the problem (``problem``: the problem file's mapping as
-JSON, :meth:`~biped_opt.systems.problems.Problem.as_dict`).
+JSON, :meth:`~biped_opt.control.problems.Problem.as_dict`).
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ from biped_opt.optimal import OptimalControlProblem, get_problem
 from biped_opt.record import SweepWriter
 
 if TYPE_CHECKING:  # the systems' modules (SymPy) load only where a system is used
-    from biped_opt.systems.problems import Problem
+    from biped_opt.control.problems import Problem
 
 __all__ = ["RecorderNode", "SweepRequest", "SweepSummary", "main"]
 

@@ -61,10 +61,10 @@ SYSTEM_INFO_QOS = ros.QoSProfile(
 
 
 def compile_served_system(spec: str) -> Any:
-    """The :class:`~biped_opt.systems.compiled.CompiledSystem` of the ``system`` parameter, its
+    """The :class:`~biped_opt.simulation.compiled.CompiledSystem` of the ``system`` parameter, its
     kernel compiled (a first start compiles for a while; later ones load it). Any failure is
     one :class:`BipedOptError` naming the parameter."""
-    from biped_opt.systems.compiled import CompiledSystem
+    from biped_opt.simulation.compiled import CompiledSystem
 
     try:
         compiled = CompiledSystem(spec)

@@ -24,9 +24,9 @@ from typing import TYPE_CHECKING, Any
 from biped_opt.errors import InvalidInputError, InvalidParameterError, quoted
 
 if TYPE_CHECKING:
-    from biped_opt.study import StudyLimits
+    from biped_opt.control.problems import Problem
+    from biped_opt.studies.study import StudyLimits
     from biped_opt.systems.description import System
-    from biped_opt.systems.problems import Problem
 
 __all__ = ["MAX_NAME", "PROBLEM_SUFFIXES", "SystemLimits", "Sources", "check_name", "name_of",
            "directories", "declare_request_limits", "request_study"]
@@ -156,7 +156,7 @@ class Sources:
     limits: SystemLimits = SystemLimits()
 
     def system(self, field: str, text: str) -> str:
-        """What :func:`biped_opt.systems.problems.describe` loads for the system name ``text``:
+        """What :func:`biped_opt.control.problems.describe` loads for the system name ``text``:
         the library name itself or the absolute path of ``<dir>/<name>.py``."""
         from biped_opt.systems.library import LIBRARY
 
@@ -215,8 +215,8 @@ class Sources:
 
     def describe(self, field: str, source: str) -> System:
         """The description of a resolved system, its size checked before anything derives."""
+        from biped_opt.control.problems import describe
         from biped_opt.errors import BipedOptError
-        from biped_opt.systems.problems import describe
 
         try:
             system = describe(source)
@@ -230,9 +230,9 @@ class Sources:
         file names), ``problem`` a name (""): the one named like ``maneuver``). The problem
         must be on ``maneuver``. Runs the system's description (a file's code): call it where
         a slow or failing description holds up nobody else."""
+        from biped_opt.control.problems import Problem, get_problem, load_problem, read_yaml
         from biped_opt.errors import BipedOptError
         from biped_opt.nodes.convert import check_maneuver_of, check_problem_on
-        from biped_opt.systems.problems import Problem, get_problem, load_problem, read_yaml
 
         source = self.system("system", system) if system else ""
         name = problem or maneuver
@@ -272,12 +272,13 @@ class Sources:
         return self.system(f"{path.name}: system", text)
 
     def study(self, system: str, problem: str | None) -> tuple[str, str | None]:
-        """The ``system`` and ``problem`` a :class:`~biped_opt.study.Study` loads for a study
+        """The ``system`` and ``problem`` a :class:`~biped_opt.studies.study.Study` loads for a
+        study
         that names them: the system resolved as :meth:`system` (and described, its size
         checked); the problem a declared name (kept) or the path of its file, whose ``system``
         key must be absent, a library name or ``x.py`` beside it (what the study's loader
         reads itself)."""
-        from biped_opt.systems.problems import read_yaml
+        from biped_opt.control.problems import read_yaml
 
         source = self.system("system", system)
         described = self.describe("system", source)
@@ -304,7 +305,7 @@ def declare_request_limits(node: Any) -> tuple[Sources, StudyLimits, int]:
     ``max_values``, ``max_request_chars``): the node's :class:`Sources`, study limits and
     longest study text. A bad value stops the node (one line, status 2)."""
     from biped_opt.nodes.run import int_parameter, string_list_parameter
-    from biped_opt.study import StudyLimits
+    from biped_opt.studies.study import StudyLimits
 
     for name, default in (("system_paths", []), ("max_legs", MAX_LEGS),
                           ("max_coordinates", MAX_COORDINATES), ("max_points", MAX_POINTS),

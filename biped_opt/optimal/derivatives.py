@@ -48,6 +48,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy.integrate import solve_ivp
 
+from biped_opt.control.derivatives import DEFAULT_VARIATIONAL, VariationalOptions, saltation_matrix
+from biped_opt.control.theorem1 import Derivatives
 from biped_opt.errors import InvalidInputError, SimulationError
 from biped_opt.hybrid.simulate import (
     DEFAULT_OPTIONS,
@@ -68,6 +70,7 @@ from biped_opt.optimal.solve import optimal_policy
 
 __all__ = [
     "PARAMETER_NAMES",
+    "DEFAULT_VARIATIONAL",
     "VariationalOptions",
     "OutcomeSensitivity",
     "Derivatives",
@@ -90,25 +93,6 @@ TH = 2  #: index of the body pitch in y
 _JAC_STEP = 2e-4
 
 
-@dataclass(frozen=True, kw_only=True)
-class VariationalOptions:
-    """Tolerances of the variational integration and of the branch bookkeeping."""
-
-    rtol: float = 1e-11  # DOP853 relative tolerance on (y, Z)
-    atol: float = 1e-12  # DOP853 absolute tolerance
-    #: a guard within this of zero in the intermediate mode flips in the same instant
-    zero_length_tol: float = 1e-8
-    #: step of the central differences in u that give second derivatives of th_f
-    second_order_step: float = 1e-3
-
-    def __post_init__(self) -> None:
-        for name in ("rtol", "atol", "zero_length_tol", "second_order_step"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise InvalidInputError(f"{name} must be a positive number, got {value!r}")
-
-
-DEFAULT_VARIATIONAL = VariationalOptions()
 
 
 # --- compiled right-hand sides ----------------------------------------------------------------
@@ -232,20 +216,6 @@ def _reset_jacobian(p: Array, mode_after: int, touchdown: bool) -> Array:
             if mode_after >> j & 1:
                 dr[11 + 2 * j, 11 + 2 * j] = -p[8]
     return dr
-
-
-def saltation_matrix(
-    dr: Array, f_minus: Array, f_plus: Array, dg: Array
-) -> Array:
-    """Xi = DR + (F+ - DR F-) Dg / (Dg F-), the first-order jump of the flow's sensitivity.
-
-    ``dr``: reset Jacobian (n, n); ``f_minus``/``f_plus``: vector fields before/after the reset;
-    ``dg``: guard gradient (n,). Raises SimulationError for a grazing event (Dg F- = 0).
-    """
-    rate = float(dg @ f_minus)
-    if rate == 0.0 or not math.isfinite(rate):
-        raise SimulationError("grazing event (guard rate 0): the saltation matrix is undefined")
-    return dr + np.outer(f_plus - dr @ f_minus, dg) / rate
 
 
 def _impact(p: Array, mode_after: int, y: Array, touchdown: bool) -> Array:
@@ -564,46 +534,6 @@ def outcome_derivative(
 
 
 # --- optimal policy and value: Theorem 1, Eqs. (12)-(13) ----------------------------------------
-@dataclass(frozen=True, eq=False)
-class Derivatives:
-    """One-sided derivatives w.r.t. th0 of the optimal outcome, value and policy at ``theta0``.
-
-    Every pair is (left, right): the derivative of the branch that th0 -> theta0^- (resp. ^+)
-    follows, evaluated at ``theta0`` (Theorem 1 of [1]_: on each branch the value and policy are
-    as smooth as the outcome). ``outcome`` is the total derivative of the *optimal* outcome
-    th_f(th0, u*(th0)), i.e. d th_f/d th0 + D_u th_f du*/dth0. ``*_limits`` are the one-sided
-    limits, which differ where the function jumps. ``branches`` are the branch mode orders
-    (zero-length modes included).
-    """
-
-    problem: str
-    theta0: float
-    outcome: tuple[float, float]
-    value: tuple[float, float]
-    policy: dict[str, tuple[float, float]]
-    outcome_limits: tuple[float, float]
-    value_limits: tuple[float, float]
-    policy_limits: dict[str, tuple[float, float]]
-    branches: tuple[str, str]
-    #: decisions held at a bound on each side (their policy derivative is 0 there)
-    at_bound: tuple[tuple[str, ...], tuple[str, ...]]
-    nsens: int  #: sensitivity (variational) solves used
-
-    def as_dict(self) -> dict:
-        """Plain-data form (JSON-ready), keys as in the ``optimise --json`` output."""
-        return {
-            "outcome": list(self.outcome),
-            "value": list(self.value),
-            "policy": {k: list(v) for k, v in self.policy.items()},
-            "limits": {
-                "outcome": list(self.outcome_limits),
-                "value": list(self.value_limits),
-                "policy": {k: list(v) for k, v in self.policy_limits.items()},
-            },
-            "branches": list(self.branches),
-        }
-
-
 @dataclass(frozen=True)
 class _BranchData:
     """Cost derivatives on one branch at (th0, u): everything Eqs. (12)-(13) need."""

@@ -30,8 +30,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import minimize_scalar
 
+from biped_opt.control.solve import GRID_POINTS, XATOL, refine_minimum
 from biped_opt.errors import InvalidInputError, InvalidParameterError
 from biped_opt.hybrid import simulate, simulate_batch
 from biped_opt.hybrid.simulate import INPUT_NAMES
@@ -39,7 +39,6 @@ from biped_opt.hybrid.trajectory import Trajectory
 from biped_opt.maneuvers import check_theta0
 from biped_opt.model.modes import ContactMode
 from biped_opt.model.params import BipedParams
-from biped_opt.nonsmooth import locate_switch
 from biped_opt.optimal.problems import INPUT_MODES, OptimalControlProblem
 
 __all__ = [
@@ -54,20 +53,6 @@ __all__ = [
 ]
 
 Array = npt.NDArray[np.float64]
-
-#: grid points of the global bracketing stage (spacing 1/64 of the bound interval)
-GRID_POINTS = 65
-#: absolute tolerance handed to minimize_scalar(method="bounded")
-XATOL = 1e-10
-#: a switch of mode order inside the decision interval is located to this width
-SWITCH_TOL = 1e-12
-#: the simulated cost is accurate to ~1e-14: a polished point may be this much worse
-COST_NOISE = 1e-14
-#: optima within this many polish steps of a bound get the bound (KKT) test
-BOUND_ZONE = 10
-#: stencil step of the final Newton polish, relative to the bound interval
-POLISH_STEP = 5e-4
-
 
 def branch_label(modes: Sequence[ContactMode] | None, ok: bool = True, status: str = "") -> str:
     """The mode order as text, e.g. ``"AIR->LEFT->GROUND"``; failed simulations are labelled."""
@@ -205,123 +190,6 @@ def _active_of(problem: OptimalControlProblem, th0: float, label: str) -> str | 
             "the outcome; only problems with one acting decision per th0 are supported"
         )
     return active[0] if active else None
-
-
-def _polish(
-    run: Callable[[float], tuple[float, str, Trajectory]],
-    u0: float,
-    c0: float,
-    label: str,
-    a: float,
-    b: float,
-    step: float,
-) -> tuple[float, float]:
-    """One Newton step on c'(u) = 0 with fourth-order central differences of step ``step``.
-
-    Brent on cost values alone stops where the cost is flat to its noise (~1e-14), i.e. some
-    1e-7 from the minimiser; differences over a wide stencil (noise / step ~ 1e-11) locate it
-    to ~1e-10. Skipped (the Brent point kept) unless the stencil stays on the branch and the
-    new point is no worse.
-    """
-    if not (a <= u0 - 2 * step and u0 + 2 * step <= b):
-        return u0, c0
-    c = {}
-    for m in (-2, -1, 1, 2):
-        cost, lab, _ = run(u0 + m * step)
-        if lab != label or not math.isfinite(cost):
-            return u0, c0
-        c[m] = cost
-    grad = (8.0 * (c[1] - c[-1]) - (c[2] - c[-2])) / (12.0 * step)
-    curv = (-c[2] + 16.0 * c[1] - 30.0 * c0 + 16.0 * c[-1] - c[-2]) / (12.0 * step**2)
-    if not curv > 0.0:
-        return u0, c0
-    u1 = u0 - grad / curv
-    if abs(u1 - u0) > step:
-        return u0, c0
-    c1, lab, _ = run(u1)
-    if lab == label and c1 <= c0 + COST_NOISE * max(1.0, abs(c0)):
-        return u1, c1
-    return u0, c0
-
-
-def _inward_slope(
-    run: Callable[[float], tuple[float, str, Trajectory]],
-    end: float,
-    inward: float,
-    step: float,
-    label: str,
-) -> float | None:
-    """d c / d u at the bound ``end`` along the inward direction, from a one-sided stencil.
-
-    A quartic through c(end + inward m step), m = 0..4, gives the slope to ~noise / step; a
-    non-negative slope means the bound holds the minimum. None if the stencil leaves the branch.
-    """
-    offsets = inward * step * np.arange(5)
-    values = []
-    for off in offsets:
-        cost, lab, _ = run(end + off)
-        if lab != label or not math.isfinite(cost):
-            return None
-        values.append(cost)
-    coeffs = np.polynomial.polynomial.polyfit(offsets, values, 4)
-    return float(inward * coeffs[1])
-
-
-def refine_minimum(
-    run: Callable[[float], tuple[float, str, object]],
-    us: Array,
-    costs: Array,
-    labels: Sequence[str],
-    k: int,
-    bounds: tuple[float, float],
-    xatol: float,
-) -> tuple[float, float, int, tuple[float, float]]:
-    """Refine the grid local minimum k of a one-decision cost ``run(u) -> (cost, label, ...)``
-    sampled at ``us``: (decision, cost, Brent iterations, the bracket searched).
-
-    The bracket is the neighbouring grid points on the same branch, else the located switch;
-    bounded Brent inside it, a Newton polish, the bounds themselves (Brent never evaluates an
-    interval's ends), and near a bound the Karush-Kuhn-Tucker test on the inward slope
-    (comparing cost values cannot decide it: the cost is flat there).
-    """
-    lo_b, hi_b = bounds
-    n = us.size
-
-    def label_of(u: float) -> str:
-        return run(u)[1]
-
-    if k == 0:
-        a = us[0]
-    elif labels[k - 1] == labels[k]:
-        a = us[k - 1]
-    else:
-        a = locate_switch(label_of, float(us[k]), float(us[k - 1]), tol=SWITCH_TOL)[0]
-    if k == n - 1:
-        b = us[-1]
-    elif labels[k + 1] == labels[k]:
-        b = us[k + 1]
-    else:
-        b = locate_switch(label_of, float(us[k]), float(us[k + 1]), tol=SWITCH_TOL)[0]
-    best_u, best_c, nit = float(us[k]), float(costs[k]), 0
-    step = POLISH_STEP * (hi_b - lo_b)
-    if b > a:
-        res = minimize_scalar(lambda u: run(u)[0], bounds=(a, b), method="bounded",
-                              options={"xatol": xatol})
-        nit = int(res.nit)
-        if res.fun <= best_c:
-            best_u, best_c = float(res.x), float(res.fun)
-        best_u, best_c = _polish(run, best_u, best_c, labels[k], a, b, step)
-    for end in (a, b):
-        if end in (lo_b, hi_b) and end != us[k]:
-            c_end = run(end)[0]
-            if c_end <= best_c:
-                best_u, best_c = float(end), c_end
-    for end, inward in ((lo_b, 1.0), (hi_b, -1.0)):
-        if a <= end <= b and abs(best_u - end) <= BOUND_ZONE * step:
-            slope = _inward_slope(run, end, inward, step, labels[k])
-            if slope is not None and slope >= 0.0:
-                best_u, best_c = float(end), run(end)[0]
-    return best_u, best_c, nit, (float(a), float(b))
 
 
 def _refine(

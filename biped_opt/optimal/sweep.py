@@ -12,11 +12,7 @@ frozen values of arrays with :meth:`to_json`; a small progress bar on stderr is 
 from __future__ import annotations
 
 import json
-import math
-import sys
-import time
 from dataclasses import dataclass, field
-from typing import TextIO
 
 import numpy as np
 import numpy.typing as npt
@@ -30,8 +26,11 @@ from biped_opt.maneuvers import check_theta0, spec
 from biped_opt.model.params import BipedParams
 from biped_opt.optimal.problems import OptimalControlProblem
 from biped_opt.optimal.solve import OptimalResult, branch_label, optimal_sweep
+from biped_opt.progress import Progress
+from biped_opt.progress import bar as _bar
 
 __all__ = [
+    "Progress",
     "Progress",
     "sweep_grid",
     "FixedSweep",
@@ -41,42 +40,6 @@ __all__ = [
 ]
 
 Array = npt.NDArray[np.float64]
-
-
-class Progress:
-    """A one-line text progress bar, redrawn in place on ``stream`` (stderr by default).
-
-    Disabled bars do nothing, so library code can always call :meth:`update`.
-    """
-
-    def __init__(self, total: int, label: str = "", *, stream: TextIO | None = None,
-                 enabled: bool = True, width: int = 30, min_interval: float = 0.1) -> None:
-        self.total = max(int(total), 1)
-        self.label = label
-        self.stream = stream if stream is not None else sys.stderr
-        self.enabled = enabled
-        self.width = width
-        self.min_interval = min_interval
-        self._last = -math.inf
-        self._start = time.perf_counter()
-
-    def update(self, done: int, total: int | None = None) -> None:
-        if total is not None:
-            self.total = max(int(total), 1)
-        if not self.enabled:
-            return
-        now = time.perf_counter()
-        if done < self.total and now - self._last < self.min_interval:
-            return
-        self._last = now
-        filled = int(self.width * min(done, self.total) / self.total)
-        bar = "#" * filled + "." * (self.width - filled)
-        self.stream.write(
-            f"\r{self.label} [{bar}] {done}/{self.total} {now - self._start:5.1f}s"
-        )
-        if done >= self.total:
-            self.stream.write("\n")
-        self.stream.flush()
 
 
 def sweep_grid(
@@ -254,9 +217,3 @@ def sweep_optimal(
     bar = _bar(progress, th.size, f"{problem.name} optimal sweep")
     results = optimal_sweep(problem, th, callback=bar.update, **solver)  # type: ignore[arg-type]
     return OptimalSweep.from_results(problem, results)
-
-
-def _bar(progress: bool | Progress, total: int, label: str) -> Progress:
-    if isinstance(progress, Progress):
-        return progress
-    return Progress(total, label, enabled=bool(progress))

@@ -1,4 +1,4 @@
-"""The gradient study's figure, one per problem (:mod:`biped_opt.gradients`).
+"""The gradient study's figure, one per problem (:mod:`biped_opt.analysis.gradients`).
 
 Three panels: the cost along one decision at the estimator study's s with its switches and the
 Gaussian-smoothed costs J_sigma; the bias of each estimator against the gradient of J_sigma,
@@ -35,7 +35,7 @@ def smoothed_curve(u: np.ndarray, cost: np.ndarray, sigma: float) -> np.ndarray:
 
 
 def gradient_figure(study: Any, name: str, path: str | Path) -> Path:
-    """The figure of problem ``name`` of a :class:`biped_opt.gradients.GradientStudy`."""
+    """The figure of problem ``name`` of a :class:`biped_opt.analysis.gradients.GradientStudy`."""
     curve = study.curves[name]
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
     ax = axes[0]

@@ -1,7 +1,7 @@
 """The count of smooth pieces against the paper's (n!)^k (Sec. V-B), drawn from the records of
-:func:`biped_opt.pieces.count_pieces` (any records with ``n``, ``k``, ``count`` and
+:func:`biped_opt.analysis.pieces.count_pieces` (any records with ``n``, ``k``, ``count`` and
 ``velocities``) and, optionally, the number of distinct linear pieces of the Bouligand derivative
-per n (:func:`biped_opt.pieces.derivative_pieces`)."""
+per n (:func:`biped_opt.analysis.pieces.derivative_pieces`)."""
 
 from __future__ import annotations
 

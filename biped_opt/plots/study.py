@@ -1,4 +1,5 @@
-"""Figures of a parameter study's table (:mod:`biped_opt.study`): where the nonsmoothness persists.
+"""Figures of a parameter study's table (:mod:`biped_opt.studies.study`): where the
+nonsmoothness persists.
 
 - :func:`size_map`: over two varied parameters, the size of one kind of nonsmooth point of one
   quantity near a chosen s (the jump of the liftoff outcome at 0, the kink of the touchdown

@@ -44,16 +44,19 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import numpy.typing as npt  # noqa: E402
 
+from biped_opt.analysis.nonsmooth import find_nonsmooth, find_nonsmooth_optimal  # noqa: E402
+from biped_opt.analysis.switches import NonsmoothReport  # noqa: E402
+from biped_opt.control.problems import Problem  # noqa: E402
 from biped_opt.errors import InvalidInputError  # noqa: E402
-from biped_opt.fixed_sweep import theta_grid  # noqa: E402
 from biped_opt.model.modes import ContactMode  # noqa: E402
-from biped_opt.nonsmooth import OneSided, one_sided  # noqa: E402
-from biped_opt.optimal.nonsmooth import NonsmoothReport  # noqa: E402
+from biped_opt.piecewise import (  # noqa: E402
+    OneSided,
+    one_sided,
+    theta_grid,  # noqa: E402
+)
 from biped_opt.plots.figures import MODE_COLOURS, _finish  # noqa: E402
-from biped_opt.systems.compiled import CompiledSystem  # noqa: E402
+from biped_opt.simulation.compiled import CompiledSystem  # noqa: E402
 from biped_opt.systems.derive import mode_name  # noqa: E402
-from biped_opt.systems.nonsmooth import find_nonsmooth, find_nonsmooth_optimal  # noqa: E402
-from biped_opt.systems.problems import Problem  # noqa: E402
 
 __all__ = [
     "Mark",
@@ -337,7 +340,7 @@ def fixed_input_sweep(compiled: CompiledSystem, maneuver: str, grid: npt.ArrayLi
                       inputs: Any = None, *, progress: bool = False
                       ) -> tuple[tuple[float, ...], Array, NonsmoothReport]:
     """The inputs (checked, in declared order), the outcome along ``grid`` (one batch) and its
-    nonsmooth report (:func:`biped_opt.systems.nonsmooth.find_nonsmooth`: every change of the
+    nonsmooth report (:func:`biped_opt.analysis.nonsmooth.find_nonsmooth`: every change of the
     mode sequence located to 1e-10 in s and classified from extrapolated one-sided limits and
     slopes)."""
     s = np.asarray(grid, dtype=np.float64)
@@ -464,10 +467,10 @@ def optimal_figures(out: str | Path, problem: Problem, grid: npt.ArrayLike, *,
                     progress: bool = False) -> SystemFigures:
     """The optimal control of ``problem`` over ``grid``: ``outcome.png`` (the optimal outcome)
     and ``policy_value.png`` (policy and value), each with the nonsmooth points of
-    :func:`biped_opt.systems.nonsmooth.find_nonsmooth_optimal` on its curves, captions.txt and
+    :func:`biped_opt.analysis.nonsmooth.find_nonsmooth_optimal` on its curves, captions.txt and
     data.json in ``out``."""
-    from biped_opt.optimal.sweep import _bar
-    from biped_opt.systems.optimal import compiled_for, optimal_sweep, policy_table
+    from biped_opt.control.solve import compiled_for, optimal_sweep, policy_table
+    from biped_opt.progress import bar as _bar
 
     out = Path(out)
     s = np.asarray(grid, dtype=np.float64)
@@ -579,7 +582,7 @@ def control_experiment_data(*, half_width: float = 0.02, num: int = 801,
 
 def grid_one_sided(s: Array, y: Array, x: float, side: int, *, levels: int = 5) -> OneSided:
     """One-sided limit and slope at the grid point x from the grid's own values: the
-    polynomial extrapolation of :func:`biped_opt.nonsmooth.one_sided` on the ladder of grid
+    polynomial extrapolation of :func:`biped_opt.piecewise.one_sided` on the ladder of grid
     points x + side 2^k h, h the spacing, k = levels-1 .. 0 (y at x itself is never used)."""
     k = int(np.flatnonzero(s == x)[0])
     spacing = float(s[k + side] - s[k]) * side

@@ -239,7 +239,7 @@ _RECORDS: dict[str, tuple[dict[str, Any], tuple[str, ...]]] = {
     SYSTEM_METADATA: ({
         **{k: _text for k in _PLAIN}, **{k: _names for k in _NAME_LISTS},
         **{k: _numbers for k in _NUMBER_LISTS}}, (*_PLAIN, *_NAME_LISTS, "parameter_values")),
-    "biped_opt.study": ({"study": _study}, ("study",)),
+    "biped_opt.studies.study": ({"study": _study}, ("study",)),
 }
 
 

@@ -24,9 +24,9 @@ import yaml
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
-import biped_opt
 from biped_opt.record.reader import RawRecording, read_raw
 from biped_opt.record.writer import RecordError, SweepWriter, sealed
+from biped_opt.version import __version__
 
 __all__ = ["METADATA_VERSION", "Rosbag2SweepWriter", "export_rosbag2", "metadata_yaml"]
 
@@ -131,7 +131,7 @@ def export_rosbag2(recording: str | Path | RawRecording, directory: str | Path) 
     mcap_path = out / f"{out.name}_0.mcap"
     with open(mcap_path, "wb") as stream:
         writer = Writer(stream, compression=CompressionType.ZSTD)
-        writer.start(profile="ros2", library=f"biped_opt {biped_opt.__version__}")
+        writer.start(profile="ros2", library=f"biped_opt {__version__}")
         ids: dict[str, int] = {}
         schema_ids: dict[str, int] = {}
         for topic, ch in raw.channels.items():

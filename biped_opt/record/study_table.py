@@ -3,7 +3,8 @@
 The table is CSV (what pandas' ``read_csv`` and polars' ``read_csv`` take with no extra
 dependency; Parquet would add pyarrow, ~100 MB, for tables of a few thousand rows): one row per
 parameter point and nonsmooth point, columns ``point``, the varied parameters, then
-:data:`biped_opt.study.COLUMNS`. Next to it, ``<table>.study.json`` holds the study, so that an
+:data:`~biped_opt.studies.study.COLUMNS`.
+Next to it, ``<table>.study.json`` holds the study, so that an
 interrupted run continues where it stopped: the rows of a parameter point are appended in one
 write and flushed; on resume the points whose rows are all there are kept, anything torn (a half
 line, a point with missing rows) is dropped and recomputed, and no point appears twice.
@@ -32,7 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from biped_opt.errors import InvalidInputError
-from biped_opt.study import COLUMNS, Study, StudyRow, evaluate_point
+from biped_opt.studies.study import COLUMNS, Study, StudyRow, evaluate_point
 
 __all__ = ["run_study", "read_table", "StudySummary", "StudyTable", "spec_path",
            "write_study_mcap"]
@@ -341,7 +342,7 @@ def _run(table: StudyTable, workers: int, progress: Callable[[int, int], None] |
 def write_study_mcap(study: Study, table: Path, output: Path) -> int:
     """The complete rows of the table at ``table`` as ``/biped/study`` StudyRow messages in an
     MCAP file (ROS 2 profile, like the sweeps; log time = row number in point order), the study
-    in a ``biped_opt.study`` metadata record. Returns the number of rows written."""
+    in a ``biped_opt.studies.study`` metadata record. Returns the number of rows written."""
     from biped_opt.record.writer import STUDY_TOPICS, SweepWriter
 
     rows = sorted(read_table(table, study), key=lambda r: int(r["point"]))
@@ -351,7 +352,7 @@ def write_study_mcap(study: Study, table: Path, output: Path) -> int:
         return math.nan if text == "" else float(text)
 
     with SweepWriter(output, metadata={"study": json.dumps(study.as_dict())},
-                     topics=STUDY_TOPICS, metadata_name="biped_opt.study") as writer:
+                     topics=STUDY_TOPICS, metadata_name="biped_opt.studies.study") as writer:
         for k, r in enumerate(rows):
             writer.write("/biped/study", {
                 "point": int(r["point"]), "parameter_names": names,

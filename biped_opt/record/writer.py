@@ -45,10 +45,10 @@ import numpy as np
 import numpy.typing as npt
 from mcap.writer import CompressionType, Writer
 
-import biped_opt
 from biped_opt.errors import BipedOptError
 from biped_opt.record.cdr import FixedLayout, compile_layout, numpy_dtype
 from biped_opt.ros.interfaces import load_interfaces
+from biped_opt.version import __version__
 
 __all__ = [
     "RecordError",
@@ -180,7 +180,7 @@ class SweepWriter:
         # (the metadata record has no CRC of its own); zlib's CRC costs ~1 ms per MB
         self._writer = Writer(self._stream, chunk_size=chunk_size, compression=kind,
                               enable_data_crcs=True)
-        self._writer.start(profile="ros2", library=f"biped_opt {biped_opt.__version__}")
+        self._writer.start(profile="ros2", library=f"biped_opt {__version__}")
         self.typestore = load_interfaces().typestore
         self._channels: dict[str, int] = {}
         self._layouts: dict[tuple[Any, ...], FixedLayout] = {}
@@ -337,7 +337,8 @@ class SweepWriter:
         """All samples of one trajectory of the recording's system on ``/biped/system_state``
         in one vectorised pass.
 
-        ``samples`` has the columns of :attr:`biped_opt.systems.compiled.SystemTrajectory.samples`
+        ``samples`` has the columns of
+        :attr:`biped_opt.simulation.compiled.SystemTrajectory.samples`
         (t, q (d), qdot (d), mode, lambda (n)); ``ndof`` is d. Header stamps and log times are
         ``stamp_offset_ns`` + t; the frame id is the system's name. Returns the number written.
         """

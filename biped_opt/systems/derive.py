@@ -6,7 +6,7 @@ Jacobian Da(q) and the velocity term (d/dt Da)(q, q') q' of the constraints' acc
 check names the system (and its file), the item and what is wrong.
 
 :class:`NumericSystem` evaluates a derived system with NumPy (SymPy's ``lambdify``) at given
-parameter values. It is a :class:`~biped_opt.model.system.MechanicalSystem`, so the generic
+parameter values. It is a :class:`~biped_opt.systems.mechanics.MechanicalSystem`, so the generic
 Eq. (1) routines (reaction forces, accelerations, impact map) apply to it directly; it is the
 reference the compiled kernels are checked against, not the fast path.
 """
@@ -21,8 +21,8 @@ import numpy as np
 import numpy.typing as npt
 import sympy as sp
 
-from biped_opt.model.system import MechanicalSystem
 from biped_opt.systems.description import ManeuverDescription, System, SystemDescriptionError
+from biped_opt.systems.mechanics import MechanicalSystem
 
 __all__ = ["DerivedSystem", "DerivedManeuver", "NumericSystem", "derive", "mode_mask",
            "mode_name"]

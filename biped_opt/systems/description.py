@@ -154,7 +154,7 @@ class System:
         self.restitution: Any = restitution
         self.constraints: dict[str, Any] = {}
         self.maneuvers: dict[str, ManeuverDescription] = {}
-        #: optimal-control problems by name (see :mod:`biped_opt.systems.problems`)
+        #: optimal-control problems by name (see :mod:`biped_opt.control.problems`)
         self.problems: dict[str, dict[str, Any]] = {}
         self.source: str | None = None  #: the file a system was loaded from, for messages
 
@@ -207,7 +207,7 @@ class System:
         outcome_weight (outcome - target)^2 + sum W (y_k(t_f) - r_k)^2 + sum alpha_i u_i^2 over
         ``decisions`` (input -> (lower, upper)); ``weights`` are the alpha_i, ``fixed`` the other
         inputs, ``final_state`` maps coordinates or velocities to (W, r). Checked when used
-        (:func:`biped_opt.systems.problems.get_problem`)."""
+        (:func:`biped_opt.control.problems.get_problem`)."""
         _check_name("problem name", name, self.name)
         if name in self.problems:
             raise SystemDescriptionError(f"{self.name}: problem {name!r} is given twice")

@@ -187,8 +187,8 @@ def test_walker_comparator_with_two_legs_is_the_biped_comparator():
 
 @pytest.mark.parametrize("law", ["coupled", "decoupled"])
 def test_generated_walker_agrees_with_its_comparator(law):
+    from biped_opt.simulation.compiled import compile_system
     from biped_opt.systems import walker
-    from biped_opt.systems.compiled import compile_system
 
     generated = compile_system(walker(3, law))
     model = walker_model.Walker(3, law)

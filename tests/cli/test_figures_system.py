@@ -10,9 +10,9 @@ import json
 import numpy as np
 import pytest
 
-from biped_opt.systems.compiled import CompiledSystem
-from biped_opt.systems.optimal import optimal_policy
-from biped_opt.systems.problems import get_problem
+from biped_opt.control.problems import get_problem
+from biped_opt.control.solve import optimal_policy
+from biped_opt.simulation.compiled import CompiledSystem
 from tests.cli.test_systems_cmd import _run
 
 

@@ -7,8 +7,8 @@ import json
 
 import pytest
 
-from biped_opt.systems.optimal import optimal_policy
-from biped_opt.systems.problems import get_problem
+from biped_opt.control.problems import get_problem
+from biped_opt.control.solve import optimal_policy
 from tests.cli.test_systems_cmd import _run
 
 

@@ -7,7 +7,7 @@ import pytest
 
 from biped_opt.model.biped import Biped, apply_impact, dynamics
 from biped_opt.model.params import BipedParams
-from biped_opt.model.system import (
+from biped_opt.systems.mechanics import (
     MechanicalSystem,
     accelerations,
     active_constraints,

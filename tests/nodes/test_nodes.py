@@ -18,11 +18,11 @@ import pytest
 from cyclonedds._clayer import ddspy_write
 
 from biped_opt import ros
-from biped_opt.fixed_sweep import theta_grid
 from biped_opt.hybrid import simulate
 from biped_opt.nodes.graph import Graph
 from biped_opt.nodes.recorder import SweepRequest
 from biped_opt.optimal import get_problem, optimal_policy
+from biped_opt.piecewise import theta_grid
 from biped_opt.record import read_recording
 
 NS = 1_000_000_000

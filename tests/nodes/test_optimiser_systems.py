@@ -13,18 +13,18 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from biped_opt import ros
+from biped_opt.control.problems import get_problem
+from biped_opt.control.solve import optimal_policy
+from biped_opt.control.theorem1 import value_slopes
 from biped_opt.errors import BipedOptError
-from biped_opt.fixed_sweep import theta_grid
 from biped_opt.nodes.compiler import BUSY
 from biped_opt.nodes.graph import Graph
 from biped_opt.nodes.recorder import SweepRequest
 from biped_opt.optimal import get_problem as biped_problem
 from biped_opt.optimal import optimal_policy as biped_optimal_policy
+from biped_opt.piecewise import theta_grid
 from biped_opt.record.report import load_sweep
-from biped_opt.systems.compiled import CompiledSystem
-from biped_opt.systems.optimal import optimal_policy
-from biped_opt.systems.optimal_derivatives import value_slopes
-from biped_opt.systems.problems import get_problem
+from biped_opt.simulation.compiled import CompiledSystem
 from tests.conftest import unique_domain_id
 
 from .test_nodes import call

@@ -13,7 +13,7 @@ from biped_opt import ros
 from biped_opt.nodes.coordinator import StudyCoordinator, StudyFailedError
 from biped_opt.nodes.optimiser import OptimiserNode
 from biped_opt.record.study_table import read_table, run_study
-from biped_opt.study import Study
+from biped_opt.studies.study import Study
 from tests.conftest import unique_domain_id
 
 #: 16 points of the rocking bar's drop at fixed inputs, ~0.1 s each

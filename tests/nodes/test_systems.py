@@ -17,12 +17,12 @@ from mcap_ros2.decoder import DecoderFactory
 
 from biped_opt import ros
 from biped_opt.errors import BipedOptError
-from biped_opt.fixed_sweep import theta_grid
 from biped_opt.nodes import convert
 from biped_opt.nodes.graph import Graph
 from biped_opt.nodes.recorder import SweepRequest
 from biped_opt.nodes.simulator import SYSTEM_INFO_QOS
-from biped_opt.systems.compiled import CompiledSystem
+from biped_opt.piecewise import theta_grid
+from biped_opt.simulation.compiled import CompiledSystem
 
 from .test_nodes import call
 

@@ -28,7 +28,6 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from biped_opt.fixed_sweep import theta_grid
 from biped_opt.maneuvers import spec
 from biped_opt.model.params import BipedParams
 from biped_opt.optimal import (
@@ -39,6 +38,7 @@ from biped_opt.optimal import (
 )
 from biped_opt.optimal.nonsmooth import LOCATE_TOL, find_nonsmooth_fixed, find_nonsmooth_optimal
 from biped_opt.optimal.sweep import sweep_grid
+from biped_opt.piecewise import theta_grid
 
 # --- grids ---------------------------------------------------------------------------------------
 RANGES = [(-0.25, 0.25), (-0.05, 0.2), (0.01, 0.2), (-0.2, -0.01), (0.0, 0.2), (-0.2, 0.0),

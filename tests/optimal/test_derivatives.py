@@ -1,7 +1,7 @@
 """One-sided derivatives through events, and the policy/value B-derivatives of Theorem 1.
 
 Independent checks: Richardson-extrapolated one-sided finite differences of the simulator's
-outcome (:func:`biped_opt.nonsmooth.one_sided`) and of the optimal solver's policy and value,
+outcome (:func:`biped_opt.piecewise.one_sided`) and of the optimal solver's policy and value,
 MODEL.md's reference slopes and limits, and the biped's mirror symmetry.
 
 Tolerances are computed (:mod:`tests.extrapolated`): SAFETY times the reference's error
@@ -22,7 +22,6 @@ from biped_opt.errors import InvalidInputError, SimulationError
 from biped_opt.hybrid import simulate
 from biped_opt.hybrid.simulate import DEFAULT_OPTIONS
 from biped_opt.model.modes import ContactMode
-from biped_opt.nonsmooth import locate_switch
 from biped_opt.optimal import get_problem, optimal_policy
 from biped_opt.optimal.derivatives import (
     DEFAULT_VARIATIONAL,
@@ -32,6 +31,7 @@ from biped_opt.optimal.derivatives import (
     outcome_sensitivity,
     saltation_matrix,
 )
+from biped_opt.piecewise import locate_switch
 from tests.extrapolated import SAFETY, extrapolated, relative_noise
 
 TD_U = (2.0, 0.5, 0.0)

@@ -10,7 +10,8 @@ import pytest
 
 from biped_opt.errors import InvalidInputError
 from biped_opt.optimal import liftoff_problem, optimal_policy
-from biped_opt.optimal.sweep import Progress, sweep_fixed, sweep_grid, sweep_optimal
+from biped_opt.optimal.sweep import sweep_fixed, sweep_grid, sweep_optimal
+from biped_opt.progress import Progress
 from tests.conftest import REFERENCE
 
 

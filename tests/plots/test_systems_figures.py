@@ -22,7 +22,7 @@ from biped_opt.plots.systems import (
     outcome_figure,
     policy_value_figure,
 )
-from biped_opt.systems.compiled import CompiledSystem
+from biped_opt.simulation.compiled import CompiledSystem
 
 DPI = 150  # what every figure is saved at
 

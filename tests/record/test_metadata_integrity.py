@@ -22,12 +22,12 @@ import biped_opt.record.report
 from biped_opt import simulate
 from biped_opt.cli.info_cmd import describe
 from biped_opt.cli.main import main
-from biped_opt.fixed_sweep import theta_grid
 from biped_opt.nodes import convert
 from biped_opt.optimal import get_problem
+from biped_opt.piecewise import theta_grid
 from biped_opt.record import SweepWriter, writer
 from biped_opt.record.reader import read_raw
-from biped_opt.systems.compiled import CompiledSystem
+from biped_opt.simulation.compiled import CompiledSystem
 
 NS = 1_000_000_000
 PREFIX = 9  # opcode and length in front of every record
@@ -234,7 +234,7 @@ def test_a_dropped_record_is_said_and_the_report_still_drawn(tmp_path, capsys, m
     ("biped_opt.sweep", {"problem": "[]"}, "no decisions"),
     ("biped_opt.sweep", {"manuever": "x"}, "unknown key 'manuever'"),
     ("biped_opt.system", {"system": "bar"}, "is missing"),
-    ("biped_opt.study", {"study": "[" * 100_000}, "not JSON"),
+    ("biped_opt.studies.study", {"study": "[" * 100_000}, "not JSON"),
 ])
 def test_a_record_that_fails_its_parse_is_left_out(tmp_path, name, pairs, why):
     path = tmp_path / "r.mcap"

@@ -24,7 +24,7 @@ from biped_opt.cli.main import main
 from biped_opt.errors import InvalidInputError
 from biped_opt.record import study_table
 from biped_opt.record.study_table import StudyTable, read_table, run_study, spec_path
-from biped_opt.study import Study
+from biped_opt.studies.study import Study
 
 BAR = {"system": "rocking_bar", "maneuver": "drop", "grid": {"gamma": [0.3, 0.5, 0.8]},
        "num": 61}

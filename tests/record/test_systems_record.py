@@ -12,14 +12,14 @@ import pytest
 from biped_opt import ros
 from biped_opt.cli.info_cmd import describe
 from biped_opt.cli.main import main
-from biped_opt.fixed_sweep import theta_grid
 from biped_opt.nodes import convert
 from biped_opt.nodes.simulator import SYSTEM_INFO_QOS
+from biped_opt.piecewise import theta_grid
 from biped_opt.record import SweepWriter, read_recording
 from biped_opt.record.reader import read_raw
 from biped_opt.record.replay import Player
 from biped_opt.record.report import load_sweep, report
-from biped_opt.systems.compiled import CompiledSystem
+from biped_opt.simulation.compiled import CompiledSystem
 
 NS = 1_000_000_000
 #: same kernel, float64 all the way: the numbers come back to the last bit (1e-12 allows
@@ -170,8 +170,8 @@ def test_optimal_sweep_of_a_system_through_the_cli(tmp_path, capsys, monkeypatch
     """``record --system walker3_coupled --optimal`` (the graph in-process): every SweepPoint
     equals the core's optimum at its s, ``info`` shows the problem, ``report`` finds the
     policy's kinks where the foot order changes at s = 0 (foot 3 first below, foot 1 above)."""
-    from biped_opt.systems.optimal import optimal_policy
-    from biped_opt.systems.problems import get_problem
+    from biped_opt.control.problems import get_problem
+    from biped_opt.control.solve import optimal_policy
 
     monkeypatch.setenv("ROS_DOMAIN_ID", str(domain_id))
     path = tmp_path / "w.mcap"

@@ -20,7 +20,7 @@ from bench.request_fuzz import (
     plant_files,
 )
 from biped_opt import ros
-from biped_opt.study import Study
+from biped_opt.studies.study import Study
 
 pytestmark = pytest.mark.skipif(ros.BACKEND != "dds", reason="the built-in backend's wire types")
 

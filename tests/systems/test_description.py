@@ -16,9 +16,9 @@ import sympy as sp
 from biped_opt.maneuvers import initial_state
 from biped_opt.model.biped import Biped
 from biped_opt.model.params import BipedParams
-from biped_opt.model.system import accelerations, impact_map, reaction_forces
 from biped_opt.systems import System, SystemDescriptionError, derive, walker
 from biped_opt.systems.library import LIBRARY, biped, rocking_bar
+from biped_opt.systems.mechanics import accelerations, impact_map, reaction_forces
 
 RNG = np.random.default_rng(12)
 
@@ -290,7 +290,7 @@ def test_the_code_printer_keeps_the_meaning_of_every_power():
     compared with SymPy's own lambdify to 1e-12 relative."""
     import math
 
-    from biped_opt.systems.codegen import _Printer
+    from biped_opt.codegen.render import _Printer
 
     x, y, w, m = sp.symbols("x y w m")
     printer = _Printer({"fully_qualified_modules": True})

@@ -34,8 +34,8 @@ def test_the_example_agrees_with_an_independent_integration(tmp_path):
     from SciPy's DOP853 on the NumPy evaluation (rtol 1e-12), to 1e-9."""
     from scipy.integrate import solve_ivp
 
+    from biped_opt.simulation.compiled import compile_system
     from biped_opt.systems import derive, load_system
-    from biped_opt.systems.compiled import compile_system
 
     (tmp_path / "hopper.py").write_text(_blocks()[0])
     system = load_system(str(tmp_path / "hopper.py"))

@@ -1,0 +1,5 @@
+"""Nonsmooth analysis: one-sided limits and switch location (:mod:`~biped_opt.piecewise`, below it),
+the engine that locates and classifies kinks and jumps along a sweep
+(:mod:`~biped_opt.analysis.switches`) and its drivers for any system
+(:mod:`~biped_opt.analysis.nonsmooth`), the (n!)^k pieces (:mod:`~biped_opt.analysis.pieces`) and
+gradient methods at kinks and jumps (:mod:`~biped_opt.analysis.gradients`)."""

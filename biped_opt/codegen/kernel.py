@@ -1,0 +1,721 @@
+"""The event-driven kernel of every generated system module (MODEL.md Sec. 3, SYSTEMS.md Sec. 1).
+
+:mod:`biped_opt.codegen.render` appends the code below the ``# --- kernel ---`` marker to each
+system's module, after the system's own functions (``vector_field``, ``reaction``, ``apply_impact``,
+``guard_value``, ``constraint_rates``, ``terminal_value``, ``outcome_value``, ``initial_state``)
+and its DOP853 step; those names, and ``NSTATE``, ``NCON``, ``NGUARDS``, ``WORKSPACE``,
+``TERM_AFTER_TOUCHDOWN``, ``FINAL_MODE``, ``INITIAL_MODE`` (and, imported there, ``Status``,
+``EVENT_CONTACT``, ``EVENT_TERMINAL``), are defined there, which is why this
+file is not imported itself (ruff's undefined-name check is off for it).
+
+The algorithm: an adaptive Dormand-Prince 8(5,3) integrator with its 7th-order dense output
+(Hairer, Norsett and Wanner, *Solving ODEs I*, Sec. II.10; the step is the unrolled code of
+:mod:`biped_opt.codegen.dop853`); guards monitored at the step ends and at every stage (a
+guard that dips below zero inside a step is not missed); event times as roots of the guard on the
+dense output (regula falsi with the Anderson-Bjorck modification, bracket < 1e-13 of the step:
+event times good to ~1e-12); contact guards within SIMULTANEOUS_TOL of zero and moving toward
+it flip together with the first (simultaneous events, MODEL.md Sec. 3), the terminal guard never
+(it is ordered by time); a constraint in the air whose rate shows a lowest point inside a step
+has that point checked; a flipped guard at ~0 stays disarmed until it is farther than
+REARM_TOL from zero, and is watched inside each step meanwhile (its flight's apex, dense-output
+probes), so that a bounce and a return within one step are two events; restitution: after an
+impact with gamma > 0 a constraint whose velocity Da_j q'+ is positive separates at once; the
+mode after an event is the one the complementarity conditions allow (``_consistent_mode``);
+an air constraint found below its surface at an event ends the run (CONSTRAINT_VIOLATED).
+docs/SYSTEMS.md, "Events", states these rules. Everything lives in flat float arrays; nothing
+allocates per step.
+
+Layouts: ``events[k] = [t, kind, touchdown_mask, liftoff_mask, mode_before, mode_after,
+y_before (2d), y_after (2d)]``; ``samples[k] = [t, y (2d), mode, lambda (n)]``.
+"""
+
+import math  # noqa: F401  (used by the generated module this text is appended to)
+
+import numba as nb  # noqa: F401
+import numpy as np  # noqa: F401
+
+# --- kernel ---
+
+OK = int(Status.OK)
+HORIZON = int(Status.HORIZON)
+MAX_EVENTS = int(Status.MAX_EVENTS)
+INCONSISTENT = int(Status.INCONSISTENT)
+APEX_IN_CONTACT = int(Status.APEX_IN_CONTACT)
+STEP_FAILURE = int(Status.STEP_FAILURE)
+CONSTRAINT_VIOLATED = int(Status.CONSTRAINT_VIOLATED)
+EVENT_WIDTH = 6 + 2 * NSTATE
+SAMPLE_WIDTH = 2 + NSTATE + NCON
+NLAM = max(NCON, 1)
+
+SIMULTANEOUS_TOL = 1e-9
+REARM_TOL = 1e-10
+#: a constraint in the air more than this below its surface at an event is a violation
+VIOLATION_TOL = 1e-9
+#: a constraint separates after an impact when its velocity exceeds this
+SEPARATION_TOL = 1e-12
+
+# --- DOP853 step control ---
+_SAFETY = 0.9
+_MIN_FACTOR = 0.2
+_MAX_FACTOR = 10.0
+_MAX_STEPS = 100_000
+#: a step size that is a guess rather than the controller's prediction (the first step, the
+#: first after an event) may be rejected by any factor its error estimate asks for, down to this
+_MIN_FACTOR_TRIAL = 1e-3
+#: after an event the controller's prediction comes from the previous mode's dynamics; starting
+#: the new mode at this fraction of it avoids most rejected first steps (~4% fewer evaluations
+#: on the biped's benchmark cases with these two settings)
+_EVENT_STEP_FRACTION = 0.7
+#: event roots are located to this fraction of the step: 1e-13 of a step is ~4e-15 in time,
+#: about where the guards' rounding noise leaves the root undetermined anyway
+_ROOT_XTOL = 1e-13
+
+CFG_T_END = 0
+CFG_MAX_EVENTS = 1
+CFG_RTOL = 2
+CFG_ATOL = 3
+CFG_H_MAX = 4
+CFG_SAMPLE_DT = 5
+#: 1: a touchdown happened before y0 (a trajectory continued from an event), so a terminal
+#: guard armed after the first touchdown is armed from the start
+CFG_TOUCHED_DOWN = 6
+CFG_SIZE = 7
+
+#: the y0 argument of simulate_maneuver that starts from the maneuver's own initial state at s
+#: (an array of NSTATE entries is the state to start from)
+FROM_S = np.empty(0)
+
+
+@nb.njit("void(f8[::1], i8, f8[::1], i8, f8[::1], f8[::1], i8, f8[::1], i8)", **HOT_PATH)
+def _field_at(p, mode, y, yo, u, out, off, lam, lo):
+    """The vector field as a call, for the paths outside the step (the start, events, samples,
+    the dense output's extra stages): each inlined copy of it costs compile time (~0.5 s for
+    the biped), a call only a few nanoseconds, and these run a few times per trajectory. The
+    explicit signature compiles it once: called with the literal offsets of the dense stages,
+    Numba would otherwise compile one specialisation per offset."""
+    vector_field(p, mode, y, yo, u, out, off, lam, lo)
+
+
+@nb.njit(**HOT_PATH)
+def _inverse_eighth_root(err):
+    return 1.0 / math.sqrt(math.sqrt(math.sqrt(err)))
+
+
+@nb.njit(**HOT_PATH)
+def _dense_eval(F, y, x, out):
+    """The 7th-order interpolant at fraction x of the step that started at y."""
+    xm = 1.0 - x
+    for i in range(y.shape[0]):
+        out[i] = y[i] + x * (F[0, i] + xm * (F[1, i] + x * (F[2, i] + xm * (
+            F[3, i] + x * (F[4, i] + xm * (F[5, i] + x * F[6, i]))))))
+
+
+@nb.njit(**HOT_PATH)
+def _guard_at(p, mode, u, code, y, i, lam):
+    """Guard i at a state y whose reactions are not known yet (lam: scratch)."""
+    if i < NCON and mode >> i & 1:
+        return reaction(p, mode, u, y, i)
+    return guard_value(p, mode, u, code, y, 0, lam, 0, i)
+
+
+@nb.njit(**HOT_PATH)
+def _guard_on_dense(p, mode, u, code, F, y, x, i, tmp, lam):
+    """Guard i on the interpolant at x: one component when the guard is one (a height in the
+    air, a velocity as terminal guard: see ``guard_component``), else the whole state."""
+    k, sign = guard_component(mode, code, i)
+    if k >= 0:
+        xm = 1.0 - x
+        return sign * (y[k] + x * (F[0, k] + xm * (F[1, k] + x * (F[2, k] + xm * (
+            F[3, k] + x * (F[4, k] + xm * (F[5, k] + x * F[6, k])))))))
+    _dense_eval(F, y, x, tmp)
+    return _guard_at(p, mode, u, code, tmp, i, lam)
+
+
+@nb.njit(**HOT_PATH)
+def _guard_rate(p, mode, u, code, y, f, i, tmp, lam):
+    """d/dt of guard i along the flow of ``mode`` at y (f = vector field at y), by a central
+    difference: only its sign is used, to decide which near-zero guards flip together."""
+    eps = 1e-6
+    for m in range(y.shape[0]):
+        tmp[m] = y[m] + eps * f[m]
+    g_plus = _guard_at(p, mode, u, code, tmp, i, lam)
+    for m in range(y.shape[0]):
+        tmp[m] = y[m] - eps * f[m]
+    g_minus = _guard_at(p, mode, u, code, tmp, i, lam)
+    return (g_plus - g_minus) / (2.0 * eps)
+
+
+@nb.njit(**HOT_PATH)
+def _root_on_dense(p, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, lam):
+    """Root in (xa, xb] of guard i on the dense output (ga > 0 >= gb), by regula falsi with
+    the Anderson-Bjorck modification, to a bracket below _ROOT_XTOL of the step. A guard that
+    is one state component (see ``guard_component``) iterates on that component's eight
+    coefficients, read once; only other guards interpolate the whole state per iterate."""
+    k, sign = guard_component(mode, code, i)
+    c = max(k, 0)  # (read but unused when the guard is not one component)
+    y0, f0, f1, f2, f3 = y[c], F[0, c], F[1, c], F[2, c], F[3, c]
+    f4, f5, f6 = F[4, c], F[5, c], F[6, c]
+    side = 0
+    for _ in range(200):
+        if xb - xa <= _ROOT_XTOL:
+            break
+        x = (xa * gb - xb * ga) / (gb - ga)
+        if not xa < x < xb:
+            x = 0.5 * (xa + xb)
+        x = min(max(x, xa + 0.5 * _ROOT_XTOL), xb - 0.5 * _ROOT_XTOL)
+        if k >= 0:
+            xm = 1.0 - x
+            gx = sign * (y0 + x * (f0 + xm * (f1 + x * (f2 + xm * (f3 + x * (f4 + xm * (
+                f5 + x * f6)))))))
+        else:
+            _dense_eval(F, y, x, tmp)
+            gx = _guard_at(p, mode, u, code, tmp, i, lam)
+        if gx > 0.0:
+            if side == 1:
+                m = 1.0 - gx / ga
+                gb *= m if m > 0.0 else 0.5
+            xa, ga = x, gx
+            side = 1
+        else:
+            if gx == 0.0:
+                xb = x
+                break
+            if side == -1:
+                m = 1.0 - gx / gb
+                ga *= m if m > 0.0 else 0.5
+            xb, gb = x, gx
+            side = -1
+    return xb
+
+
+@nb.njit(**HOT_PATH)
+def _rate_on_dense(p, F, y, x, j, tmp, rates):
+    """d/dt a_j along the step's interpolant at x: Da_j(q) q' of the interpolated state (the
+    velocities are part of the state, so no derivative of the interpolant is needed)."""
+    _dense_eval(F, y, x, tmp)
+    constraint_rates(p, tmp, 0, rates)
+    return rates[j]
+
+
+@nb.njit(**HOT_PATH)
+def _extremum(p, mode, u, code, F, y, j, ra, rb, above, tmp, lam, rates):
+    """Toward the extremum of constraint j's height a_j inside the step, where its rate on the
+    interpolant (ra at the start, rb at the end, of opposite signs) is zero: the apex of a
+    flight (ra > 0) or a lowest point (ra < 0). Regula falsi on the rate (Illinois), which
+    stops at the first iterate where a_j is above the ground (``above`` = 1.0) or at or below
+    it (``above`` = 0.0; a float: a literal bool would compile one copy per value): that is
+    all the caller needs, and a flight's rate is close to linear, so it mostly stops at the
+    first iterate. Returns (x, a_j(x)) of the last iterate (the
+    extremum to 1e-12 of the step when no iterate stopped it)."""
+    xa, xb = 0.0, 1.0
+    side = 0
+    x = 0.5
+    g = 0.0
+    for _ in range(100):
+        x = (xa * rb - xb * ra) / (rb - ra)
+        if not xa < x < xb:
+            x = 0.5 * (xa + xb)
+        g = _guard_on_dense(p, mode, u, code, F, y, x, j, tmp, lam)
+        if (g > 0.0) == (above > 0.0) or xb - xa <= 1e-12:
+            break
+        r = _rate_on_dense(p, F, y, x, j, tmp, rates)
+        if (r > 0.0) == (ra > 0.0):
+            if side == 1:
+                rb *= 0.5
+            xa, ra = x, r
+            side = 1
+        else:
+            if side == -1:
+                ra *= 0.5
+            xb, rb = x, r
+            side = -1
+    return x, g
+
+
+#: dense-output probes per searched part of a step (see _first_probe): one in every eighth of
+#: the part before a stage probe's sign change, or of the part a constraint whose guard was
+#: just reset is watched in (see _separation_point)
+_PROBES = 8
+
+
+@nb.njit(**HOT_PATH)
+def _first_probe(p, mode, u, code, F, y, i, xa, xb, last, above, tmp, lam):
+    """The first of the points xa + (xb - xa) m / _PROBES, m = 1 .. last, where guard i on the
+    interpolant is above zero (``above`` = 1.0) or at or below it (``above`` = 0.0; a float,
+    as in _extremum): (x, g there), or (-1.0, 0.0) when none is."""
+    for m in range(1, last + 1):
+        x = xa + (xb - xa) * m / _PROBES
+        g = _guard_on_dense(p, mode, u, code, F, y, x, i, tmp, lam)
+        if (g > 0.0) == (above > 0.0):
+            return x, g
+    return -1.0, 0.0
+
+
+@nb.njit(**HOT_PATH)
+def _separation_point(p, mode, u, code, F, y, j, r0, r1, x_end, tmp, lam, rates):
+    """Where in [0, x_end) of the step constraint j, disarmed at ~0 after an event (a bounce, a
+    liftoff, a foot that left the ground at once), is above the ground: at the start if it is
+    above there and coming down (a flight that began in an earlier step); near the apex of its
+    flight when its rate went from separating (r0 > 0) to approaching (r1 < 0); else at the
+    first of _PROBES - 1 probes with a_j > 0. -1.0 when a_j never rose above 0 (it went the
+    wrong way, or the flight is shorter than the guard's rounding)."""
+    if r0 < 0.0 and _guard_on_dense(p, mode, u, code, F, y, 0.0, j, tmp, lam) > 0.0:
+        return 0.0
+    if r0 > 0.0 and r1 < 0.0:
+        x, g = _extremum(p, mode, u, code, F, y, j, r0, r1, 1.0, tmp, lam, rates)
+        if g > 0.0 and x < x_end:
+            return x
+    return _first_probe(p, mode, u, code, F, y, j, 0.0, x_end, _PROBES - 1, 1.0, tmp, lam)[0]
+
+
+@nb.njit(**HOT_PATH)
+def _separation_rate(p, mode, u, y, f, j, tmp, rates):
+    """d/dt (Da_j q') along the flow of ``mode`` (f: the vector field there): a_j'', the
+    separation acceleration of a constraint at rest on its surface, by a central difference
+    (only its sign is used)."""
+    eps = 1e-6
+    for m in range(y.shape[0]):
+        tmp[m] = y[m] + eps * f[m]
+    constraint_rates(p, tmp, 0, rates)
+    r_plus = rates[j]
+    for m in range(y.shape[0]):
+        tmp[m] = y[m] - eps * f[m]
+    constraint_rates(p, tmp, 0, rates)
+    return (r_plus - rates[j]) / (2.0 * eps)
+
+
+#: complementarity is checked to this tolerance (reactions, separation accelerations) when a
+#: mode other than the one the event suggests is tried: the sign of a zero is rounding
+_COMPLEMENTARITY_TOL = 1e-10
+
+
+@nb.njit(**HOT_PATH)
+def _consistent_mode(p, mode, u, y, f, lam, tmp, tmp2, rates):
+    """The contact mode that satisfies the complementarity conditions at y, chosen among the
+    subsets of ``mode`` (the constraints at rest on their surface after the event's resets):
+    every active constraint with lambda_j >= 0, every released one with a separation
+    acceleration a_j'' >= 0. Subsets are tried from the largest down (2^n candidates; the
+    Schur complement Da M^-1 Da^T is positive definite, so at most one fits). Returns the mode
+    (f and lam then hold its vector field and reactions), or -1 when none fits."""
+    for size in range(NCON, -1, -1):
+        for cand in range(1 << NCON):
+            if cand & ~mode:
+                continue
+            bits = 0
+            for j in range(NCON):
+                bits += cand >> j & 1
+            if bits != size:
+                continue
+            _field_at(p, cand, y, 0, u, f, 0, lam, 0)
+            ok = True
+            for j in range(NCON):
+                if not mode >> j & 1:
+                    continue
+                if cand >> j & 1:
+                    ok = lam[j] >= -_COMPLEMENTARITY_TOL
+                else:
+                    ok = _separation_rate(p, cand, u, y, f, j, tmp2, rates) \
+                        >= -_COMPLEMENTARITY_TOL
+                if not ok:
+                    break
+            if ok:
+                return cand
+    _field_at(p, mode, y, 0, u, f, 0, lam, 0)
+    return -1
+
+
+@nb.njit(**HOT_PATH)
+def _record_sample(samples, ns, t, y, mode, lam):
+    if ns < samples.shape[0]:
+        samples[ns, 0] = t
+        for k in range(NSTATE):
+            samples[ns, 1 + k] = y[k]
+        samples[ns, 1 + NSTATE] = mode
+        for j in range(NCON):
+            samples[ns, 2 + NSTATE + j] = lam[j]
+    return ns + 1
+
+
+@nb.njit(**HOT_PATH)
+def _initial_step(p, mode, u, y, f, rtol, atol, h_max, tmp, ftmp, lam):
+    """Starting step size (Hairer, Norsett and Wanner, Sec. II.4), one extra evaluation."""
+    n = y.shape[0]
+    d0 = 0.0
+    d1 = 0.0
+    for i in range(n):
+        scale = atol + rtol * abs(y[i])
+        d0 += (y[i] / scale) ** 2
+        d1 += (f[i] / scale) ** 2
+    d0 = math.sqrt(d0 / n)
+    d1 = math.sqrt(d1 / n)
+    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    for i in range(n):
+        tmp[i] = y[i] + h0 * f[i]
+    _field_at(p, mode, tmp, 0, u, ftmp, 0, lam, 0)
+    d2 = 0.0
+    for i in range(n):
+        scale = atol + rtol * abs(y[i])
+        d2 += ((ftmp[i] - f[i]) / scale) ** 2
+    d2 = math.sqrt(d2 / n) / h0
+    if d1 <= 1e-15 and d2 <= 1e-15:
+        h1 = max(1e-6, h0 * 1e-3)
+    else:
+        h1 = (0.01 / max(d1, d2)) ** (1.0 / 8.0)
+    return min(100.0 * h0, h1, h_max)
+
+
+@nb.njit(**HOT_PATH, inline="always")
+def _all_guards(p, mode, u, code, y, lam, out):
+    guard_values(p, mode, u, code, y, 0, lam, 0, out)
+
+
+@nb.njit(**HOT_PATH)
+def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
+    """Integrate maneuver ``code`` from t = 0 to its terminal event: from its initial state at
+    s, or, when y0 has NSTATE entries, from (y0, mode0) (a trajectory continued after an event;
+    s then unused). One compiled call per trajectory, and one function: a wrapper around the
+    kernel cost a second compile, in which LLVM optimises the linked step again (~1 s).
+
+    Returns (status, t_final, mode_final, n_events, n_samples, nfev, nsteps, nrejected,
+    outcome at the final state).
+    """
+    term_after_touchdown = TERM_AFTER_TOUCHDOWN[code] != 0 and cfg[CFG_TOUCHED_DOWN] == 0.0
+    term_mode = FINAL_MODE[code]
+    t_end = cfg[CFG_T_END]
+    max_events = int(cfg[CFG_MAX_EVENTS])
+    rtol = cfg[CFG_RTOL]
+    atol = cfg[CFG_ATOL]
+    h_max = cfg[CFG_H_MAX]
+    sample_dt = cfg[CFG_SAMPLE_DT]
+    term = NCON  # index of the terminal guard
+
+    n = NSTATE
+    # one allocation carved into views (a dozen small arrays cost more than a step)
+    buf = np.zeros(WORKSPACE + 13 * n + 6 * NLAM + 3 * NGUARDS)
+    W = buf[:WORKSPACE]
+    o = WORKSPACE
+    F = buf[o:o + 7 * n].reshape((7, n))
+    o += 7 * n
+    y = buf[o:o + n]
+    f = buf[o + n:o + 2 * n]
+    y_new = buf[o + 2 * n:o + 3 * n]
+    f_new = buf[o + 3 * n:o + 4 * n]
+    tmp = buf[o + 4 * n:o + 5 * n]
+    tmp2 = buf[o + 5 * n:o + 6 * n]
+    o += 6 * n
+    rates = buf[o:o + NLAM]
+    lam = buf[o + NLAM:o + 2 * NLAM]
+    lam_new = buf[o + 2 * NLAM:o + 3 * NLAM]
+    lam_tmp = buf[o + 3 * NLAM:o + 4 * NLAM]
+    rate0 = buf[o + 4 * NLAM:o + 5 * NLAM]  # Da q' at the step's start
+    rate1 = buf[o + 5 * NLAM:o + 6 * NLAM]  # and at its end
+    o += 6 * NLAM
+    gv = buf[o:o + NGUARDS]
+    gv_new = buf[o + NGUARDS:o + 2 * NGUARDS]
+    probe = buf[o + 2 * NGUARDS:o + 3 * NGUARDS]
+    flags = np.zeros(2 * NGUARDS, dtype=np.bool_)
+    armed = flags[:NGUARDS]
+    flips = flags[NGUARDS:]
+    if y0.shape[0] == n:
+        for k in range(n):
+            y[k] = y0[k]
+        mode = mode0
+    else:
+        initial_state(code, s, p, y)
+        mode = INITIAL_MODE[code]
+    t = 0.0
+    nfev = 0
+    nsteps = 0
+    nrejected = 0
+    n_events = 0
+    ns = 0
+    status = OK
+    term_enabled = not term_after_touchdown
+    sampling = sample_dt > 0.0
+    next_sample = 0
+
+    _field_at(p, mode, y, 0, u, f, 0, lam, 0)
+    nfev += 1
+    _all_guards(p, mode, u, code, y, lam, gv)
+    constraint_rates(p, y, 0, rate0)
+    for i in range(NGUARDS):
+        armed[i] = gv[i] > REARM_TOL
+    if not term_enabled:
+        armed[term] = False
+    if sampling:
+        ns = _record_sample(samples, ns, t, y, mode, lam)
+        next_sample = 1
+
+    h = _initial_step(p, mode, u, y, f, rtol, atol, h_max, tmp, tmp2, lam_tmp)
+    nfev += 1
+    trial = True
+    step_rejected = False
+    finished = False
+
+    while not finished:
+        if nsteps >= _MAX_STEPS or h < 1e-14 * max(1.0, t):
+            status = STEP_FAILURE
+            break
+        if t >= t_end:
+            status = HORIZON
+            break
+        h_step = min(h, h_max, t_end - t)
+        err = step(p, mode, u, code, y, f, h_step, W, y_new, f_new, lam_new, rtol, atol, probe)
+        nfev += 12
+        nsteps += 1
+        if not err < 1.0:
+            h = h_step * max(_MIN_FACTOR_TRIAL if trial else _MIN_FACTOR,
+                             _SAFETY * _inverse_eighth_root(err))
+            nrejected += 1
+            step_rejected = True
+            continue
+        if err == 0.0:
+            factor = _MAX_FACTOR
+        else:
+            factor = min(_MAX_FACTOR, _SAFETY * _inverse_eighth_root(err))
+        if step_rejected:
+            factor = min(1.0, factor)
+        step_rejected = False
+        trial = False
+        h = h_step * factor
+
+        _all_guards(p, mode, u, code, y_new, lam_new, gv_new)
+        constraint_rates(p, y_new, 0, rate1)
+        # candidates: an armed guard seen <= 0 at the end or at a stage state; a constraint in
+        # the air that is above the ground at both ends but was moving down at the start and
+        # up at the end (its lowest point is inside the step: is it below the ground?); a
+        # constraint disarmed after an event that ends the step at or below the ground (it
+        # may have left and come back within the step)
+        any_candidate = False
+        for i in range(NGUARDS):
+            if armed[i] and gv[i] > 0.0 and (gv_new[i] <= 0.0 or probe[i] <= 1.0):
+                any_candidate = True
+            elif i < NCON and not mode >> i & 1:
+                if armed[i]:
+                    if gv[i] > 0.0 and rate0[i] < 0.0 and rate1[i] > 0.0:
+                        any_candidate = True
+                elif gv_new[i] <= 0.0:
+                    any_candidate = True
+
+        dense_ready = False
+        if any_candidate or sampling:
+            dense_coefficients(p, mode, u, y, f, h_step, W, y_new, f_new, F)
+            nfev += 3
+            dense_ready = True
+
+        first = -1
+        x_first = 2.0
+        wrong_way = False
+        if any_candidate:
+            # the armed guards first, then the reset constraints, searched only up to the
+            # earliest root found (the common case: the step also holds the terminal event)
+            for i in range(NGUARDS):
+                if not armed[i] or gv[i] <= 0.0:
+                    continue
+                if gv_new[i] <= 0.0:
+                    xb = 1.0
+                    gb = gv_new[i]
+                elif probe[i] <= 1.0:
+                    xb, gb = _first_probe(p, mode, u, code, F, y, i, 0.0, probe[i], _PROBES,
+                                          0.0, tmp, lam_tmp)
+                    if xb < 0.0:
+                        continue
+                elif i < NCON and not mode >> i & 1 and rate0[i] < 0.0 and rate1[i] > 0.0:
+                    # its lowest point is inside the step: at or below the ground?
+                    xb, gb = _extremum(p, mode, u, code, F, y, i, rate0[i], rate1[i], 0.0,
+                                       tmp, lam_tmp, rates)
+                    if gb > 0.0:
+                        continue
+                else:
+                    continue
+                x = _root_on_dense(p, mode, u, code, F, y, i, 0.0, gv[i], xb, gb, tmp, lam_tmp)
+                if x < x_first:
+                    x_first = x
+                    first = i
+            for i in range(NCON):
+                if armed[i] or mode >> i & 1 or gv_new[i] > 0.0:
+                    continue
+                x_end = min(x_first, 1.0)
+                g_end = gv_new[i]
+                if x_end < 1.0:
+                    g_end = _guard_on_dense(p, mode, u, code, F, y, x_end, i, tmp, lam_tmp)
+                    if g_end > 0.0:
+                        continue
+                xa = _separation_point(p, mode, u, code, F, y, i, rate0[i], rate1[i], x_end,
+                                       tmp, lam_tmp, rates)
+                if xa < 0.0:
+                    wrong_way = wrong_way or g_end < -REARM_TOL
+                    continue
+                ga = _guard_on_dense(p, mode, u, code, F, y, xa, i, tmp, lam_tmp)
+                # the first probe at or below, else the end of the searched part
+                xb, gb = _first_probe(p, mode, u, code, F, y, i, xa, x_end, _PROBES - 1, 0.0,
+                                      tmp, lam_tmp)
+                if xb < 0.0:
+                    xb = x_end
+                    gb = g_end
+                x = _root_on_dense(p, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, lam_tmp)
+                if x < x_first:
+                    x_first = x
+                    first = i
+        t_stop = t + h_step if first < 0 else t + x_first * h_step
+
+        if sampling and dense_ready:
+            while True:
+                ts = next_sample * sample_dt
+                if ts > t_stop or (first >= 0 and ts >= t_stop):
+                    break
+                _dense_eval(F, y, (ts - t) / h_step, tmp)
+                _field_at(p, mode, tmp, 0, u, tmp2, 0, lam_tmp, 0)
+                nfev += 1
+                ns = _record_sample(samples, ns, ts, tmp, mode, lam_tmp)
+                next_sample += 1
+
+        if first < 0:
+            t = t_stop
+            for k in range(n):
+                y[k] = y_new[k]
+                f[k] = f_new[k]
+            for j in range(NLAM):
+                lam[j] = lam_new[j]
+                rate0[j] = rate1[j]
+            for i in range(NGUARDS):
+                gv[i] = gv_new[i]
+                if not armed[i] and (i < term or term_enabled):
+                    if gv[i] > REARM_TOL:
+                        armed[i] = True
+                    elif i < term and mode >> i & 1 and gv[i] < -REARM_TOL:
+                        wrong_way = True  # a contact's reaction turned to pulling at once
+            if wrong_way:
+                status = INCONSISTENT  # a disarmed contact guard went the wrong way
+                finished = True
+            continue
+
+        # --- event at t_stop: the state is the 7th-order interpolant at the root -----------
+        t = t_stop
+        _dense_eval(F, y, x_first, tmp)
+        for k in range(n):
+            y[k] = tmp[k]
+        _field_at(p, mode, y, 0, u, f, 0, lam, 0)
+        nfev += 1
+        _all_guards(p, mode, u, code, y, lam, gv_new)
+        # contact guards near zero and moving toward it flip with a contact guard (MODEL.md
+        # Sec. 3); the terminal guard is ordered by time: it never joins contact events
+        for i in range(NGUARDS):
+            flips[i] = i == first
+            if i != first and armed[i] and i != term and first != term:
+                if abs(gv_new[i]) <= SIMULTANEOUS_TOL:
+                    flips[i] = _guard_rate(p, mode, u, code, y, f, i, tmp, lam_tmp) < 0.0
+        for j in range(NCON):
+            if not flips[j] and not mode >> j & 1 and gv_new[j] < -VIOLATION_TOL:
+                status = CONSTRAINT_VIOLATED  # (a root missed before this event)
+                finished = True
+        touchdown = 0
+        liftoff = 0
+        for j in range(NCON):
+            if flips[j]:
+                if mode >> j & 1:
+                    liftoff |= 1 << j
+                else:
+                    touchdown |= 1 << j
+        if (touchdown | liftoff) and not finished:
+            row = events[n_events]
+            row[0] = t
+            row[1] = EVENT_CONTACT
+            row[2] = touchdown
+            row[3] = liftoff
+            row[4] = mode
+            for k in range(n):
+                row[6 + k] = y[k]
+            if sampling:
+                ns = _record_sample(samples, ns, t, y, mode, lam)
+            term_was_armed = armed[term] and gv_new[term] > 0.0
+            mode = mode ^ (touchdown | liftoff)
+            if touchdown:
+                apply_impact(p, mode, y)
+                # restitution: an impacted constraint moving apart leaves the mode at once
+                constraint_rates(p, y, 0, rates)
+                for j in range(NCON):
+                    if touchdown >> j & 1 and rates[j] > SEPARATION_TOL:
+                        mode &= ~(1 << j)
+            _field_at(p, mode, y, 0, u, f, 0, lam, 0)
+            nfev += 1
+            # complementarity: the next mode has every active constraint pressing (lambda >=
+            # 0) and every released one not accelerating into its surface; when the mode the
+            # event suggests has a pulling contact, the others are tried
+            for j in range(NCON):
+                if mode >> j & 1 and lam[j] < 0.0:
+                    chosen = _consistent_mode(p, mode, u, y, f, lam, tmp, tmp2, rates)
+                    nfev += 1 << NCON
+                    if chosen < 0:
+                        status = INCONSISTENT  # no mode fits: every one pulls or penetrates
+                        finished = True
+                    else:
+                        mode = chosen
+                    break
+            row[5] = mode
+            for k in range(n):
+                row[6 + n + k] = y[k]
+            n_events += 1
+            if sampling:
+                ns = _record_sample(samples, ns, t, y, mode, lam)
+            if touchdown and term_after_touchdown:
+                term_enabled = True
+            _all_guards(p, mode, u, code, y, lam, gv)
+            constraint_rates(p, y, 0, rate0)
+            for i in range(NGUARDS):
+                if flips[i] or not armed[i]:
+                    # events can follow each other without a plain step between them (a bar's
+                    # impacts 1e-7 apart): a guard away from zero since is armed again here;
+                    # one at ~0 (a reset constraint) is watched by the next steps instead
+                    armed[i] = gv[i] > REARM_TOL and (i < term or term_enabled)
+            h *= _EVENT_STEP_FRACTION
+            trial = True
+            if term_was_armed and gv[term] <= 0.0 and not finished:
+                flips[term] = True  # the reset itself took the terminal guard through 0
+            if not finished and n_events >= max_events and not flips[term]:
+                status = MAX_EVENTS
+                finished = True
+        if flips[term] and not finished:
+            row = events[n_events]
+            row[0] = t
+            row[1] = EVENT_TERMINAL
+            row[2] = 0
+            row[3] = 0
+            row[4] = mode
+            row[5] = mode
+            for k in range(n):
+                row[6 + k] = y[k]
+                row[6 + n + k] = y[k]
+            if term_mode >= 0 and mode != term_mode:
+                status = APEX_IN_CONTACT
+            finished = True
+
+    if sampling:
+        ns = _record_sample(samples, ns, t, y, mode, lam)
+    for k in range(n):
+        y_out[k] = y[k]
+    outcome = outcome_value(code, p, y_out, 0)
+    return status, t, mode, n_events, ns, nfev, nsteps, nrejected, outcome
+
+
+@nb.njit(**HOT_PATH, parallel=True)
+def simulate_batch_kernel(p, code, ss, us, cfg, events, y_out, outcome, info):
+    """:func:`simulate_maneuver` over many s and inputs in parallel threads; ``outcome[k]``
+    receives the maneuver's outcome at the final state."""
+    no_samples = np.empty((0, SAMPLE_WIDTH))
+    from_s = np.empty(0)  # (FROM_S, allocated here: a global array would be frozen into code)
+    mode0 = INITIAL_MODE[code]  # (unused with from_s; a variable, not a literal 0, which Numba
+    # would compile a second specialisation of the whole kernel for)
+    for k in nb.prange(ss.shape[0]):
+        status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej, value = simulate_maneuver(
+            p, code, ss[k], us[k], cfg, no_samples, events[k], y_out[k], from_s, mode0
+        )
+        outcome[k] = value
+        info[k, 0] = status
+        info[k, 1] = t_f
+        info[k, 2] = mode_f
+        info[k, 3] = n_ev
+        info[k, 4] = n_s
+        info[k, 5] = nfev
+        info[k, 6] = nsteps
+        info[k, 7] = nrej

@@ -1,0 +1,2 @@
+"""Hybrid simulation of any system: :class:`~biped_opt.simulation.compiled.CompiledSystem` compiles
+a description once (disk cache) and runs its maneuvers with the generated event-driven kernel."""

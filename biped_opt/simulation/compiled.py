@@ -1,0 +1,526 @@
+"""Compile a system description into its simulator, cached on disk by content, and run it.
+
+The first use of a system writes the module :func:`biped_opt.codegen.render.render` makes into
+the cache directory, named by a hash of its source, and imports it; Numba then compiles it on
+the first call and keeps the machine code next to it (``__pycache__``), so a second process loads
+instead of compiling. Parameter values are runtime data (an array argument): changing one never
+changes the source, so it never recompiles.
+
+A second process need not derive or render to find that module: after a render, a small index
+entry (``systems/start/<key>.json``) maps a cheap key of the request -- a library name, or a system
+file's path and content, together with a hash of the biped_opt sources and the versions of the
+libraries the generator uses -- to the module's name and the few facts simulating needs (names,
+maneuvers, inputs, parameter defaults). On a hit the module is imported directly and SymPy is not
+touched: :attr:`CompiledSystem.system` and :attr:`CompiledSystem.derived` are built when first
+read. Any change of the file or of the package misses, and the slow path writes a fresh entry.
+
+The cache lives in ``$BIPED_OPT_CACHE`` if set, else ``$XDG_CACHE_HOME/biped_opt`` (by default
+``~/.cache/biped_opt``), under ``systems/``; deleting that directory is always safe.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import importlib.metadata
+import importlib.util
+import json
+import math
+import os
+import sys
+import tempfile
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+
+from biped_opt.codegen import precompile
+from biped_opt.codegen.runtime import Status
+from biped_opt.errors import InvalidInputError, InvalidParameterError
+from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
+from biped_opt.version import PACKAGE_DIR
+
+if TYPE_CHECKING:  # (imported where needed: SymPy and the generator are the slow part of a start)
+    from biped_opt.systems.derive import DerivedSystem
+    from biped_opt.systems.description import System
+
+__all__ = ["CompiledSystem", "SystemTrajectory", "cache_dir", "compile_system", "shared",
+           "simulate", "simulate_batch", "STATUS_NAMES"]
+
+Array = npt.NDArray[np.float64]
+
+#: the kernel's status codes (as in :class:`biped_opt.hybrid.trajectory.Status`)
+STATUS_NAMES = tuple(status.name for status in Status)
+_LOCK = threading.Lock()
+_LOADED: dict[str, ModuleType] = {}
+
+
+def cache_dir() -> Path:
+    """Where compiled systems live (see the module docstring)."""
+    root = os.environ.get("BIPED_OPT_CACHE")
+    if root:
+        return Path(root) / "systems"
+    xdg = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(xdg) / "biped_opt" / "systems"
+
+
+def _write(folder: Path, path: Path, text: str) -> None:
+    """``text`` into ``path``, written whole then renamed: a concurrent process never reads
+    half a file."""
+    with tempfile.NamedTemporaryFile("w", dir=folder, suffix=".tmp", delete=False) as fh:
+        fh.write(text)
+    os.replace(fh.name, path)
+
+
+#: the generated modules' names in sys.modules (Numba's cached code refers to them by name)
+_MODULE_PREFIX = "biped_opt_systems_"
+
+
+def _import(name: str, path: Path) -> ModuleType:
+    """The cached module ``name`` (at ``path``), imported once per process (under _LOCK)."""
+    if name not in _LOADED:
+        spec = importlib.util.spec_from_file_location(_MODULE_PREFIX + name, path)
+        assert spec is not None and spec.loader is not None
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module
+        spec.loader.exec_module(module)
+        _LOADED[name] = module
+    return _LOADED[name]
+
+
+def _module_for(derived: DerivedSystem) -> tuple[str, ModuleType]:
+    from biped_opt.codegen.render import render, source_key
+
+    text = render(derived)
+    name = f"{derived.system.name}_{source_key(text)}"
+    folder = cache_dir()
+    path = folder / f"{name}.py"
+    with _LOCK:
+        fresh = False
+        if name not in _LOADED:
+            folder.mkdir(parents=True, exist_ok=True)
+            fresh = not path.exists() or path.read_text() != text
+            if fresh:
+                _write(folder, path, text)
+                # a new module: its event functions compile in a second process meanwhile
+                precompile.start(path, _MODULE_PREFIX + name)
+        module = _import(name, path)
+    if fresh:  # (outside the lock: a compile of seconds must not hold up other systems)
+        precompile.step_first(module)
+    return name, module
+
+
+_GENERATOR: list[str] = []
+
+
+def _generator_key() -> str:
+    """A hash of everything a rendered module may depend on besides the request: every source
+    file of biped_opt (the generator, the library, the checks) and the versions of SymPy (its
+    printing and common subexpressions) and SciPy (the DOP853 tableau)."""
+    if not _GENERATOR:
+        digest = hashlib.sha256()
+        root = PACKAGE_DIR
+        for path in sorted(root.rglob("*.py")):
+            digest.update(f"{path.relative_to(root).as_posix()}\0".encode())
+            digest.update(path.read_bytes())
+        for dist in ("sympy", "scipy"):
+            digest.update(f"\0{dist} {importlib.metadata.version(dist)}".encode())
+        _GENERATOR.append(digest.hexdigest())
+    return _GENERATOR[0]
+
+
+def _start_entry(spec: object) -> Path | None:
+    """Where the index entry of a library name or a system file lives (None for a System
+    object, or a file that cannot be read: those take the slow path)."""
+    if not isinstance(spec, (str, Path)):
+        return None
+    text = str(spec)
+    request = f"library\0{text}".encode()
+    if text.endswith(".py"):
+        try:
+            content = Path(text).read_bytes()
+        except OSError:
+            return None
+        request = f"file\0{text}\0".encode() + hashlib.sha256(content).digest()
+    key = hashlib.sha256(_generator_key().encode() + b"\0" + request).hexdigest()[:32]
+    return cache_dir() / "start" / f"{key}.json"
+
+
+def _read_entry(entry: Path | None) -> tuple[dict[str, Any], ModuleType] | None:
+    """The facts and the module an index entry names, if both are there."""
+    if entry is None:
+        return None
+    try:
+        facts = json.loads(entry.read_text())
+        name = facts["module"]
+        path = cache_dir() / f"{name}.py"
+        with _LOCK:
+            if name not in _LOADED and not path.is_file():
+                return None
+            return facts, _import(name, path)
+    except (OSError, ValueError, KeyError, TypeError):
+        return None  # absent or unreadable: derive and render instead
+
+
+def kernel_config(module: ModuleType, options: SimulatorOptions, sample_dt: float = 0.0,
+                  touched_down: bool = False) -> Array:
+    """The ``cfg`` vector a generated module's kernel takes (layout: its CFG_* indices).
+    ``touched_down``: the trajectory continues after a touchdown, so a terminal event armed
+    after the first touchdown is armed from the start."""
+    m = module
+    cfg = np.empty(m.CFG_SIZE)
+    cfg[m.CFG_T_END] = options.t_end
+    cfg[m.CFG_MAX_EVENTS] = options.max_events
+    cfg[m.CFG_RTOL] = options.rtol
+    cfg[m.CFG_ATOL] = options.atol
+    cfg[m.CFG_H_MAX] = options.h_max
+    cfg[m.CFG_SAMPLE_DT] = sample_dt
+    cfg[m.CFG_TOUCHED_DOWN] = float(touched_down)
+    return cfg
+
+
+def cached_module(system: str | Path) -> ModuleType | None:
+    """The compiled module of a library system or system file when the index names it (read
+    without deriving anything), else None."""
+    found = _read_entry(_start_entry(system))
+    return None if found is None else found[1]
+
+
+def _write_entry(entry: Path, facts: dict[str, Any]) -> None:
+    entry.parent.mkdir(parents=True, exist_ok=True)
+    _write(entry.parent, entry, json.dumps(facts))
+
+
+@dataclass(slots=True)
+class SystemTrajectory:
+    """One simulated maneuver of a compiled system (a plain record: a frozen dataclass's
+    construction alone cost 2.5 us, an eighth of a trajectory)."""
+
+    system: str
+    maneuver: str
+    s: float
+    inputs: tuple[float, ...]
+    status: str
+    t_final: float
+    outcome: float
+    y_final: Array
+    events: Array  #: rows [t, kind, touchdown, liftoff, mode_before, mode_after, y-, y+]
+    samples: Array  #: rows [t, y, mode, lambda]
+    nfev: int
+    nsteps: int
+    n_events: int  #: contact events (the first rows of ``events``; a terminal row may follow)
+    initial_mode: int
+    #: (max_events, horizon, constraint names): what :attr:`message` explains an end by
+    budget: tuple[int, float, tuple[str, ...]]
+
+    @property
+    def message(self) -> str:
+        """How the run ended, in words; a budget used up names its limit, where to raise it
+        and the last events."""
+        status = Status[self.status]
+        max_events, horizon, names = self.budget
+        if status is Status.MAX_EVENTS:
+            text = (f"{max_events} contact events, the maneuver's event budget, were used up "
+                    "before the terminal event (raise max_events on the maneuver, or "
+                    "--max-events)")
+        elif status is Status.HORIZON:
+            text = (f"the horizon t = {horizon:g}, the maneuver's, was reached before the "
+                    "terminal event (raise horizon on the maneuver, or --horizon)")
+        else:
+            text = status.message
+        if status is not Status.OK and self.n_events:
+            text += "; last events: " + ", ".join(
+                _describe_event(row, names) for row in self.events[:self.n_events][-3:])
+        return text
+
+    @property
+    def success(self) -> bool:
+        return self.status == "OK"
+
+    # (read from the event rows when asked for: converting them on every simulation cost a
+    # tenth of a trajectory, and an optimiser reads only the outcome)
+    @property
+    def modes(self) -> tuple[int, ...]:
+        """The contact modes in order, from the initial one."""
+        return (self.initial_mode, *map(int, self.events[: self.n_events, 5].tolist()))
+
+    @property
+    def event_times(self) -> tuple[float, ...]:
+        """Times of the contact events."""
+        return tuple(self.events[: self.n_events, 0].tolist())
+
+
+def _describe_event(row: Array, names: tuple[str, ...]) -> str:
+    """One event row in words: ``t = 1.2 touchdown left -> mode right``."""
+    def which(mask: int) -> str:
+        found = [names[j] if j < len(names) else str(j) for j in range(64) if mask >> j & 1]
+        return "+".join(found) if found else "air"
+
+    what = " ".join(f"{kind} {which(int(row[k]))}" for kind, k in (("touchdown", 2),
+                                                                      ("liftoff", 3)) if row[k])
+    return f"t = {row[0]:.10g} {what} -> mode {which(int(row[5]))}"
+
+
+class CompiledSystem:
+    """A system ready to simulate: derived, generated, imported (compiled on first call)."""
+
+    def __init__(self, system: System | str, **parameters: float) -> None:
+        self._spec = system
+        self._system: System | None = None
+        self._derived: DerivedSystem | None = None
+        entry = _start_entry(system)
+        cached = _read_entry(entry)
+        if cached is None:
+            facts = self._build(system)
+            if entry is not None and _start_entry(system) == entry:  # (not edited meanwhile)
+                _write_entry(entry, facts)
+        else:
+            facts, self.module = cached
+        self._name: str = facts["name"]
+        self._where: str = facts["where"]
+        self._defaults: dict[str, float] = dict(facts["parameters"])
+        self.maneuvers: tuple[str, ...] = tuple(facts["maneuvers"])
+        self.inputs: tuple[str, ...] = tuple(facts["inputs"])
+        self._constraints: tuple[str, ...] = tuple(facts["constraints"])
+        self._options = [dataclasses.replace(DEFAULT_OPTIONS, max_events=events, t_end=horizon)
+                         for events, horizon in facts["budgets"]]
+        self._initial_modes = [int(v) for v in self.module.INITIAL_MODE]
+        self._codes = {name: k for k, name in enumerate(self.maneuvers)}
+        self._ninputs = len(self.inputs)
+        self._no_samples = np.empty((0, self.module.SAMPLE_WIDTH))
+        self._cfgs: dict[tuple[SimulatorOptions, float], Array] = {}
+        # each maneuver's own options without samples, the common call: found without hashing
+        self._maneuver_cfgs = [self._cfg(o, 0.0) for o in self._options]
+        self.set_parameters(**parameters)
+
+    def _build(self, spec: System | str) -> dict[str, Any]:
+        """The slow path: load, derive, render, import; the facts an index entry keeps."""
+        from biped_opt.systems.derive import derive
+        from biped_opt.systems.files import load_system
+
+        system = self._system = load_system(spec)
+        derived = self._derived = derive(system)
+        module_name, self.module = _module_for(derived)
+        return {"module": module_name, "name": system.name, "where": system.where(),
+                "parameters": list(system.defaults.items()), "maneuvers": list(derived.maneuvers),
+                "inputs": list(system.u.names()), "constraints": list(system.constraints),
+                "budgets": [[m.description.max_events, m.description.horizon]
+                            for m in derived.maneuvers.values()]}
+
+    @property
+    def system(self) -> System:
+        """The description (built when first read after a start from the index)."""
+        if self._system is None:
+            from biped_opt.systems.files import load_system
+
+            self._system = load_system(self._spec)
+        return self._system
+
+    @property
+    def derived(self) -> DerivedSystem:
+        """The derived quantities (SymPy; derived when first read after a start from the
+        index)."""
+        if self._derived is None:
+            from biped_opt.systems.derive import derive
+
+            self._derived = derive(self.system)
+        return self._derived
+
+    @property
+    def name(self) -> str:
+        return self._name
+
+    def set_parameters(self, **parameters: float) -> None:
+        """Parameter values (defaults overridden); runtime data, no recompilation."""
+        values = dict(self._defaults)
+        for key, value in parameters.items():
+            if key not in values:
+                raise InvalidParameterError(
+                    f"{self._where}: unknown parameter {key!r} "
+                    f"(parameters: {', '.join(values) or 'none'})")
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not math.isfinite(value):
+                raise InvalidParameterError(
+                    f"{self._where}: parameter {key!r} must be a finite number, "
+                    f"got {value!r}")
+            values[key] = float(value)
+        raw = np.array(list(values.values()), dtype=np.float64)  # (the declared order)
+        try:  # the values and what depends on them alone (see codegen._Hoisted)
+            with np.errstate(divide="raise", invalid="raise", over="raise"):
+                prepared = self.module.prepare_parameters(raw)
+        except (ArithmeticError, ValueError, FloatingPointError) as exc:
+            raise InvalidParameterError(
+                f"{self._where}: these parameters give no invertible mass matrix "
+                f"({exc})") from None
+        self.parameters = values
+        self._p = prepared
+
+    def initial_mode(self, maneuver: str) -> int:
+        """The contact mode (bit mask) ``maneuver`` starts in."""
+        return self._initial_modes[self._code(maneuver)]
+
+    def maneuver_options(self, maneuver: str) -> SimulatorOptions:
+        """The simulator's settings for ``maneuver``: the defaults with its own event budget
+        and horizon (what :meth:`simulate` uses unless given other options)."""
+        return self._options[self._code(maneuver)]
+
+    def _code(self, maneuver: str) -> int:
+        code = self._codes.get(maneuver) if type(maneuver) is str else None
+        if code is not None:
+            return code
+        try:
+            return self.maneuvers.index(maneuver)
+        except ValueError:
+            raise InvalidInputError(
+                f"{self._where}: unknown maneuver {maneuver!r} "
+                f"(maneuvers: {', '.join(self.maneuvers) or 'none'})") from None
+
+    def _inputs(self, inputs: Any) -> Array:
+        if type(inputs) is tuple and len(inputs) == self._ninputs > 0:
+            # the common case, a full vector of numbers, checked in one call (per-element
+            # checks and NumPy's would cost as much as a quarter of a trajectory): fsum
+            # refuses what is not a number, and its sum is finite only if every term is
+            try:
+                finite = math.isfinite(math.fsum(inputs))
+            except (TypeError, ValueError, OverflowError):  # (ValueError: inf - inf)
+                finite = False
+            if finite:
+                return np.array(inputs, dtype=np.float64)
+        u = np.zeros(max(len(self.inputs), 1))
+        if inputs is None:
+            return u
+        if isinstance(inputs, dict):
+            for key, value in inputs.items():
+                if key not in self.inputs:
+                    raise InvalidInputError(
+                        f"{self._where}: unknown input {key!r} "
+                        f"(inputs: {', '.join(self.inputs) or 'none'})")
+                u[self.inputs.index(key)] = value
+        else:
+            values = np.asarray(inputs, dtype=np.float64).ravel()
+            if values.size > len(self.inputs):
+                raise InvalidInputError(
+                    f"{self._where}: {values.size} inputs given, the system has "
+                    f"{len(self.inputs)} ({', '.join(self.inputs) or 'none'})")
+            u[: values.size] = values
+        if not np.all(np.isfinite(u)):
+            raise InvalidInputError(f"{self._where}: inputs must be finite, got {u}")
+        return u
+
+    def _cfg(self, options: SimulatorOptions, sample_dt: float) -> Array:
+        key = (options, sample_dt)
+        cfg = self._cfgs.get(key)
+        if cfg is None:
+            cfg = self._cfgs[key] = kernel_config(self.module, options, sample_dt)
+        return cfg
+
+    def simulate(self, maneuver: str, s: float, inputs: Any = None, *,
+                 options: SimulatorOptions = DEFAULT_OPTIONS,
+                 sample_dt: float | None = None) -> SystemTrajectory:
+        """One maneuver at s (inputs by name in a dict, or a vector in the declared order).
+        ``options`` left at ``DEFAULT_OPTIONS`` means :meth:`maneuver_options` (the
+        maneuver's own budget); any other options are taken as given."""
+        code = self._code(maneuver)
+        if options is DEFAULT_OPTIONS:
+            options = self._options[code]
+        s = float(s)
+        if not math.isfinite(s):
+            raise InvalidInputError(f"{self._where}: s must be finite, got {s}")
+        u = self._inputs(inputs)
+        m = self.module
+        capacity = 0
+        if sample_dt:
+            dt = float(sample_dt)
+            if dt > 0:
+                capacity = int(options.t_end / dt) + 4 * (options.max_events + 2)
+            samples = np.zeros((capacity, m.SAMPLE_WIDTH)) if capacity else self._no_samples
+            cfg = self._cfg(options, dt)
+        else:
+            samples = self._no_samples
+            cfg = (self._maneuver_cfgs[code] if options is self._options[code]
+                   else self._cfg(options, 0.0))
+        events = np.empty((options.max_events + 1, m.EVENT_WIDTH))
+        y_out = np.empty(m.NSTATE)
+        status, t_f, _mode_f, n_ev, n_s, nfev, nsteps, _nrej, outcome = m.simulate_maneuver(
+            self._p, code, s, u, cfg, samples, events, y_out, m.FROM_S, 0)
+        return SystemTrajectory(
+            self.name, maneuver, s, tuple(u.tolist()[: self._ninputs]), STATUS_NAMES[status],
+            t_f, outcome, y_out, events[: n_ev + (status == 0)], samples[: min(n_s, capacity)],
+            nfev, nsteps, n_ev, self._initial_modes[code],
+            (options.max_events, options.t_end, self._constraints))
+
+    def simulate_batch(self, maneuver: str, s: npt.ArrayLike, inputs: npt.ArrayLike | None = None,
+                       *, options: SimulatorOptions = DEFAULT_OPTIONS) -> dict[str, Array]:
+        """Many s (and input vectors, one row each or one for all) in parallel compiled threads:
+        arrays ``outcome``, ``t_final``, ``status``, ``mode_final``, ``n_events``, ``y_final``
+        (``options`` as in :meth:`simulate`)."""
+        code = self._code(maneuver)
+        if options is DEFAULT_OPTIONS:
+            options = self._options[code]
+        ss = np.atleast_1d(np.asarray(s, dtype=np.float64))
+        if not np.all(np.isfinite(ss)):
+            raise InvalidInputError(f"{self._where}: s must be finite")
+        width = max(len(self.inputs), 1)
+        if inputs is None:
+            us = np.zeros((ss.size, width))
+        else:
+            rows = np.atleast_2d(np.asarray(inputs, dtype=np.float64))
+            us = np.zeros((ss.size, width))
+            us[:, : rows.shape[1]] = rows if rows.shape[0] == ss.size else rows[0]
+        m = self.module
+        events = np.zeros((ss.size, options.max_events + 1, m.EVENT_WIDTH))
+        y_out = np.zeros((ss.size, m.NSTATE))
+        outcome = np.zeros(ss.size)
+        info = np.zeros((ss.size, 8))
+        m.simulate_batch_kernel(self._p, code, ss, us, self._cfg(options, 0.0), events, y_out,
+                                outcome, info)
+        return {"outcome": outcome, "t_final": info[:, 1], "status": info[:, 0].astype(int),
+                "mode_final": info[:, 2].astype(int), "n_events": info[:, 3].astype(int),
+                "y_final": y_out, "events": events}
+
+
+def compile_system(system: System | str, **parameters: float) -> CompiledSystem:
+    """:class:`CompiledSystem` of a System, a library name or a system file."""
+    return CompiledSystem(system, **parameters)
+
+
+_COMPILED: dict[tuple[int, str], CompiledSystem] = {}
+
+
+def shared(system: System | str) -> CompiledSystem:
+    """One CompiledSystem per System object or name/path in this process; callers set its
+    parameters before each use (and serialise uses that may run in parallel threads)."""
+    named = isinstance(system, (str, Path))
+    key = (0, str(system)) if named else (id(system), "")
+    with _LOCK:
+        found = _COMPILED.get(key)
+    if found is None or (not named and found.system is not system):
+        found = CompiledSystem(system)
+        with _LOCK:
+            _COMPILED[key] = found
+    return found
+
+
+def simulate(system: System | str, maneuver: str, s: float, inputs: Any = None, *,
+             parameters: dict[str, float] | None = None,
+             options: SimulatorOptions = DEFAULT_OPTIONS,
+             sample_dt: float | None = None) -> SystemTrajectory:
+    """``maneuver`` of ``system`` (a System, a library name or a system file) at s: the
+    compiled system is made once per process and its parameters set for this call."""
+    compiled = shared(system)
+    compiled.set_parameters(**(parameters or {}))
+    return compiled.simulate(maneuver, s, inputs, options=options, sample_dt=sample_dt)
+
+
+def simulate_batch(system: System | str, maneuver: str, s: npt.ArrayLike,
+                   inputs: npt.ArrayLike | None = None, *,
+                   parameters: dict[str, float] | None = None,
+                   options: SimulatorOptions = DEFAULT_OPTIONS) -> dict[str, Array]:
+    """:meth:`CompiledSystem.simulate_batch` of ``system`` (see :func:`simulate`)."""
+    compiled = shared(system)
+    compiled.set_parameters(**(parameters or {}))
+    return compiled.simulate_batch(maneuver, s, inputs, options=options)

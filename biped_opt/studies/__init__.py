@@ -1,0 +1,1 @@
+"""Parameter studies: where the kinks and jumps persist as system parameters change."""

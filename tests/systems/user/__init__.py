@@ -1,4 +1,0 @@
-"""System files written as a user writes them from README's "Your own system" section, and
-independent references for them that import nothing from biped_opt (closed-form flights with
-certified event isolation, SciPy solve_ivp with events): tests/systems/test_user_suite.py
-compares the two."""
