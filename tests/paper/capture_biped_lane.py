@@ -1,6 +1,6 @@
 """Record what the biped-only lane computes for docs/MODEL.md's maneuvers and problems.
 
-Run once, by hand, from the repository root (it takes a few minutes on two cores):
+Run once, by hand, from the repository root (about half a minute on two idle cores):
 
     python -m tests.paper.capture_biped_lane
 
