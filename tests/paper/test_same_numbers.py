@@ -23,12 +23,12 @@ from typing import Any
 import numpy as np
 import pytest
 
-from biped_opt.systems.compiled import shared, simulate
-from biped_opt.systems.derivatives import outcome_gradient
-from biped_opt.systems.nonsmooth import find_nonsmooth, find_nonsmooth_optimal
-from biped_opt.systems.optimal import compiled_for, optimal_policy
-from biped_opt.systems.optimal_derivatives import optimal_derivatives_with_errors
-from biped_opt.systems.problems import Problem, get_problem
+from biped_opt.analysis.nonsmooth import find_nonsmooth, find_nonsmooth_optimal
+from biped_opt.control.derivatives import outcome_gradient
+from biped_opt.control.problems import Problem, get_problem
+from biped_opt.control.solve import compiled_for, optimal_policy
+from biped_opt.control.theorem1 import optimal_derivatives_with_errors
+from biped_opt.simulation.compiled import shared, simulate
 from tests.extrapolated import SAFETY
 
 RECORD = json.loads(Path(__file__).with_name("biped_lane.json").read_text())
