@@ -9,7 +9,7 @@ The model provides ``ncon``, ``initial_state(maneuver, s) -> (y, mode)``,
 an event is a guard falling through 0), ``impact(y, mode) -> y`` (Eq. (1b) on entering mode),
 ``constraint_rates(y)`` (Da q'), ``terminal(maneuver, y)``, ``armed_after_touchdown(maneuver)``,
 ``final_mode(maneuver)`` (None: any) and ``outcome(maneuver, y)``. The rules are SYSTEMS.md
-Sec. 1: simultaneous guards within 1e-9 moving toward zero flip together; a flipped guard is
+Secs. 1 and 5: simultaneous guards within 1e-9 moving toward zero flip together; a flipped guard is
 disarmed until it is 1e-10 from zero (re-arming is an event of its own); with restitution an
 impacted constraint moving apart leaves the mode at once.
 """

@@ -32,7 +32,8 @@ _GAP = r"(?:[ \t]*\n[ \t]*(?:#:?)?)?[ \t]*"
 _FILE = re.compile(r"(?<![\w./-])(?P<path>/?(?:[\w.-]+/)*)(?P<name>[A-Z][A-Z0-9_]*\.md)\b")
 # what may follow a spec's name: a markdown link target, then sections, rows and titles
 _LINK = re.compile(r"\]\([^)\s]*\)")
-_SECTIONS = re.compile(_GAP + r"Secs?\." + _GAP + r"(\d+)(?:" + _GAP + r"-" + _GAP + r"(\d+))?")
+_SECTIONS = re.compile(_GAP + r"Secs?\." + _GAP + r"(\d+)(?:" + _GAP + r"(-|and)" + _GAP
+                       + r"(\d+))?")
 _ROWS = re.compile(_GAP + r"(R\d+)(?:" + _GAP + r"[-/]" + _GAP + r"(R\d+))?\b")
 _TITLE = re.compile(_GAP + r"\(?\"([^\"\n]+)\"\)?")
 _SEPARATOR = re.compile(_GAP + r"[,:]")
@@ -82,8 +83,9 @@ def parse(text: str, where: str = "text") -> list[Citation]:
             sep = _SEPARATOR.match(text, pos)
             at = sep.end() if sep else pos
             if m := _SECTIONS.match(text, at):
-                lo, hi = int(m[1]), int(m[2] or m[1])
-                sections.extend(range(lo, hi + 1) if lo <= hi else (lo, hi))
+                lo, hi = int(m[1]), int(m[3] or m[1])
+                sections.extend(range(lo, hi + 1) if m[2] == "-" and lo <= hi else
+                                dict.fromkeys((lo, hi)))
             elif m := _ROWS.match(text, at):
                 rows.extend(_rows(m[1], m[2]))
             elif m := _TITLE.match(text, at):
@@ -208,6 +210,7 @@ def test_every_cited_specification_file_exists() -> None:
 @pytest.mark.parametrize("text, expected", [
     ("(MODEL.md Sec. 6)", [("", "MODEL.md", (6,), (), ())]),
     ("SYSTEMS.md Secs. 2-3.", [("", "SYSTEMS.md", (2, 3), (), ())]),
+    ("SYSTEMS.md Secs. 1 and\n5: the", [("", "SYSTEMS.md", (1, 5), (), ())]),
     ("docs/SYSTEMS.md, \"Events\", states", [("docs/", "SYSTEMS.md", (), (), ("Events",))]),
     ("[docs/SYSTEMS.md](docs/SYSTEMS.md) (\"Events\")",
      [("docs/", "SYSTEMS.md", (), (), ("Events",))]),
