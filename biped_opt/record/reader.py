@@ -4,7 +4,7 @@
 every chunk's CRC checked); if the file has no usable summary - its writer was killed before
 ``finish()``, or the summary is damaged - or a chunk is damaged, it falls back to a scan that keeps
 every complete, intact chunk, skips and counts damaged ones, and reports how much it recovered
-(MCAP.md: crash safety). A file that is not MCAP, or holds
+(MCAP.md, "Crash safety"). A file that is not MCAP, or holds
 nothing recoverable, is an error.
 :func:`read_recording` decodes what :func:`read_raw` returns.
 

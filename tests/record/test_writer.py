@@ -93,7 +93,7 @@ def test_round_trip_two_independent_readers(tmp_path, trajectories):
     # log times increase through the sweep
     times = [m.log_time_ns for m in ours.messages]
     assert times == sorted(times)
-    # channel metadata and schemas per MCAP.md
+    # channel metadata and schemas per MCAP.md Secs. 1-2
     ts = load_interfaces().typestore
     for channel in summary.channels.values():
         typename = TOPICS[channel.topic][0]

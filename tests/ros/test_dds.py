@@ -208,7 +208,7 @@ def _raw_participant(domain_id):
 
 
 def test_wire_names_types_and_request_header(context, domain_id):
-    """An independent raw-Cyclone client that knows only ROS.md's conventions."""
+    """An independent raw-Cyclone client that knows only the conventions of ROS.md Sec. 2."""
     node = dds.Node("wire", context=context, namespace="/biped")
     node.create_service(POLICY, "optimal_policy", _double)
     dp = _raw_participant(domain_id)
