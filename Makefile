@@ -6,7 +6,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint bench venv clean clean-cache lock
+.PHONY: demo test lint typecheck bench venv clean clean-cache lock
 
 venv: $(STAMP)
 
@@ -20,11 +20,15 @@ $(STAMP): requirements.txt requirements-dev.txt constraints.txt setup.py
 demo: $(STAMP)
 	$(VENV)/bin/biped-opt demo
 
-test: $(STAMP) lint
+test: $(STAMP) lint typecheck
 	$(PY) -m pytest
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check biped_opt tests bench launch
+
+# The numerical core, as setup.cfg's [mypy] section lists it.
+typecheck: $(STAMP)
+	$(PY) -m mypy
 
 bench: $(STAMP)
 	$(VENV)/bin/biped-opt bench
@@ -40,4 +44,4 @@ lock: $(STAMP)
 		> constraints.txt.new && mv constraints.txt.new constraints.txt
 
 clean: clean-cache
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build *.egg-info .mypy_cache

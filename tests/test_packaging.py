@@ -166,7 +166,7 @@ def test_setup_cfg_installs_scripts_where_ros2_run_looks():
 
 _COPY_IGNORE = shutil.ignore_patterns(
     ".git", ".venv", "venv", "build", "install", "log", "out", "__pycache__", "*.egg-info",
-    ".pytest_cache", ".ruff_cache", "*.nbi", "*.nbc",
+    ".pytest_cache", ".ruff_cache", ".mypy_cache", "*.nbi", "*.nbc",
 )
 
 

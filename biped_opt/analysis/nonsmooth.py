@@ -93,7 +93,7 @@ def _sample_of(r: SystemOptimalResult) -> Sample:
     values = {"outcome": r.outcome, "value": r.value}
     values.update({f"policy:{d}": v for d, v in r.policy.items()})
     return Sample(label=(r.branch, r.active, r.bound), values=values, branch=r.branch,
-                  active=r.active, bound=r.bound, result=r)  # type: ignore[arg-type]
+                  active=r.active, bound=r.bound, result=r)
 
 
 def find_nonsmooth_optimal(problem: Problem, s: npt.ArrayLike | None = None, *,

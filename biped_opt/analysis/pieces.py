@@ -57,6 +57,7 @@ import math
 import threading
 from collections import Counter
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 import numpy.typing as npt
@@ -371,7 +372,7 @@ def _shift_map(compiled: CompiledSystem, n: int, inputs: list[float]) -> Array:
 def _offsets_for(A: Array, tau: Array) -> Array:
     """Offsets d with A d = tau, raised in common until every offset is at least 0.5 (raising
     every foot alike delays all touchdowns alike: A 1 = alpha 1, so the order is kept)."""
-    d = np.linalg.solve(A, tau)
+    d = cast(Array, np.linalg.solve(A, tau))  # (float64 in, float64 out)
     return d + max(0.0, 0.5 - float(d.min()))
 
 

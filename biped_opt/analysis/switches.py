@@ -317,7 +317,7 @@ def _cause(sl: Sample, sr: Sample, optimal: bool, policy_jumps: bool) -> str:
         if d is not None:
             lo, hi = problem.bound(d)
             if sr.bound is not None:
-                which = sr.bound
+                which: str | None = sr.bound
                 value = lo if which == "lower" else hi
                 verb = "reaches" if sl.bound is None else "moves to"
                 causes.append(f"input {d} {verb} its {which} bound {value:g}")

@@ -41,14 +41,16 @@ import re
 import textwrap
 import tokenize
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, cast
 
 import sympy as sp
 from sympy.printing.pycode import PythonCodePrinter
 
 from biped_opt.codegen import dop853
-from biped_opt.systems.derive import DerivedSystem
+from biped_opt.systems.derive import DerivedManeuver, DerivedSystem
 from biped_opt.systems.description import System, SystemDescriptionError
 
 __all__ = ["render", "source_key", "KERNEL_BODY", "UnsupportedExpressionError"]
@@ -272,7 +274,7 @@ def _solve(em: _Emitter, L: list[list[str]] | _Inverse, b: list[str], tag: str) 
     if isinstance(L, _Inverse):
         return [em.assign(tag, _mul(b[i], L[i])) for i in range(len(L))]
     k = len(L)
-    z = []
+    z: list[str] = []
     for i in range(k):
         total = _sum([b[i], *(f"-({_mul(L[i][r], z[r])})" for r in range(i)
                               if not _is_zero(_mul(L[i][r], z[r])))])
@@ -447,7 +449,7 @@ class _Hoisted:
         self.em.line(f"{name} = p[{self.offset + self.slots[name]}]")
         return name
 
-    def load_all(self, names):
+    def load_all(self, names: list[Any]) -> list[Any]:  # nested lists of names
         return [self.load_all(v) if isinstance(v, list) else self.load(v) for v in names]
 
     def function(self, derived: DerivedSystem) -> list[str]:
@@ -545,7 +547,7 @@ def _schedule(body: list[str]) -> list[str]:
     as one block, as in hand-written code. With every binding at the top, the vector field
     inlined twelve times into the step kept ~30 more values live than registers, and the
     spills cost ~4% of a step (measured on the biped: 710 stack moves per step against 357)."""
-    defined = {}
+    defined: dict[str, int] = {}
     for k, line in enumerate(body):
         if m := _DEFINITION.fullmatch(line):
             defined.update((name, k) for name in m[1].split(", "))
@@ -656,7 +658,7 @@ def _scalar_function(name: str, doc: str, args: str, derived: DerivedSystem,
 
 
 def _per_maneuver(name: str, doc: str, args: str, derived: DerivedSystem,
-                  pick, *, inputs: bool) -> list[str]:
+                  pick: Callable[[DerivedManeuver], sp.Expr], *, inputs: bool) -> list[str]:
     out = ["@nb.njit(**HOT_PATH)", f"def {name}({args}):", f'    """{doc}"""']
     em = _Emitter(_symbol_names(derived.system))
     _bindings(derived, em, velocities=True, inputs=inputs)
@@ -820,9 +822,14 @@ def _literal_node(value: float) -> ast.expr:
     return ast.Constant(value)
 
 
-def _segment(lines: list[str], node: ast.AST) -> str:
+def _end_line(node: ast.expr | ast.stmt) -> int:
+    """The last line of ``node`` (1-based), which ``ast.parse`` always records."""
+    return cast(int, node.end_lineno)
+
+
+def _segment(lines: list[str], node: ast.expr) -> str:
     """The source text of ``node`` (``lines``: its module's, ASCII)."""
-    first, last = node.lineno - 1, node.end_lineno - 1
+    first, last = node.lineno - 1, _end_line(node) - 1
     if first == last:
         return lines[first][node.col_offset:node.end_col_offset]
     return "\n".join([lines[first][node.col_offset:], *lines[first + 1:last],
@@ -831,7 +838,7 @@ def _segment(lines: list[str], node: ast.AST) -> str:
 
 def _statement_text(lines: list[str], stmt: ast.stmt) -> str:
     """The lines of ``stmt``, which must be alone on them, without its indentation."""
-    rest = lines[stmt.end_lineno - 1][stmt.end_col_offset:].strip()
+    rest = lines[_end_line(stmt) - 1][stmt.end_col_offset:].strip()
     if lines[stmt.lineno - 1][:stmt.col_offset].strip() or (rest and rest[0] != "#"):
         raise ValueError(f"line {stmt.lineno}: a statement to copy must be alone on its lines")
     out = []
@@ -903,7 +910,8 @@ class _Inlinable:
         body = list(fn.body)
         if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
             body = body[1:]  # the docstring
-        returns = body.pop().value if body and isinstance(body[-1], ast.Return) else None
+        returns = (cast(ast.Return, body.pop()).value
+                   if body and isinstance(body[-1], ast.Return) else None)
         unsupported = (ast.Return, ast.FunctionDef, ast.Lambda, ast.Global, ast.Nonlocal,
                        ast.ListComp, ast.SetComp, ast.DictComp, ast.GeneratorExp, ast.Yield,
                        ast.Break, ast.Continue, ast.keyword, ast.NamedExpr, ast.JoinedStr)
@@ -930,7 +938,7 @@ class _Inlinable:
                                  and not isinstance(n.ctx, ast.Load)),
                 single=single,
                 reads=frozenset(n.id for n in ast.walk(stmt.value) if isinstance(n, ast.Name))
-                if single else frozenset()))
+                if single and isinstance(stmt, ast.Assign) else frozenset()))
         top = Counter(s.single for s in statements if s.single)
         items = returns.elts if isinstance(returns, ast.Tuple) else [returns]
         returned = tuple(e.id if isinstance(e, ast.Name) else None for e in items)
@@ -992,12 +1000,12 @@ class _Expander:
             if (isinstance(call, ast.Call) and isinstance(call.func, ast.Name)
                     and call.func.id in self.functions):
                 if (lines[stmt.lineno - 1][:stmt.col_offset].strip()
-                        or lines[stmt.end_lineno - 1][stmt.end_col_offset:].strip()):
+                        or lines[_end_line(stmt) - 1][stmt.end_col_offset:].strip()):
                     raise ValueError(f"line {stmt.lineno}: a call to inline must be a "
                                      "statement of its own lines")
                 indent = " " * stmt.col_offset
                 new = self.inline(call, target, scope, top)
-                edits.append((stmt.lineno, stmt.end_lineno,
+                edits.append((stmt.lineno, _end_line(stmt),
                               [indent + line for s in new for line in s.split("\n")]))
                 continue
             for field in ("body", "orelse", "finalbody"):
@@ -1009,7 +1017,7 @@ class _Expander:
 
     def inline(self, call: ast.Call, target: ast.expr | None, scope: dict, top: bool
                ) -> list[str]:
-        name = call.func.id
+        name = cast(ast.Name, call.func).id  # block() inlines only calls of a name
         fn = self.functions[name]
         if call.keywords or len(call.args) != len(fn.params) or any(
                 isinstance(a, ast.Starred) for a in call.args):
@@ -1024,8 +1032,9 @@ class _Expander:
         self.copies += 1
         out: list[str] = []
         values: dict[str, str] = {}
-        targets = ([t.id for t in target.elts] if isinstance(target, ast.Tuple)
-                   else [target.id] if target is not None else [])
+        # block() passes a name or a tuple of names
+        targets = ([cast(ast.Name, t).id for t in target.elts] if isinstance(target, ast.Tuple)
+                   else [cast(ast.Name, target).id] if target is not None else [])
         names = [a.id for a in call.args if isinstance(a, ast.Name)]
         for param, arg in zip(fn.params, call.args):
             if isinstance(arg, ast.Name) and param not in fn.rebound:
@@ -1038,7 +1047,7 @@ class _Expander:
                 # it (c0 = probe(..., c0)): that variable can be the parameter throughout
                 values[param] = arg.id
             elif (isinstance(arg, ast.Constant) and type(arg.value) in (int, float)
-                  and 0 <= arg.value < math.inf and param not in fn.rebound):
+                  and 0 <= cast(float, arg.value) < math.inf and param not in fn.rebound):
                 values[param] = repr(arg.value)  # so does a number (a negative one is bound)
             else:  # evaluated once, before the body, as a call would
                 values[param] = self.fresh(f"{param}_{self.tag}{self.copies}")
@@ -1068,7 +1077,7 @@ class _Expander:
             for v in sorted(stmt.stored - values.keys()):
                 values[v] = self.fresh(f"{v}_{self.tag}{self.copies}")
             out.append(_fold_offsets(stmt.template.fill(values)))
-        if target is not None:
+        if target is not None and fn.returns is not None:  # (no returns with a target raised)
             value = _fold_offsets(fn.returns.fill(values))
             if value.replace("(", "").replace(")", "") != _segment(self.lines, target):
                 out.append(f"{_segment(self.lines, target)} = {value}")

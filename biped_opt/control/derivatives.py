@@ -47,7 +47,7 @@ import math
 import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -370,7 +370,7 @@ class _Branch:
         self.options = options
         self.where = where
 
-    def _solve(self, st: _State, t1: float, events: list | None = None):
+    def _solve(self, st: _State, t1: float, events: list | None = None) -> Any:  # OdeResult
         mdl = self.model
         n = mdl.n
         w0 = np.concatenate([st.y, st.z[:n].ravel()])
@@ -607,7 +607,7 @@ def directional_derivative(
     (it differs from o(p) where the outcome jumps)."""
     g = outcome_gradient(compiled, maneuver, s, inputs, direction=v, options=options,
                          variational=variational)
-    return float(g.gradient @ g.direction)
+    return float(g.gradient @ cast(Array, g.direction))  # (v is given)
 
 
 def final_state_directional_derivative(
@@ -618,7 +618,7 @@ def final_state_directional_derivative(
     """Bouligand derivative of the final state y(t_f) (2d entries) in the direction v."""
     g = outcome_gradient(compiled, maneuver, s, inputs, direction=v, options=options,
                          variational=variational)
-    return g.state_gradient @ g.direction
+    return g.state_gradient @ cast(Array, g.direction)  # (v is given)
 
 
 def one_sided_derivatives(

@@ -340,7 +340,7 @@ def _grid_minima(costs: Array, shape: tuple[int, ...]) -> list[int]:
     for axis in range(grid.ndim):
         for step in (-1, 1):
             neighbour = np.roll(grid, step, axis=axis)
-            edge = [slice(None)] * grid.ndim
+            edge: list[slice | int] = [slice(None)] * grid.ndim
             edge[axis] = 0 if step == 1 else -1
             neighbour[tuple(edge)] = np.inf
             keep &= grid <= neighbour
@@ -461,6 +461,7 @@ def optimal_policy(problem: Problem, s: float, *, grid_points: int | None = None
     acting_now = _acting(problem, compiled, tr.modes)
     bounds = {d: ("lower" if policy[d] == problem.bound(d)[0] else
                   "upper" if policy[d] == problem.bound(d)[1] else None) for d in acting_now}
+    active: str | None
     if len(acting_now) == 1:
         active, bound = acting_now[0], bounds[acting_now[0]]
     else:

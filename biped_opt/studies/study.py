@@ -25,11 +25,15 @@ import reprlib
 import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from biped_opt.errors import InvalidParameterError
+
+if TYPE_CHECKING:
+    from biped_opt.control.problems import Problem
 
 __all__ = ["Study", "StudyLimits", "StudyRow", "evaluate_point", "COLUMNS",
            "PROBLEM_PARAMETERS", "LIMITS"]
@@ -240,7 +244,7 @@ class Study:
             problem=optional["problem"],
             grid=tuple(grid), sample=tuple(sample), samples=samples,
             seed=_count(f"{where}: seed", spec.get("seed", 0), 0, MAX_STUDY_SEED),
-            s_range=s_range,  # type: ignore[arg-type]
+            s_range=s_range,
             num=_count(f"{where}: num", spec.get("num", 201), 3, limits.max_num, "max_num"),
             num_optimal=_count(f"{where}: num_optimal", spec.get("num_optimal", 41), 3,
                                limits.max_num, "max_num"),
@@ -311,13 +315,14 @@ class Study:
                 "seed": self.seed, "s_range": None if self.s_range is None
                 else list(self.s_range), "num": self.num, "num_optimal": self.num_optimal}
 
-    def _problem(self):
+    def _problem(self) -> Problem:
         from biped_opt.control.problems import load_problem
 
         return load_problem(self.problem, system=self.system)  # type: ignore[arg-type]
 
 
-def _grid(compiled: Any, maneuver: str, num: int, s_range: Sequence[float] | None):
+def _grid(compiled: Any, maneuver: str, num: int,
+          s_range: Sequence[float] | None) -> npt.NDArray[np.float64]:
     from biped_opt.analysis.nonsmooth import s_grid
 
     lo, hi = (None, None) if s_range is None else s_range

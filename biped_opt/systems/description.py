@@ -24,7 +24,7 @@ from __future__ import annotations
 import keyword
 import math
 import re
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -61,7 +61,7 @@ class Symbols:
         except KeyError:
             raise KeyError(f"no {self._kind} named {name!r}") from None
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[sp.Symbol]:
         return iter(self._by_name.values())
 
     def __len__(self) -> int:

@@ -18,6 +18,7 @@ convention of :class:`biped_opt.model.modes.ContactMode`.
 from __future__ import annotations
 
 import abc
+from typing import cast
 
 import numpy as np
 import numpy.typing as npt
@@ -103,7 +104,7 @@ def accelerations(
     """q'' from M q'' = f_J + Da_J^T lambda_J, Eq. (1a); returns (q'', lambda)."""
     lam = reaction_forces(system, q, dq, u, mode)
     total = system.forces(q, dq, u, mode) + system.constraint_jacobian(q).T @ lam
-    return np.linalg.solve(system.mass_matrix(q), total), lam
+    return cast(Array, np.linalg.solve(system.mass_matrix(q), total)), lam  # (float64)
 
 
 def impact_map(system: MechanicalSystem, q: Array, mode: int) -> Array:
