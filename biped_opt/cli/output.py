@@ -28,9 +28,9 @@ __all__ = ["derivatives_json", "emit_json", "emit_paths", "emit_sweep", "fixed_s
 
 # -- forms of delivery --------------------------------------------------------------------------
 
-def emit_json(value: Any) -> None:
-    """``value`` as one line of strict JSON on stdout (no NaN or infinity)."""
-    print(strict_json.dumps(value))
+def emit_json(value: Any, *, indent: int | None = None) -> None:
+    """``value`` as strict JSON on stdout (no NaN or infinity): one line, or indented."""
+    print(strict_json.dumps(value, indent=indent))
 
 
 def emit_paths(paths: Iterable[Path | str], *, to_stderr: bool = False) -> None:
