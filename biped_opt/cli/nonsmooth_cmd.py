@@ -38,34 +38,34 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     system = uses_system(args)
     progress = progress_from_args(args)
-    optimal = args.optimal or args.variant or args.problem is not None
-    if system and optimal:
+    kind = "optimal" if args.optimal or args.variant or args.problem is not None else "fixed"
+    if system and kind == "optimal":
         from biped_opt.analysis.nonsmooth import find_nonsmooth_optimal
         from biped_opt.control.solve import compiled_for
 
         problem = problem_from_system_args(args)
-        grid = s_grid_from_args(args, compiled_for(problem), problem.maneuver, SWEEP_NUM["optimal"])
+        grid = s_grid_from_args(args, compiled_for(problem), problem.maneuver, SWEEP_NUM[kind])
         report = find_nonsmooth_optimal(problem, grid, progress=progress)
     elif system:
         from biped_opt.analysis.nonsmooth import find_nonsmooth
 
         compiled = compiled_from_args(args)
         compiled.initial_mode(args.maneuver)  # an unknown maneuver: the system's message
-        grid = s_grid_from_args(args, compiled, args.maneuver, SWEEP_NUM["fixed"])
+        grid = s_grid_from_args(args, compiled, args.maneuver, SWEEP_NUM[kind])
         report = find_nonsmooth(compiled, args.maneuver, dict(args.input), s=grid,
                                 progress=progress)
-    elif optimal:
-        from biped_opt.optimal.nonsmooth import find_nonsmooth_optimal as biped_optimal
+    elif kind == "optimal":
+        from biped_opt.optimal.nonsmooth import find_nonsmooth_optimal as find_biped_optimal
 
         maneuver = parse_maneuver_arg(args.maneuver).value
         problem = problem_from_args(args)
-        report = biped_optimal(problem, grid_from_args(args, maneuver, SWEEP_NUM["optimal"]),
-                               progress=progress)
+        grid = grid_from_args(args, maneuver, SWEEP_NUM[kind])
+        report = find_biped_optimal(problem, grid, progress=progress)
     else:
         from biped_opt.fixed_sweep import FIXED_INPUTS
         from biped_opt.optimal.nonsmooth import find_nonsmooth_fixed
 
         maneuver = parse_maneuver_arg(args.maneuver).value
-        report = find_nonsmooth_fixed(maneuver, grid_from_args(args, maneuver, SWEEP_NUM["fixed"]),
-                                      FIXED_INPUTS[maneuver], progress=progress)
+        grid = grid_from_args(args, maneuver, SWEEP_NUM[kind])
+        report = find_nonsmooth_fixed(maneuver, grid, FIXED_INPUTS[maneuver], progress=progress)
     return show_report(report, args.json)
