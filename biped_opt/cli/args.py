@@ -1,25 +1,59 @@
-"""argparse converters and output-path checks shared by the sub-commands: each error names
-its argument."""
+"""The command line's input side, shared by the sub-commands: argparse converters and output-path
+checks (each error names its argument), the option groups that several commands take (the
+maneuver, the biped's problem overrides, the th0 range and progress bar, any system's
+``--system``/``--problem``/``--s``/``--input``/``--param``) and the one validated value each group
+becomes (a maneuver, a problem, a grid, a compiled system).
+
+With ``--system`` a maneuver is swept over its parameter s (--s, --s-min, --s-max), fixed inputs
+are ``--input NAME=VALUE``, system parameters ``--param NAME=VALUE``, and an optimal-control
+problem is one the system declares (``--problem NAME``, default: the one named like --maneuver)
+or a problem file (``--problem FILE.yaml|FILE.py``, whose ``system`` key may replace --system).
+The biped's own options (--theta0, --u1.., --theta-star, --alpha, --bounds, --fixed, --variant)
+stay the biped's. Imports of the core happen where a value is built, not while the parser is.
+"""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
+import sys
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from biped_opt.errors import InvalidInputError
+from biped_opt.errors import BipedOptError, InvalidInputError, InvalidParameterError
 
-__all__ = ["MAX_POINTS", "MAX_SEED", "assignment", "finite_float", "float_in_range",
-           "input_file", "int_in_range", "new_directory", "output_directory", "output_file",
-           "path_arg", "positive_float"]
+if TYPE_CHECKING:
+    import numpy as np
+    import numpy.typing as npt
+
+    from biped_opt.control.problems import Problem
+    from biped_opt.maneuvers import Maneuver
+    from biped_opt.optimal.problems import OptimalControlProblem
+    from biped_opt.simulation.compiled import CompiledSystem
+
+__all__ = ["BIPED_ONLY", "GRADIENT_EPS_VALUES", "GRADIENT_SAMPLE_COUNTS", "GRADIENT_SIGMAS",
+           "MAX_POINTS", "MAX_SEED", "add_maneuver_argument",
+           "add_problem_arguments", "add_progress_arguments", "add_range_arguments",
+           "add_system_arguments", "assignment", "checked_theta0", "compiled_from_args",
+           "finite_float", "float_in_range", "grid_from_args", "input_file", "int_in_range",
+           "new_directory", "output_directory", "output_file", "parse_maneuver_arg", "path_arg",
+           "positive_float", "problem_from_args", "problem_from_system_args",
+           "progress_from_args", "s_grid_from_args", "SWEEP_NUM", "uses_system"]
 
 #: the most grid points, samples or cases one command takes: a million fixed-input simulations
 #: are about a minute, 8 MB per array; a larger number is a typo, not a study
 MAX_POINTS = 1_000_000
+#: grid points of a biped's or a system's sweep when --num is not given (sweep, nonsmooth)
+SWEEP_NUM = {"fixed": 401, "optimal": 201}
+#: the gradient study as ``gradients`` and ``demo`` run it (paper Sec. V-A): smoothing widths,
+#: sample counts of the stochastic estimators, finite-difference steps
+GRADIENT_SIGMAS = (0.003, 0.03)
+GRADIENT_SAMPLE_COUNTS = (4, 64)
+GRADIENT_EPS_VALUES = (0.02, 0.002)
 #: seeds are taken in 0..2**32 - 1 (numpy's legacy range, and what every seed here needs)
 MAX_SEED = 2**32 - 1
 
@@ -274,3 +308,280 @@ def assignment(option: str) -> Callable[[str], tuple[str, float]]:
 
     convert.__name__ = option
     return convert
+
+
+# -- the option groups several commands take, and the one value each becomes ----------------
+
+def add_progress_arguments(p: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """--progress / --no-progress (default: a bar when stderr is a terminal)."""
+    p.add_argument("--progress", dest="progress", action="store_true", default=None,
+                   help="draw a progress bar on stderr (default: when stderr is a terminal)")
+    p.add_argument("--no-progress", dest="progress", action="store_false")
+
+
+def progress_from_args(args: argparse.Namespace) -> bool:
+    """Whether to draw a progress bar: --progress/--no-progress, else when stderr is a tty."""
+    return sys.stderr.isatty() if args.progress is None else bool(args.progress)
+
+
+def add_maneuver_argument(parser: argparse.ArgumentParser) -> None:
+    """--maneuver: the paper's maneuver, or a maneuver of --system."""
+    from biped_opt.maneuvers import Maneuver
+
+    parser.add_argument(
+        "--maneuver",
+        type=str,
+        metavar="{" + ",".join(m.value for m in Maneuver) + "}",
+        help="which maneuver of the paper (Sec. IV), or of --system",
+    )
+
+
+def parse_maneuver_arg(text: str | None) -> Maneuver:
+    """--maneuver as one of the paper's maneuvers; the error names the argument."""
+    from biped_opt.maneuvers import parse_maneuver
+
+    if text is None:
+        raise InvalidInputError("--maneuver is required")
+    try:
+        return parse_maneuver(text)
+    except InvalidInputError as exc:
+        raise InvalidInputError(f"--maneuver: {exc}") from None
+
+
+def checked_theta0(maneuver: Maneuver | str, value: float, option: str = "--theta0") -> float:
+    """An initial pitch inside the maneuver's range; the error names ``option``."""
+    from biped_opt.maneuvers import check_theta0
+
+    try:
+        return check_theta0(maneuver, value)
+    except InvalidInputError as exc:
+        raise InvalidInputError(f"{option}: {exc}") from None
+
+
+def _input_assignment(name: str, pairs: bool) -> Callable[[str], tuple[str, tuple[float, ...]]]:
+    """NAME=VALUE (NAME=LO,HI when ``pairs``) with NAME one of the biped's inputs; errors name
+    the option."""
+    from biped_opt.hybrid.simulate import INPUT_NAMES
+
+    def convert(text: str) -> tuple[str, tuple[float, ...]]:
+        key, sep, rest = text.partition("=")
+        key = key.strip()
+        if not sep or key not in INPUT_NAMES:
+            form = "NAME=LO,HI" if pairs else "NAME=VALUE"
+            raise argparse.ArgumentTypeError(
+                f"{name} must look like {form} with NAME one of {', '.join(INPUT_NAMES)}, "
+                f"got {text!r}"
+            )
+        parts = rest.replace(":", ",").split(",") if pairs else [rest]
+        if len(parts) != (2 if pairs else 1):
+            raise argparse.ArgumentTypeError(f"{name} {key}: expected LO,HI, got {rest!r}")
+        values = []
+        for part in parts:
+            try:
+                value = float(part)
+            except ValueError:
+                raise argparse.ArgumentTypeError(
+                    f"{name} {key}: {part!r} is not a number"
+                ) from None
+            if not math.isfinite(value):
+                raise argparse.ArgumentTypeError(f"{name} {key}: must be finite, got {part!r}")
+            values.append(value)
+        return key, tuple(values)
+
+    convert.__name__ = name
+    return convert
+
+
+def add_problem_arguments(p: argparse.ArgumentParser, *, variant: bool = True) -> None:
+    """The options that select the biped's optimal-control problem and override MODEL.md
+    Sec. 5's defaults: --maneuver, --variant, --theta-star, --alpha, --bounds, --fixed."""
+    add_maneuver_argument(p)
+    if variant:
+        p.add_argument("--variant", action="store_true",
+                       help="liftoff only: decide the single-stance forces u1, u2 in [0, 3] "
+                            "with u12 = 0 (MODEL.md Sec. 6)")
+    p.add_argument("--theta-star", type=finite_float("--theta-star"), default=None,
+                   help="target outcome th* [rad] (default per problem)")
+    p.add_argument("--alpha", action="append", default=[], metavar="NAME=VALUE",
+                   type=_input_assignment("--alpha", pairs=False),
+                   help="input weight of a decision, e.g. --alpha u1=3e-4 (repeatable)")
+    p.add_argument("--bounds", action="append", default=[], metavar="NAME=LO,HI",
+                   type=_input_assignment("--bounds", pairs=True),
+                   help="bounds of a decision, e.g. --bounds u12=-0.5,0.5 (repeatable)")
+    p.add_argument("--fixed", action="append", default=[], metavar="NAME=VALUE",
+                   type=_input_assignment("--fixed", pairs=False),
+                   help="value of a non-decision input, e.g. --fixed u2=3 (repeatable)")
+
+
+def problem_from_args(args: argparse.Namespace) -> OptimalControlProblem:
+    """The biped's problem named by --maneuver/--variant with the command line's overrides."""
+    from biped_opt.hybrid.simulate import INPUT_NAMES
+    from biped_opt.maneuvers import Maneuver
+    from biped_opt.optimal.problems import get_problem
+
+    maneuver = parse_maneuver_arg(args.maneuver)
+    name = maneuver.value
+    if getattr(args, "variant", False):
+        if maneuver is not Maneuver.LIFTOFF:
+            raise InvalidInputError("--variant: only the liftoff maneuver has a variant problem")
+        name = "liftoff-variant"
+    problem = get_problem(name)
+    try:
+        if args.theta_star is not None:
+            problem = dataclasses.replace(problem, theta_star=args.theta_star)
+        fixed = list(problem.fixed_inputs)
+        for key, (value,) in args.fixed:
+            if key in problem.decisions:
+                raise InvalidInputError(
+                    f"--fixed: {key} is a decision of the {problem.name} problem, not fixed"
+                )
+            fixed[INPUT_NAMES.index(key)] = value
+        problem = dataclasses.replace(problem, fixed_inputs=tuple(fixed))
+    except InvalidParameterError as exc:
+        raise InvalidInputError(f"--theta-star/--fixed: {exc}") from None
+    for option, items, apply in (
+        ("--alpha", args.alpha, lambda pr, k, v: pr.with_alpha(k, v[0])),
+        ("--bounds", args.bounds, lambda pr, k, v: pr.with_bounds(k, v[0], v[1])),
+    ):
+        for key, values in items:
+            try:
+                problem = apply(problem, key, values)
+            except (InvalidInputError, InvalidParameterError) as exc:
+                raise InvalidInputError(f"{option}: {exc}") from None
+    return problem
+
+
+def add_range_arguments(p: argparse.ArgumentParser, num_help: str) -> None:
+    """The biped's th0 sweep: --theta0-min, --theta0-max, --num, and the progress bar."""
+    p.add_argument("--theta0-min", type=finite_float("--theta0-min"), default=None,
+                   help="smallest th0 [rad] (default: -limit of the maneuver)")
+    p.add_argument("--theta0-max", type=finite_float("--theta0-max"), default=None,
+                   help="largest th0 [rad] (default: +limit of the maneuver)")
+    p.add_argument("--num", type=int_in_range("--num", 2, MAX_POINTS), default=None,
+                   help=num_help)
+    add_progress_arguments(p)
+
+
+def grid_from_args(args: argparse.Namespace, maneuver: str,
+                   default_num: int) -> npt.NDArray[np.float64]:
+    """The th0 grid of --theta0-min/--theta0-max/--num (0 included)."""
+    from biped_opt.optimal.sweep import sweep_grid
+
+    for option, value in (("--theta0-min", args.theta0_min), ("--theta0-max", args.theta0_max)):
+        if value is not None:
+            checked_theta0(maneuver, value, option)
+    if (args.theta0_min is not None and args.theta0_max is not None
+            and not args.theta0_min < args.theta0_max):
+        raise InvalidInputError(
+            f"--theta0-min must be below --theta0-max, got {args.theta0_min} >= {args.theta0_max}"
+        )
+    return sweep_grid(maneuver, args.theta0_min, args.theta0_max,
+                      args.num if args.num is not None else default_num)
+
+
+#: the biped's options, refused alongside --system (name on the command line, attribute)
+BIPED_ONLY = (("--theta0", "theta0"), ("--theta0-min", "theta0_min"),
+              ("--theta0-max", "theta0_max"), ("--theta-star", "theta_star"),
+              ("--alpha", "alpha"), ("--bounds", "bounds"), ("--fixed", "fixed"),
+              ("--variant", "variant"), ("--u1", "u1"), ("--u2", "u2"), ("--u12", "u12"))
+
+
+def add_system_arguments(p: argparse.ArgumentParser, *, point: bool = False,
+                         sweep: bool = False, problem: bool = True) -> None:
+    """The options of any system (see the module docstring)."""
+    g = p.add_argument_group("any system (instead of the biped)")
+    g.add_argument("--system", metavar="NAME|FILE.py",
+                   help="a library system (biped, walkerN[_coupled|_decoupled], rocking_bar) or "
+                        "a system file; see `biped-opt systems`")
+    if problem:
+        g.add_argument("--problem", metavar="NAME|FILE",
+                       help="an optimal-control problem the system declares, or a problem file "
+                            "(.yaml/.py; README 'Problems on any system')")
+    if point:
+        g.add_argument("--s", type=finite_float("--s"), help="the maneuver's parameter s")
+    if sweep:
+        g.add_argument("--s-min", type=finite_float("--s-min"), default=None,
+                       help="smallest s (default: the maneuver's range)")
+        g.add_argument("--s-max", type=finite_float("--s-max"), default=None,
+                       help="largest s (default: the maneuver's range)")
+    g.add_argument("--input", action="append", default=[], metavar="NAME=VALUE",
+                   type=assignment("--input"), help="a fixed input of the system (repeatable)")
+    g.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   type=assignment("--param"), help="a parameter of the system (repeatable)")
+
+
+def uses_system(args: argparse.Namespace) -> bool:
+    """Whether the command line selects a system (else it is the biped's); an option of the
+    other kind is an error naming it."""
+    if getattr(args, "system", None) is not None or getattr(args, "problem", None) is not None:
+        for flag, attr in BIPED_ONLY:
+            value = getattr(args, attr, None)
+            if value not in (None, False, []):
+                raise InvalidInputError(
+                    f"{flag}: the biped's option; with --system use --s, --s-min/--s-max, "
+                    "--input NAME=VALUE, --param NAME=VALUE and --problem")
+        return True
+    for flag in ("s", "s_min", "s_max", "input", "param"):
+        if getattr(args, flag, None) not in (None, []):
+            raise InvalidInputError(f"--{flag.replace('_', '-')}: only with --system")
+    return False
+
+
+def problem_from_system_args(args: argparse.Namespace, *, required: bool = True) -> Problem | None:
+    """The Problem of --system/--problem/--maneuver with --param overrides, or None."""
+    from biped_opt.control.problems import describe, load_problem
+
+    try:
+        if args.problem is not None:
+            problem = load_problem(args.problem, system=args.system)
+        else:
+            if args.maneuver is None:
+                if not required:
+                    return None
+                raise InvalidInputError("--problem (or --maneuver naming one) is required")
+            system = describe(args.system)
+            if args.maneuver not in system.problems:
+                if not required:
+                    return None
+                raise InvalidInputError(
+                    f"--problem: {system.where()} declares no problem named like --maneuver "
+                    f"{args.maneuver!r} (problems: {', '.join(system.problems) or 'none'}); "
+                    "give --problem NAME or a problem file")
+            problem = load_problem(args.maneuver, system=args.system)
+        if args.system is not None and args.problem is not None and \
+                Path(str(args.problem)).suffix in (".yaml", ".yml", ".py"):
+            chosen = describe(args.system).name
+            if problem.description.name != chosen:
+                raise InvalidInputError(
+                    f"--problem: {args.problem} is a problem on {problem.description.name}, "
+                    f"not on --system {chosen}")
+        if args.param:
+            merged = {**dict(problem.parameters), **dict(args.param)}
+            problem = dataclasses.replace(problem, parameters=tuple(merged.items()))
+    except InvalidInputError:
+        raise
+    except BipedOptError as exc:
+        raise InvalidInputError(f"--problem: {exc}") from None
+    if args.maneuver is not None and args.maneuver != problem.maneuver:
+        raise InvalidInputError(f"--maneuver {args.maneuver!r}: the problem {problem.name} is "
+                                f"on maneuver {problem.maneuver!r}")
+    return problem
+
+
+def compiled_from_args(args: argparse.Namespace) -> CompiledSystem:
+    """The compiled --system with its --param values; --maneuver is required with it."""
+    from biped_opt.simulation.compiled import CompiledSystem
+
+    if args.system is None:
+        raise InvalidInputError("--system is required")
+    if args.maneuver is None:
+        raise InvalidInputError("--maneuver is required")
+    return CompiledSystem(args.system, **dict(args.param))
+
+
+def s_grid_from_args(args: argparse.Namespace, compiled: CompiledSystem, maneuver: str,
+                     num: int) -> npt.NDArray[np.float64]:
+    """The s grid of --s-min/--s-max/--num (default ``num``) over the maneuver's range."""
+    from biped_opt.analysis.nonsmooth import s_grid
+
+    return s_grid(compiled, maneuver, args.num or num, args.s_min, args.s_max)

@@ -19,8 +19,8 @@ import sys
 from pathlib import Path
 from types import ModuleType
 
-from biped_opt import strict_json
 from biped_opt.cli.args import MAX_POINTS, MAX_SEED, int_in_range
+from biped_opt.cli.output import emit_json
 from biped_opt.errors import BipedOptError
 from biped_opt.version import PACKAGE_DIR
 
@@ -136,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
         n_cases=args.cases, quick=args.quick, compile_cost=not args.no_compile, **kwargs
     )
     if args.json:
-        print(strict_json.dumps(result))
+        emit_json(result)
     else:
         print(format_table(result))
     return 0
@@ -155,5 +155,8 @@ def run_systems(args: argparse.Namespace) -> int:
         names, n_cases=min(args.cases, 40) if args.quick else args.cases,
         rounds=1 if args.quick else 3, reference_cases=5 if args.quick else 20,
         compile_cost=not args.no_compile, **kwargs)
-    print(strict_json.dumps(result) if args.json else systems_bench.format_systems_table(result))
+    if args.json:
+        emit_json(result)
+    else:
+        print(systems_bench.format_systems_table(result))
     return 0

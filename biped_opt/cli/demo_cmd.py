@@ -149,14 +149,15 @@ def gradient_methods(folder: Path) -> None:
     """Paper Sec. V-A, small: gradient methods on the liftoff problem, whose cost jumps in u12
     (``biped-opt gradients`` runs every problem, larger)."""
     from biped_opt.analysis.gradients import report, run_gradient_study
-    from biped_opt.cli.gradients_cmd import EPS_VALUES, SAMPLE_COUNTS, SIGMAS
+    from biped_opt.cli.args import GRADIENT_EPS_VALUES, GRADIENT_SAMPLE_COUNTS, GRADIENT_SIGMAS
     from biped_opt.plots.gradients import gradient_figure
 
     print("\nGradient methods at a jump of the liftoff cost (biped-opt gradients --quick "
           "--problem liftoff, seed 0)\n", flush=True)
-    study = run_gradient_study(seed=0, quick=True, problems=["liftoff"], sigmas=SIGMAS,
-                               sample_counts=SAMPLE_COUNTS, eps_values=EPS_VALUES)
-    print(report(study, SAMPLE_COUNTS))
+    study = run_gradient_study(seed=0, quick=True, problems=["liftoff"],
+                               sigmas=GRADIENT_SIGMAS, sample_counts=GRADIENT_SAMPLE_COUNTS,
+                               eps_values=GRADIENT_EPS_VALUES)
+    print(report(study, GRADIENT_SAMPLE_COUNTS))
     for name in study.curves:
         print(f"  {gradient_figure(study, name, folder / f'gradients_{name}.png')}")
 

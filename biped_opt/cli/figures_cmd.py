@@ -12,8 +12,17 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from biped_opt.cli.args import MAX_POINTS, int_in_range, output_directory, path_arg
-from biped_opt.cli.system_cmds import add_system_arguments, problem_from_system_args, uses_system
+from biped_opt.cli.args import (
+    MAX_POINTS,
+    add_system_arguments,
+    int_in_range,
+    output_directory,
+    path_arg,
+    problem_from_system_args,
+    s_grid_from_args,
+    uses_system,
+)
+from biped_opt.cli.output import emit_paths
 from biped_opt.errors import InvalidInputError
 
 #: grid sizes with --system when --num is not given: fixed inputs, optimal
@@ -58,8 +67,7 @@ def run(args: argparse.Namespace) -> int:
         fh.write(f"\n{CONTROL_EXPERIMENT_CAPTION}\n")
     print(result.table())
     print()
-    for path in (*result.figures, experiment, result.captions):
-        print(f"wrote {path}")
+    emit_paths((*result.figures, experiment, result.captions))
     print(f"reproduction took {result.seconds:.1f} s")
     return 0
 
@@ -68,7 +76,6 @@ def run_system(args: argparse.Namespace) -> int:
     """Any system's figures; every argument is checked before the output directory is made."""
     import time
 
-    from biped_opt.analysis.nonsmooth import s_grid
     from biped_opt.control.solve import compiled_for
     from biped_opt.simulation.compiled import CompiledSystem
 
@@ -93,7 +100,7 @@ def run_system(args: argparse.Namespace) -> int:
             args.maneuver, "fixed"
         compiled.initial_mode(maneuver)  # an unknown maneuver: the system's message
         compiled._inputs(dict(args.input))  # an unknown input: the system's message
-    grid = s_grid(compiled, maneuver, args.num or SYSTEM_NUM[kind], args.s_min, args.s_max)
+    grid = s_grid_from_args(args, compiled, maneuver, SYSTEM_NUM[kind])
     output_directory("--out", args.out)
     # matplotlib only when drawing
     from biped_opt.plots.systems import fixed_input_figures, optimal_figures
@@ -107,7 +114,6 @@ def run_system(args: argparse.Namespace) -> int:
           f"{grid.size} values of {result.report.parameter}")
     print(result.report.table())
     print()
-    for path in (*result.figures, result.captions, result.data):
-        print(f"wrote {path}")
+    emit_paths((*result.figures, result.captions, result.data))
     print(f"figures took {time.perf_counter() - start:.1f} s")
     return 0

@@ -6,13 +6,17 @@ import argparse
 import sys
 from pathlib import Path
 
-from biped_opt import strict_json
 from biped_opt.analysis.gradients import PROBLEMS, report, run_gradient_study
-from biped_opt.cli.args import MAX_SEED, int_in_range, output_directory, path_arg
-
-SIGMAS = (0.003, 0.03)
-SAMPLE_COUNTS = (4, 64)
-EPS_VALUES = (0.02, 0.002)
+from biped_opt.cli.args import (
+    GRADIENT_EPS_VALUES,
+    GRADIENT_SAMPLE_COUNTS,
+    GRADIENT_SIGMAS,
+    MAX_SEED,
+    int_in_range,
+    output_directory,
+    path_arg,
+)
+from biped_opt.cli.output import emit_json, emit_paths
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -37,18 +41,17 @@ def run(args: argparse.Namespace) -> int:
         print(message, file=sys.stderr, flush=True)
 
     study = run_gradient_study(seed=args.seed, quick=args.quick, problems=args.problem,
-                               sigmas=SIGMAS, sample_counts=SAMPLE_COUNTS,
-                               eps_values=EPS_VALUES, progress=say if args.verbose else None)
+                               sigmas=GRADIENT_SIGMAS, sample_counts=GRADIENT_SAMPLE_COUNTS,
+                               eps_values=GRADIENT_EPS_VALUES,
+                               progress=say if args.verbose else None)
     if args.json:
-        print(strict_json.dumps(study.as_dict()))
+        emit_json(study.as_dict())
     else:
-        print(report(study, SAMPLE_COUNTS))
+        print(report(study, GRADIENT_SAMPLE_COUNTS))
     if args.figures:
         from biped_opt.plots.gradients import gradient_figure
 
         output_directory("--figures", args.figures)
-
-        for name in study.curves:
-            path = gradient_figure(study, name, Path(args.figures) / f"gradients_{name}.png")
-            print(f"wrote {path}", file=sys.stderr)
+        emit_paths((gradient_figure(study, name, Path(args.figures) / f"gradients_{name}.png")
+                    for name in study.curves), to_stderr=True)
     return 0

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from biped_opt import strict_json
 from biped_opt.cli.args import new_directory, path_arg
+from biped_opt.cli.output import emit_json
 
 __all__ = ["register", "func", "describe"]
 
@@ -99,7 +99,10 @@ def _text(info: dict) -> str:
 
 def func(args: argparse.Namespace) -> int:
     info = describe(args.file)
-    print(strict_json.dumps(info, indent=2) if args.json else _text(info))
+    if args.json:
+        emit_json(info, indent=2)
+    else:
+        print(_text(info))
     if args.to_rosbag2 is not None:
         from biped_opt.record.rosbag2 import export_rosbag2
 

@@ -4,17 +4,21 @@ from __future__ import annotations
 
 import argparse
 
-from biped_opt import strict_json
-from biped_opt.cli.optimise_cmd import add_problem_arguments, problem_from_args
-from biped_opt.cli.simulate_cmd import parse_maneuver_arg
-from biped_opt.cli.sweep_cmd import add_range_arguments, grid_from_args, progress_from_args
-from biped_opt.cli.system_cmds import add_system_arguments, run_nonsmooth, uses_system
-from biped_opt.fixed_sweep import FIXED_INPUTS
-from biped_opt.optimal.nonsmooth import (
-    NonsmoothReport,
-    find_nonsmooth_fixed,
-    find_nonsmooth_optimal,
+from biped_opt.cli.args import (
+    SWEEP_NUM,
+    add_problem_arguments,
+    add_range_arguments,
+    add_system_arguments,
+    compiled_from_args,
+    grid_from_args,
+    parse_maneuver_arg,
+    problem_from_args,
+    problem_from_system_args,
+    progress_from_args,
+    s_grid_from_args,
+    uses_system,
 )
+from biped_opt.cli.output import show_report
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -32,28 +36,36 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if uses_system(args):
-        return run_nonsmooth(args)
-    maneuver = parse_maneuver_arg(args.maneuver).value
+    system = uses_system(args)
     progress = progress_from_args(args)
-    if args.optimal or args.variant:
-        problem = problem_from_args(args)
-        grid = grid_from_args(args, maneuver, 201)
+    kind = "optimal" if args.optimal or args.variant or args.problem is not None else "fixed"
+    if system and kind == "optimal":
+        from biped_opt.analysis.nonsmooth import find_nonsmooth_optimal
+        from biped_opt.control.solve import compiled_for
+
+        problem = problem_from_system_args(args)
+        grid = s_grid_from_args(args, compiled_for(problem), problem.maneuver, SWEEP_NUM[kind])
         report = find_nonsmooth_optimal(problem, grid, progress=progress)
+    elif system:
+        from biped_opt.analysis.nonsmooth import find_nonsmooth
+
+        compiled = compiled_from_args(args)
+        compiled.initial_mode(args.maneuver)  # an unknown maneuver: the system's message
+        grid = s_grid_from_args(args, compiled, args.maneuver, SWEEP_NUM[kind])
+        report = find_nonsmooth(compiled, args.maneuver, dict(args.input), s=grid,
+                                progress=progress)
+    elif kind == "optimal":
+        from biped_opt.optimal.nonsmooth import find_nonsmooth_optimal as find_biped_optimal
+
+        maneuver = parse_maneuver_arg(args.maneuver).value
+        problem = problem_from_args(args)
+        grid = grid_from_args(args, maneuver, SWEEP_NUM[kind])
+        report = find_biped_optimal(problem, grid, progress=progress)
     else:
-        grid = grid_from_args(args, maneuver, 401)
+        from biped_opt.fixed_sweep import FIXED_INPUTS
+        from biped_opt.optimal.nonsmooth import find_nonsmooth_fixed
+
+        maneuver = parse_maneuver_arg(args.maneuver).value
+        grid = grid_from_args(args, maneuver, SWEEP_NUM[kind])
         report = find_nonsmooth_fixed(maneuver, grid, FIXED_INPUTS[maneuver], progress=progress)
-    return print_report(report, args.json)
-
-
-def print_report(report: NonsmoothReport, as_json: bool) -> int:
-    """A nonsmooth table as text, or as a JSON list of points."""
-    if as_json:
-        print(strict_json.dumps([p.as_dict() for p in report.points]))
-    else:
-        kind = "optimal" if report.optimal else "fixed-input"
-        print(f"{report.subject} ({kind}), {report.parameter} in [{report.theta0_range[0]:g}, "
-              f"{report.theta0_range[1]:g}], {report.grid_size} grid points, "
-              f"{len(report.points)} nonsmooth findings")
-        print(report.table())
-    return 0
+    return show_report(report, args.json)

@@ -1,111 +1,29 @@
-"""``biped-opt optimise``: the optimal policy, value and one-sided derivatives at one th0.
-
-Also holds the problem options shared by ``sweep`` and ``nonsmooth``: ``--variant``,
-``--theta-star``, ``--alpha NAME=VALUE``, ``--bounds NAME=LO,HI`` and ``--fixed NAME=VALUE``
-override MODEL.md Sec. 5's defaults.
-"""
+"""``biped-opt optimise``: the optimal policy, value and one-sided derivatives at one th0 (the
+biped; MODEL.md Sec. 5's defaults overridden by --variant, --theta-star, --alpha NAME=VALUE,
+--bounds NAME=LO,HI and --fixed NAME=VALUE), or at one s of any system's problem (--system,
+--problem)."""
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import math
+import sys
+from typing import TYPE_CHECKING, Any
 
-from biped_opt import strict_json
-from biped_opt.cli.args import finite_float
-from biped_opt.cli.simulate_cmd import add_maneuver_argument, parse_maneuver_arg
-from biped_opt.cli.system_cmds import add_system_arguments, run_optimise, uses_system
-from biped_opt.errors import InvalidInputError, InvalidParameterError
-from biped_opt.hybrid.simulate import INPUT_NAMES
-from biped_opt.maneuvers import Maneuver, check_theta0
-from biped_opt.optimal.problems import OptimalControlProblem, get_problem
-from biped_opt.optimal.solve import OptimalResult, optimal_policy
+from biped_opt.cli.args import (
+    add_problem_arguments,
+    add_system_arguments,
+    checked_theta0,
+    finite_float,
+    problem_from_args,
+    problem_from_system_args,
+    uses_system,
+)
+from biped_opt.cli.output import derivatives_json, show_optimal
+from biped_opt.errors import InvalidInputError
 
-
-def _assignment(name: str, pairs: bool):
-    """argparse type for NAME=VALUE (or NAME=LO,HI when ``pairs``); errors name the option."""
-
-    def convert(text: str) -> tuple[str, tuple[float, ...]]:
-        key, sep, rest = text.partition("=")
-        key = key.strip()
-        if not sep or key not in INPUT_NAMES:
-            form = "NAME=LO,HI" if pairs else "NAME=VALUE"
-            raise argparse.ArgumentTypeError(
-                f"{name} must look like {form} with NAME one of {', '.join(INPUT_NAMES)}, "
-                f"got {text!r}"
-            )
-        parts = rest.replace(":", ",").split(",") if pairs else [rest]
-        if len(parts) != (2 if pairs else 1):
-            raise argparse.ArgumentTypeError(f"{name} {key}: expected LO,HI, got {rest!r}")
-        values = []
-        for part in parts:
-            try:
-                value = float(part)
-            except ValueError:
-                raise argparse.ArgumentTypeError(
-                    f"{name} {key}: {part!r} is not a number"
-                ) from None
-            if not math.isfinite(value):
-                raise argparse.ArgumentTypeError(f"{name} {key}: must be finite, got {part!r}")
-            values.append(value)
-        return key, tuple(values)
-
-    convert.__name__ = name
-    return convert
-
-
-def add_problem_arguments(p: argparse.ArgumentParser, *, variant: bool = True) -> None:
-    """The options that select and override the optimal-control problem."""
-    add_maneuver_argument(p)
-    if variant:
-        p.add_argument("--variant", action="store_true",
-                       help="liftoff only: decide the single-stance forces u1, u2 in [0, 3] "
-                            "with u12 = 0 (MODEL.md Sec. 6)")
-    p.add_argument("--theta-star", type=finite_float("--theta-star"), default=None,
-                   help="target outcome th* [rad] (default per problem)")
-    p.add_argument("--alpha", action="append", default=[], metavar="NAME=VALUE",
-                   type=_assignment("--alpha", pairs=False),
-                   help="input weight of a decision, e.g. --alpha u1=3e-4 (repeatable)")
-    p.add_argument("--bounds", action="append", default=[], metavar="NAME=LO,HI",
-                   type=_assignment("--bounds", pairs=True),
-                   help="bounds of a decision, e.g. --bounds u12=-0.5,0.5 (repeatable)")
-    p.add_argument("--fixed", action="append", default=[], metavar="NAME=VALUE",
-                   type=_assignment("--fixed", pairs=False),
-                   help="value of a non-decision input, e.g. --fixed u2=3 (repeatable)")
-
-
-def problem_from_args(args: argparse.Namespace) -> OptimalControlProblem:
-    """The problem named by --maneuver/--variant with the command line's overrides."""
-    maneuver = parse_maneuver_arg(args.maneuver)
-    name = maneuver.value
-    if getattr(args, "variant", False):
-        if maneuver is not Maneuver.LIFTOFF:
-            raise InvalidInputError("--variant: only the liftoff maneuver has a variant problem")
-        name = "liftoff-variant"
-    problem = get_problem(name)
-    try:
-        if args.theta_star is not None:
-            problem = dataclasses.replace(problem, theta_star=args.theta_star)
-        fixed = list(problem.fixed_inputs)
-        for key, (value,) in args.fixed:
-            if key in problem.decisions:
-                raise InvalidInputError(
-                    f"--fixed: {key} is a decision of the {problem.name} problem, not fixed"
-                )
-            fixed[INPUT_NAMES.index(key)] = value
-        problem = dataclasses.replace(problem, fixed_inputs=tuple(fixed))
-    except InvalidParameterError as exc:
-        raise InvalidInputError(f"--theta-star/--fixed: {exc}") from None
-    for option, items, apply in (
-        ("--alpha", args.alpha, lambda pr, k, v: pr.with_alpha(k, v[0])),
-        ("--bounds", args.bounds, lambda pr, k, v: pr.with_bounds(k, v[0], v[1])),
-    ):
-        for key, values in items:
-            try:
-                problem = apply(problem, key, values)
-            except (InvalidInputError, InvalidParameterError) as exc:
-                raise InvalidInputError(f"{option}: {exc}") from None
-    return problem
+if TYPE_CHECKING:
+    from biped_opt.optimal.problems import OptimalControlProblem
+    from biped_opt.optimal.solve import OptimalResult
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -117,28 +35,73 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def derivatives_json(problem: OptimalControlProblem, theta0: float) -> dict:
-    """One-sided derivatives (left, right) of outcome, value and policy at theta0.
+def run(args: argparse.Namespace) -> int:
+    return run_system(args) if uses_system(args) else run_biped(args)
 
-    From the variational equations (Theorem 1, Eqs. (12)-(13)) when
-    :mod:`biped_opt.optimal.derivatives` is available, else from extrapolated one-sided
-    finite differences of the optimal solution.
-    """
+
+def run_biped(args: argparse.Namespace) -> int:
+    """The biped's problem at --theta0: the derivatives from its variational equations."""
+    from biped_opt.optimal.solve import optimal_policy
+
+    if args.theta0 is None:
+        raise InvalidInputError("--theta0 is required (or --system with --s)")
+    problem = problem_from_args(args)
+    theta0 = checked_theta0(problem.maneuver, args.theta0)
+    r = optimal_policy(problem, theta0)
+    derivatives = _biped_derivatives(problem, theta0) if r.success else None
+    return show_optimal(
+        args.json, {**r.as_dict(), "problem": r.problem.describe()},
+        problem=f"{problem.name}  theta0 = {r.theta0:+.12g}", status=f"{r.status}: {r.message}",
+        policy=r.policy, bound=f"{r.active} at its {r.bound} bound" if r.bound else "",
+        value=r.value, outcome=f"th(t_f) = {r.outcome:+.15g}", branch=r.branch,
+        parameter="th0", derivatives=derivatives,
+        work=f"simulations = {r.nsim}, nfev = {r.nfev}", success=r.success)
+
+
+def run_system(args: argparse.Namespace) -> int:
+    """Any system's problem at --s: the derivatives of Theorem 1."""
+    from biped_opt.control.solve import optimal_policy
+    from biped_opt.control.theorem1 import optimal_derivatives
+    from biped_opt.errors import SimulationError
+
+    problem = problem_from_system_args(args)
+    if args.s is None:
+        raise InvalidInputError("--s is required with --system")
+    r = optimal_policy(problem, args.s)
+    derivatives = None
+    if r.success:
+        try:
+            d = optimal_derivatives(problem, args.s)
+        except SimulationError as exc:  # e.g. a grazing terminal event: say so, keep the optimum
+            print(f"note: no one-sided derivatives at this s: {exc}", file=sys.stderr)
+        else:
+            derivatives = derivatives_json(d, "variational (Theorem 1)")
+    return show_optimal(
+        args.json, {**r.as_dict(), "problem": problem.as_dict()},
+        problem=f"{problem.name}  ({problem.description.name}, maneuver {problem.maneuver})  "
+                f"s = {r.s:+.12g}",
+        status=f"{'ok' if r.success else 'failed'}: {r.message}", policy=r.policy,
+        bound=f"bound: {r.bound}" if r.bound else "", value=r.value,
+        outcome=f"{r.outcome:+.15g}", branch=r.branch, parameter=str(problem.description.s),
+        derivatives=derivatives, work=f"simulations = {r.nsim}", success=r.success)
+
+
+def _biped_derivatives(problem: OptimalControlProblem, theta0: float) -> dict[str, Any]:
+    """One-sided derivatives (left, right) of the biped's optimal outcome, value and policy at
+    theta0: from the variational equations (Theorem 1, Eqs. (12)-(13)) when
+    :mod:`biped_opt.optimal.derivatives` imports, else from extrapolated one-sided finite
+    differences of the optimal solution."""
     try:
         from biped_opt.optimal.derivatives import one_sided_derivatives
     except ImportError:
         return _finite_difference_derivatives(problem, theta0)
-    d = one_sided_derivatives(problem, theta0)
-    return {
-        "outcome": list(d.outcome),
-        "value": list(d.value),
-        "policy": {k: list(v) for k, v in d.policy.items()},
-        "method": "variational",
-    }
+    return derivatives_json(one_sided_derivatives(problem, theta0), "variational")
 
 
-def _finite_difference_derivatives(problem: OptimalControlProblem, theta0: float) -> dict:
+def _finite_difference_derivatives(problem: OptimalControlProblem,
+                                   theta0: float) -> dict[str, Any]:
     from biped_opt.maneuvers import spec
+    from biped_opt.optimal.solve import optimal_policy
     from biped_opt.piecewise import one_sided
 
     cache: dict[float, OptimalResult] = {}
@@ -149,7 +112,7 @@ def _finite_difference_derivatives(problem: OptimalControlProblem, theta0: float
         return cache[th]
 
     limit = spec(problem.maneuver).theta0_limit
-    out: dict = {"policy": {}, "method": "finite-difference"}
+    out: dict[str, Any] = {"policy": {}, "method": "finite-difference"}
     quantities = [("outcome", lambda r: r.outcome), ("value", lambda r: r.value)]
     quantities += [(f"policy:{d}", (lambda name: lambda r: r.policy[name])(d))
                    for d in problem.decisions]
@@ -168,48 +131,3 @@ def _finite_difference_derivatives(problem: OptimalControlProblem, theta0: float
         else:
             out[key] = pair
     return out
-
-
-def print_derivatives(parameter: str, derivatives: dict) -> None:
-    """The one-sided derivatives of :func:`derivatives_json`'s form as text lines."""
-    print(f"{'d/d' + parameter:<10} ({derivatives['method']}; left, right)")
-    print(f"  outcome  {derivatives['outcome'][0]:+.10g}  {derivatives['outcome'][1]:+.10g}")
-    print(f"  value    {derivatives['value'][0]:+.10g}  {derivatives['value'][1]:+.10g}")
-    for k, (lft, rgt) in derivatives["policy"].items():
-        print(f"  {k:<8} {lft:+.10g}  {rgt:+.10g}")
-
-
-def result_json(result: OptimalResult, derivatives: dict | None) -> dict:
-    out = result.as_dict()
-    out["problem"] = result.problem.describe()
-    if derivatives is not None:
-        out["derivatives"] = derivatives
-    return out
-
-
-def run(args: argparse.Namespace) -> int:
-    if uses_system(args):
-        return run_optimise(args)
-    if args.theta0 is None:
-        raise InvalidInputError("--theta0 is required (or --system with --s)")
-    problem = problem_from_args(args)
-    try:
-        check_theta0(problem.maneuver, args.theta0)
-    except InvalidInputError as exc:
-        raise InvalidInputError(f"--theta0: {exc}") from None
-    result = optimal_policy(problem, args.theta0)
-    derivatives = derivatives_json(problem, args.theta0) if result.success else None
-    if args.json:
-        print(strict_json.dumps(result_json(result, derivatives)))
-        return 0 if result.success else 1
-    print(f"problem    {problem.name}  theta0 = {result.theta0:+.12g}")
-    print(f"status     {result.status}: {result.message}")
-    print("policy     " + "  ".join(f"{k} = {v:+.12g}" for k, v in result.policy.items())
-          + (f"  ({result.active} at its {result.bound} bound)" if result.bound else ""))
-    print(f"value      {result.value:.15g}")
-    print(f"outcome    th(t_f) = {result.outcome:+.15g}")
-    print(f"branch     {result.branch}")
-    if derivatives is not None:
-        print_derivatives("th0", derivatives)
-    print(f"work       simulations = {result.nsim}, nfev = {result.nfev}")
-    return 0 if result.success else 1

@@ -6,7 +6,6 @@ from __future__ import annotations
 import argparse
 import time
 
-from biped_opt import strict_json
 from biped_opt.cli.args import (
     MAX_POINTS,
     MAX_SEED,
@@ -15,6 +14,7 @@ from biped_opt.cli.args import (
     path_arg,
     positive_float,
 )
+from biped_opt.cli.output import emit_json
 
 #: the exact derivatives are accurate to ~1e-10 (variational tolerance); a cone whose further
 #: direction misses g.d by more than this is cut into more than one linear piece
@@ -80,9 +80,9 @@ def run(args: argparse.Namespace) -> int:
         if not args.no_derivative:
             derivatives[n] = derivative_pieces(n, seed=args.seed)
     if args.json:
-        print(strict_json.dumps({
+        emit_json({
             "counts": [c.as_dict() for c in counts],
-            "derivative": {str(n): [p.as_dict() for p in ps] for n, ps in derivatives.items()}}))
+            "derivative": {str(n): [p.as_dict() for p in ps] for n, ps in derivatives.items()}})
     else:
         _print(counts, derivatives, args, distinct_gradients)
     if args.figure is not None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from biped_opt.cli.args import output_directory, path_arg
+from biped_opt.cli.output import emit_paths
 
 __all__ = ["register", "func"]
 
@@ -34,6 +35,5 @@ def func(args: argparse.Namespace) -> int:
         print(f"{s.path}: {s.kind} {s.label} sweep, {s.theta0.size} points, {state}")
     print()
     print(result.table)
-    for path in (*result.figures, result.table_path):
-        print(f"wrote {path}")
+    emit_paths((*result.figures, result.table_path))
     return 0

@@ -5,27 +5,22 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-from biped_opt import strict_json
-from biped_opt.cli.args import finite_float, int_in_range, positive_float
-from biped_opt.cli.system_cmds import add_system_arguments
+from biped_opt.cli.args import (
+    add_maneuver_argument,
+    add_system_arguments,
+    checked_theta0,
+    finite_float,
+    int_in_range,
+    parse_maneuver_arg,
+    positive_float,
+)
+from biped_opt.cli.output import show_system_trajectory, show_trajectory
 from biped_opt.errors import InvalidInputError
-from biped_opt.hybrid import simulate
-from biped_opt.hybrid.simulate import DEFAULT_OPTIONS, SimulatorOptions
-from biped_opt.hybrid.trajectory import Trajectory
-from biped_opt.maneuvers import Maneuver, check_theta0, parse_maneuver
+from biped_opt.simulation.options import SimulatorOptions
 
 #: bounds of one run's budget on the command line (a run's events and samples grow with them)
 MAX_EVENTS = 10_000
 MAX_HORIZON = 1e4
-
-
-def add_maneuver_argument(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--maneuver",
-        type=str,
-        metavar="{" + ",".join(m.value for m in Maneuver) + "}",
-        help="which maneuver of the paper (Sec. IV), or of --system",
-    )
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -60,41 +55,17 @@ def budget(args: argparse.Namespace, options: SimulatorOptions) -> SimulatorOpti
     return dataclasses.replace(options, **changes) if changes else options
 
 
-def trajectory_json(tr: Trajectory) -> dict:
-    """The JSON form of a trajectory (the ``--json`` output)."""
-    return {
-        "maneuver": tr.maneuver,
-        "theta0": tr.theta0,
-        "inputs": {"u1": tr.inputs[0], "u2": tr.inputs[1], "u12": tr.inputs[2]},
-        "outcome": tr.outcome,
-        "t_final": tr.t_final,
-        "status": "ok" if tr.success else tr.status.name.lower(),
-        "message": tr.message,
-        "modes": [{"t": t, "mode": m.name} for t, m in tr.modes],
-        "events": [
-            {"t": e.t, "kind": e.kind, "touchdown": list(e.touchdown),
-             "liftoff": list(e.liftoff), "mode_after": e.mode_after.name}
-            for e in tr.contact_events
-        ],
-        "state": {"q": tr.q_final.tolist(), "qdot": tr.qdot_final.tolist()},
-        "nfev": tr.nfev,
-        "nsteps": tr.nsteps,
-    }
-
-
-def parse_maneuver_arg(text: str | None) -> Maneuver:
-    """--maneuver as a Maneuver; the error names the argument."""
-    if text is None:
-        raise InvalidInputError("--maneuver is required")
-    try:
-        return parse_maneuver(text)
-    except InvalidInputError as exc:
-        raise InvalidInputError(f"--maneuver: {exc}") from None
-
-
-def run(args: argparse.Namespace) -> int:
+def _check_lane(args: argparse.Namespace) -> None:
+    """Options of the other lane are refused (the biped's with --system, and the reverse)."""
     if args.system is not None:
-        return run_system(args)
+        if args.theta0 is not None or any(getattr(args, n) for n in ("u1", "u2", "u12")):
+            raise InvalidInputError("--theta0/--u1/--u2/--u12: the biped's options; with "
+                                    "--system give --s and --input NAME=VALUE")
+        if args.s is None:
+            raise InvalidInputError("--s is required with --system")
+        if args.maneuver is None:
+            raise InvalidInputError("--maneuver is required")
+        return
     for option in ("s", "input", "param"):
         if getattr(args, option) not in (None, []):
             raise InvalidInputError(f"--{option}: only with --system (the biped takes --theta0, "
@@ -102,74 +73,22 @@ def run(args: argparse.Namespace) -> int:
     parse_maneuver_arg(args.maneuver)
     if args.theta0 is None:
         raise InvalidInputError("--theta0 is required (or --system with --s)")
+
+
+def run(args: argparse.Namespace) -> int:
+    _check_lane(args)
+    if args.system is not None:  # any system, through its compiled simulator
+        from biped_opt.simulation.compiled import compile_system
+
+        compiled = compile_system(args.system, **dict(args.param))
+        tr = compiled.simulate(args.maneuver, args.s, dict(args.input),
+                               options=budget(args, compiled.maneuver_options(args.maneuver)))
+        return show_system_trajectory(compiled, tr, args.json)
+    from biped_opt.hybrid import simulate
+    from biped_opt.simulation.options import DEFAULT_OPTIONS
+
     maneuver = parse_maneuver_arg(args.maneuver)
-    try:
-        check_theta0(maneuver, args.theta0)
-    except InvalidInputError as exc:
-        raise InvalidInputError(f"--theta0: {exc}") from None
-    tr = simulate(maneuver, args.theta0, (args.u1, args.u2, args.u12),
+    theta0 = checked_theta0(maneuver, args.theta0)
+    tr = simulate(maneuver, theta0, (args.u1, args.u2, args.u12),
                   options=budget(args, DEFAULT_OPTIONS))
-    if args.json:
-        print(strict_json.dumps(trajectory_json(tr)))
-    else:
-        print(f"maneuver   {tr.maneuver}  theta0 = {tr.theta0:+.12g}")
-        print(f"status     {tr.status.name}: {tr.message}")
-        print(f"outcome    th(t_f) = {tr.outcome:+.15g}")
-        print(f"t_final    {tr.t_final:.15g}")
-        print("modes      " + " -> ".join(f"{m.name}@{t:.12g}" for t, m in tr.modes))
-        print(f"work       nfev = {tr.nfev}, steps = {tr.nsteps}")
-    return 0 if tr.success else 1
-
-
-def run_system(args: argparse.Namespace) -> int:
-    """``simulate --system``: any system's maneuver through its compiled simulator."""
-    from biped_opt.simulation.compiled import compile_system
-
-    if args.theta0 is not None or any(getattr(args, n) for n in ("u1", "u2", "u12")):
-        raise InvalidInputError("--theta0/--u1/--u2/--u12: the biped's options; with --system "
-                                "give --s and --input NAME=VALUE")
-    if args.s is None:
-        raise InvalidInputError("--s is required with --system")
-    if args.maneuver is None:
-        raise InvalidInputError("--maneuver is required")
-    compiled = compile_system(args.system, **dict(args.param))
-    tr = compiled.simulate(args.maneuver, args.s, dict(args.input),
-                           options=budget(args, compiled.maneuver_options(args.maneuver)))
-    names = compiled.system.coordinate_names
-    d = len(names)
-    if args.json:
-        print(strict_json.dumps({
-            "system": tr.system, "maneuver": tr.maneuver, "s": tr.s,
-            "inputs": dict(zip(compiled.inputs, tr.inputs)),
-            "parameters": compiled.parameters, "status": tr.status.lower(),
-            "message": tr.message,
-            "outcome": tr.outcome, "t_final": tr.t_final,
-            "modes": [_mode_names(compiled, m) for m in tr.modes],
-            "event_times": list(tr.event_times),
-            "events": [{"t": float(r[0]), "touchdown": _mode_names(compiled, int(r[2])),
-                        "liftoff": _mode_names(compiled, int(r[3])),
-                        "mode_after": _mode_names(compiled, int(r[5]))}
-                       for r in tr.events if r[1] == 1],
-            "state": {"q": dict(zip(names, tr.y_final[:d])),
-                      "qdot": dict(zip(names, tr.y_final[d:]))},
-            "nfev": tr.nfev, "nsteps": tr.nsteps}))
-    else:
-        print(f"system     {tr.system}  maneuver {tr.maneuver}  s = {tr.s:+.12g}")
-        print(f"status     {tr.status}: {tr.message}")
-        print(f"outcome    {tr.outcome:+.15g}")
-        print(f"t_final    {tr.t_final:.15g}")
-        modes = [_mode_names(compiled, m) for m in tr.modes]
-        times = [0.0, *tr.event_times]
-        print("modes      " + " -> ".join(
-            f"{{{', '.join(m)}}}@{t:.12g}" for m, t in zip(modes, times)))
-        for r in (r for r in tr.events if r[1] == 1):
-            what = [f"{kind} {{{', '.join(_mode_names(compiled, int(r[k])))}}}"
-                    for kind, k in (("touchdown", 2), ("liftoff", 3)) if r[k]]
-            print(f"event      t = {r[0]:.12g}: {'; '.join(what)}")
-        print(f"work       nfev = {tr.nfev}, steps = {tr.nsteps}")
-    return 0 if tr.success else 1
-
-
-def _mode_names(compiled, mode: int) -> list[str]:
-    names = list(compiled.system.constraints)
-    return [names[j] for j in range(len(names)) if mode >> j & 1]
+    return show_trajectory(tr, args.json)

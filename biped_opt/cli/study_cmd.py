@@ -17,7 +17,15 @@ import argparse
 import sys
 from pathlib import Path
 
-from biped_opt.cli.args import int_in_range, output_directory, output_file, path_arg, positive_float
+from biped_opt.cli.args import (
+    add_progress_arguments,
+    int_in_range,
+    output_directory,
+    output_file,
+    path_arg,
+    positive_float,
+    progress_from_args,
+)
 from biped_opt.errors import BipedOptError, InvalidInputError
 
 #: local processes at most: each holds a compiled system (~200 MB); more is a typo
@@ -47,9 +55,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    default=None,
                    metavar="S", help="with --ros: a point a node has not answered in S seconds "
                                      "goes to another node (default 300)")
-    p.add_argument("--progress", dest="progress", action="store_true", default=None,
-                   help="draw a progress bar on stderr (default: when stderr is a terminal)")
-    p.add_argument("--no-progress", dest="progress", action="store_false")
+    add_progress_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -68,7 +74,6 @@ def load_study(path: Path):
 
 def run(args: argparse.Namespace) -> int:
     from biped_opt.cli.signals import stop_requested
-    from biped_opt.cli.sweep_cmd import progress_from_args
     from biped_opt.progress import Progress
     from biped_opt.record.study_table import run_study
 

@@ -1,51 +1,30 @@
-"""``biped-opt sweep``: outcomes at fixed inputs, or optimal policies and values, over th0."""
+"""``biped-opt sweep``: outcomes at fixed inputs, or optimal policies and values, over th0 (the
+biped) or s (any system)."""
 
 from __future__ import annotations
 
 import argparse
-import sys
 
-from biped_opt import strict_json
-from biped_opt.cli.args import MAX_POINTS, finite_float, int_in_range, output_file, path_arg
-from biped_opt.cli.optimise_cmd import add_problem_arguments, problem_from_args
-from biped_opt.cli.simulate_cmd import parse_maneuver_arg
-from biped_opt.cli.system_cmds import add_system_arguments, run_sweep, uses_system
-from biped_opt.errors import InvalidInputError
+from biped_opt.cli.args import (
+    SWEEP_NUM,
+    add_problem_arguments,
+    add_range_arguments,
+    add_system_arguments,
+    compiled_from_args,
+    finite_float,
+    grid_from_args,
+    output_file,
+    parse_maneuver_arg,
+    path_arg,
+    problem_from_args,
+    problem_from_system_args,
+    progress_from_args,
+    s_grid_from_args,
+    uses_system,
+)
+from biped_opt.cli.output import emit_sweep, fixed_sweep_table, optimal_sweep_table
 from biped_opt.fixed_sweep import FIXED_INPUTS
-from biped_opt.maneuvers import check_theta0
-from biped_opt.optimal.sweep import sweep_fixed, sweep_grid, sweep_optimal
-
-
-def add_range_arguments(p: argparse.ArgumentParser, num_help: str) -> None:
-    p.add_argument("--theta0-min", type=finite_float("--theta0-min"), default=None,
-                   help="smallest th0 [rad] (default: -limit of the maneuver)")
-    p.add_argument("--theta0-max", type=finite_float("--theta0-max"), default=None,
-                   help="largest th0 [rad] (default: +limit of the maneuver)")
-    p.add_argument("--num", type=int_in_range("--num", 2, MAX_POINTS), default=None,
-                   help=num_help)
-    p.add_argument("--progress", dest="progress", action="store_true", default=None,
-                   help="draw a progress bar on stderr (default: when stderr is a terminal)")
-    p.add_argument("--no-progress", dest="progress", action="store_false")
-
-
-def grid_from_args(args: argparse.Namespace, maneuver: str, default_num: int):
-    for option, value in (("--theta0-min", args.theta0_min), ("--theta0-max", args.theta0_max)):
-        if value is not None:
-            try:
-                check_theta0(maneuver, value)
-            except InvalidInputError as exc:
-                raise InvalidInputError(f"{option}: {exc}") from None
-    if (args.theta0_min is not None and args.theta0_max is not None
-            and not args.theta0_min < args.theta0_max):
-        raise InvalidInputError(
-            f"--theta0-min must be below --theta0-max, got {args.theta0_min} >= {args.theta0_max}"
-        )
-    return sweep_grid(maneuver, args.theta0_min, args.theta0_max,
-                      args.num if args.num is not None else default_num)
-
-
-def progress_from_args(args: argparse.Namespace) -> bool:
-    return sys.stderr.isatty() if args.progress is None else bool(args.progress)
+from biped_opt.optimal.sweep import sweep_fixed, sweep_optimal
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -65,49 +44,69 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if uses_system(args):
-        return run_sweep(args)
+    system = uses_system(args)
+    if args.optimal or args.variant or args.problem is not None:
+        return (_optimal_system if system else _optimal_biped)(args)
+    return (_fixed_system if system else _fixed_biped)(args)
+
+
+def _optimal_biped(args: argparse.Namespace) -> int:
     maneuver = parse_maneuver_arg(args.maneuver).value
-    optimal = args.optimal or args.variant
-    if optimal:
-        problem = problem_from_args(args)
-        grid = grid_from_args(args, maneuver, 201)
-        result = sweep_optimal(problem, grid, progress=progress_from_args(args))
-        rows = [
-            (th, result.outcome[k], result.value[k],
-             "  ".join(f"{d}={result.policy[d][k]:+.10g}" for d in problem.decisions),
-             result.branch[k])
-            for k, th in enumerate(result.theta0)
-        ]
-        header = f"{'theta0':>14} {'outcome':>18} {'value':>18}  policy  branch"
-        lines = [f"{r[0]:>14.9g} {r[1]:>18.12g} {r[2]:>18.12g}  {r[3]}  {r[4]}" for r in rows]
-        ok = bool(result.success.all())
-    else:
-        u = list(FIXED_INPUTS[maneuver])
-        for j, name in enumerate(("u1", "u2", "u12")):
-            if getattr(args, name) is not None:
-                u[j] = getattr(args, name)
-        grid = grid_from_args(args, maneuver, 401)
-        result = sweep_fixed(maneuver, grid, u, progress=progress_from_args(args))
-        header = f"{'theta0':>14} {'outcome':>18}  branch"
-        lines = [f"{th:>14.9g} {result.outcome[k]:>18.12g}  {result.branch[k]}"
-                 for k, th in enumerate(result.theta0)]
-        ok = bool(result.success.all())
-    return print_sweep(args, result.as_dict(), header, lines, ok)
+    problem = problem_from_args(args)
+    grid = grid_from_args(args, maneuver, SWEEP_NUM["optimal"])
+    result = sweep_optimal(problem, grid, progress=progress_from_args(args))
+    policy = [{d: result.policy[d][k] for d in problem.decisions}
+              for k in range(len(result.theta0))]
+    header, lines = optimal_sweep_table("theta0", result.theta0, result.outcome, result.value,
+                                        policy, result.branch)
+    return emit_sweep(args.out, result.as_dict(), header, lines, bool(result.success.all()))
 
 
-def print_sweep(args: argparse.Namespace, data: dict, header: str, lines: list[str],
-                ok: bool) -> int:
-    """The sweep as JSON to --out, else as a table on stdout; the exit status."""
-    if args.out:
-        try:
-            with open(args.out, "w", encoding="utf-8") as fh:
-                fh.write(strict_json.dumps(data))
-        except OSError as exc:
-            raise InvalidInputError(f"--out: cannot write {str(args.out)!r}: {exc.strerror}"
-                                    ) from None
-        print(f"wrote {len(lines)} points to {args.out}")
-    else:
-        print(header)
-        print("\n".join(lines))
-    return 0 if ok else 1
+def _fixed_biped(args: argparse.Namespace) -> int:
+    maneuver = parse_maneuver_arg(args.maneuver).value
+    u = [value if value is not None else default
+         for value, default in zip((args.u1, args.u2, args.u12), FIXED_INPUTS[maneuver])]
+    grid = grid_from_args(args, maneuver, SWEEP_NUM["fixed"])
+    result = sweep_fixed(maneuver, grid, u, progress=progress_from_args(args))
+    header, lines = fixed_sweep_table("theta0", result.theta0, result.outcome, result.branch)
+    return emit_sweep(args.out, result.as_dict(), header, lines, bool(result.success.all()))
+
+
+def _optimal_system(args: argparse.Namespace) -> int:
+    from biped_opt.control.solve import compiled_for, optimal_sweep
+    from biped_opt.progress import bar
+
+    problem = problem_from_system_args(args)
+    grid = s_grid_from_args(args, compiled_for(problem), problem.maneuver, SWEEP_NUM["optimal"])
+    progress = bar(progress_from_args(args), grid.size, f"{problem.name} sweep")
+    results = optimal_sweep(problem, grid, callback=progress.update)
+    policy = [{d: r.policy[d] for d in problem.decision_names} for r in results]
+    header, lines = optimal_sweep_table("s", [r.s for r in results],
+                                        [r.outcome for r in results],
+                                        [r.value for r in results], policy,
+                                        [r.branch for r in results])
+    data = {"problem": problem.as_dict(),
+            "points": [{"s": r.s, "outcome": r.outcome, "value": r.value, "policy": r.policy,
+                        "branch": r.branch, "success": r.success} for r in results]}
+    return emit_sweep(args.out, data, header, lines, all(r.success for r in results))
+
+
+def _fixed_system(args: argparse.Namespace) -> int:
+    from biped_opt.control.solve import branch_of
+    from biped_opt.simulation.compiled import STATUS_NAMES
+
+    compiled = compiled_from_args(args)
+    maneuver = args.maneuver
+    first = compiled.initial_mode(maneuver)
+    grid = s_grid_from_args(args, compiled, maneuver, SWEEP_NUM["fixed"])
+    u = compiled._inputs(dict(args.input))
+    out = compiled.simulate_batch(maneuver, grid, u)
+    branches = [branch_of(compiled, first, out["events"][k, : int(out["n_events"][k])],
+                          STATUS_NAMES[int(out["status"][k])]) for k in range(grid.size)]
+    header, lines = fixed_sweep_table("s", grid, out["outcome"], branches)
+    data = {"system": compiled.name, "maneuver": maneuver,
+            "inputs": dict(zip(compiled.inputs, u.tolist())),
+            "parameters": compiled.parameters, "s": grid.tolist(),
+            "outcome": out["outcome"].tolist(), "t_final": out["t_final"].tolist(),
+            "branch": branches}
+    return emit_sweep(args.out, data, header, lines, bool((out["status"] == 0).all()))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from biped_opt import strict_json
+from biped_opt.cli.output import emit_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -42,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     names = args.names or [*LIBRARY, "walker2_decoupled"]
     rows = [describe(name) for name in names]
     if args.json:
-        print(strict_json.dumps(rows))
+        emit_json(rows)
         return 0
     print(f"{'system':<18} {'d':>2} {'n':>2}  {'inputs':<22} maneuvers (s range)")
     for r in rows:
