@@ -11,7 +11,9 @@ here draws:
   draws for a sweep at fixed inputs or a problem's optimal sweep (:class:`SweepCurves`);
 - :func:`grid_one_sided`: one-sided limit and slope at a grid point from the grid's own values,
   by :func:`biped_opt.piecewise.one_sided` (the engine's extrapolation) on a ladder of grid
-  points - for a curve whose smoothness the engine found nothing to report about.
+  points - for a curve whose smoothness the engine found nothing to report about;
+- :func:`smoothed_curve`: the Gaussian-smoothed cost J_sigma along a grid
+  (:mod:`biped_opt.analysis.gradients`), for the gradient methods' figure.
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ __all__ = [
     "fixed_input_curves",
     "optimal_curves",
     "grid_one_sided",
+    "smoothed_curve",
 ]
 
 Array = npt.NDArray[np.float64]
@@ -174,3 +177,15 @@ def grid_one_sided(s: Array, y: Array, x: float, side: int, *, levels: int = 5) 
     at = {round((float(v) - x) / spacing): float(w) for v, w in zip(s, y)}
     return one_sided(lambda v: at[round((v - x) / spacing)], x, side,
                      h0=spacing * 2 ** (levels - 1), levels=levels)
+
+
+def smoothed_curve(u: Array, cost: Array, sigma: float) -> Array:
+    """J_sigma on the uniform grid u by discrete Gaussian convolution (weights renormalised at
+    the ends of the grid, where part of the kernel falls outside it)."""
+    du = float(u[1] - u[0])
+    half = int(np.ceil(4 * sigma / du))
+    k = np.exp(-0.5 * (np.arange(-half, half + 1) * du / sigma) ** 2)
+    finite = np.isfinite(cost)
+    num = np.convolve(np.where(finite, cost, 0.0), k, mode="same")
+    den = np.convolve(finite.astype(float), k, mode="same")
+    return num / np.maximum(den, 1e-300)
