@@ -10,7 +10,8 @@ module runs the sweeps and the nonsmooth analysis and turns them into plain arra
   :class:`FixedSweepData` / :class:`OptimalSweepData`, its nonsmooth points as
   :class:`NonsmoothMark` - on the cost panels mapped through the cost (:func:`cost_mark`);
 - :func:`control_experiment_data`: the two-leg walker under the coupled and the decoupled input
-  law and the rocking bar (SYSTEMS.md Secs. 2-3), with each curve's behaviour at th0 = 0.
+  law and the rocking bar (SYSTEMS.md Secs. 2-3), with each curve's behaviour at th0 = 0 (the
+  engine's jump or kink there, else the exact one-sided slopes of the variational equation).
 """
 
 from __future__ import annotations
@@ -21,8 +22,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from biped_opt.analysis.figure_data import Mark, grid_one_sided, system_marks
+from biped_opt.analysis.figure_data import Mark, system_marks
 from biped_opt.analysis.switches import NonsmoothPoint, NonsmoothReport
+from biped_opt.control.derivatives import one_sided_derivatives
 from biped_opt.errors import InvalidInputError
 from biped_opt.model.modes import ContactMode
 from biped_opt.optimal import get_problem
@@ -224,23 +226,21 @@ class ControlExperiment:
     bar_s: Array
     bar: Array  #: the rocking bar's drop outcome th'(t_f)
     bar_marks: tuple[Mark, ...]
-    #: (maneuver, law) -> what the curve does at th0 = 0 (:func:`at_zero`)
+    #: (maneuver, law) -> what the curve does at th0 = 0: ("jump", limits) or ("kink", slopes)
+    #: from the engine's point there (:func:`at_zero`), else ("C1", the one-sided slopes of the
+    #: variational equation, :func:`biped_opt.control.derivatives.one_sided_derivatives`)
     zero: dict[tuple[str, str], tuple[str, tuple[float, float]]] = field(default_factory=dict)
 
 
-def at_zero(s: Array, y: Array, marks: Sequence[Mark], law: str
-            ) -> tuple[str, tuple[float, float]]:
-    """What the curve of ``law`` does at s = 0: ("jump", its one-sided limits), ("kink", its
-    one-sided slopes) - both from the engine's point there - or, where the engine found neither,
-    ("C1", the one-sided slopes extrapolated from the grid's own values by
-    :func:`biped_opt.analysis.figure_data.grid_one_sided`)."""
+def at_zero(marks: Sequence[Mark], law: str) -> tuple[str, tuple[float, float]] | None:
+    """What the engine found at s = 0 on the curve of ``law``: ("jump", its one-sided limits)
+    or ("kink", its one-sided slopes); None where it found neither."""
     mine = {m.kind: m for m in marks if m.series == law and m.s == 0.0}
     if "jump" in mine:
         return "jump", mine["jump"].limits
     if "kink" in mine:
         return "kink", mine["kink"].slopes
-    left, right = (grid_one_sided(s, y, 0.0, side).derivative for side in (-1, 1))
-    return "C1", (left, right)
+    return None
 
 
 def control_experiment_data(*, half_width: float = 0.02, num: int = 801,
@@ -257,14 +257,15 @@ def control_experiment_data(*, half_width: float = 0.02, num: int = 801,
     s = theta_grid(-half_width, half_width, num)
     outcomes: dict[str, dict[str, Array]] = {"touchdown": {}, "liftoff": {}}
     found: dict[str, list[Mark]] = {"touchdown": [], "liftoff": []}
+    zero: dict[tuple[str, str], tuple[str, tuple[float, float]]] = {}
     for law in LAWS:
         walker = CompiledSystem(f"walker2_{law}")
         for maneuver, u in (("touchdown", TOUCHDOWN_INPUTS), ("liftoff", LIFTOFF_INPUTS)):
             y, mine = system_marks(walker, maneuver, s, u, series=law)
             outcomes[maneuver][law] = y
             found[maneuver] += mine
-    zero = {(m, law): at_zero(s, outcomes[m][law], found[m], law)
-            for m in outcomes for law in LAWS}
+            zero[(maneuver, law)] = at_zero(mine, law) or (
+                "C1", one_sided_derivatives(walker, maneuver, 0.0, list(u)))
     bar = CompiledSystem("rocking_bar")
     lo, hi = bar.derived.maneuvers["drop"].description.s_range
     bar_s = theta_grid(lo, hi, bar_num)

@@ -70,7 +70,6 @@ from biped_opt.paper.figures import (  # noqa: E402
     LIFTOFF_INPUTS,
     TOUCHDOWN_INPUTS,
     ControlExperiment,
-    at_zero,
     control_experiment_data,
 )
 from biped_opt.plots.figures import MODE_COLOURS, _finish  # noqa: E402
@@ -482,7 +481,8 @@ control_experiment.png  The paper's claim as a controlled experiment (SYSTEMS.md
           mechanics and inputs: touchdown u = (2, 0.5, 0), liftoff u = (1.5, 3, 0), 801
           angles in [-0.02, 0.02], 0 included. Coupled: touchdown kinked, liftoff jumping at
           th0 = 0 (the dot is the simultaneous liftoff itself); decoupled: C^1 (legend: one-
-          sided slopes from the grid). Inset: outcome minus its chord (a V is a kink).
+          sided slopes at 0 from the variational equation). Inset: outcome minus its chord
+          (a V is a kink).
           (c) The rocking bar (no input; inertial coupling) dropped at pitch th0: its outcome
           th'(t_f) jumps at 0 and where a third impact meets the apex. Curves are broken at
           jumps; circles are one-sided limits, diamonds kinks, located to 1e-10."""
@@ -490,7 +490,7 @@ control_experiment.png  The paper's claim as a controlled experiment (SYSTEMS.md
 
 def _law_label(law: str, behaviour: tuple[str, tuple[float, float]]) -> str:
     """'coupled: kink, slopes 0.796 | 0.714' or 'decoupled: C^1, slopes 0.830 | 0.830' from
-    :func:`biped_opt.paper.figures.at_zero`."""
+    :attr:`biped_opt.paper.figures.ControlExperiment.zero`."""
     kind, (left, right) = behaviour
     if kind == "jump":
         return f"{law}: jump, limits {left:+.4f} | {right:+.4f}"
@@ -525,9 +525,7 @@ def control_experiment_figure(path: str | Path, data: ControlExperiment | None =
     for ax, maneuver, u, outcome, marks in (
             (axes[0], "touchdown", TOUCHDOWN_INPUTS, data.touchdown, data.touchdown_marks),
             (axes[1], "liftoff", LIFTOFF_INPUTS, data.liftoff, data.liftoff_marks)):
-        curves = {_law_label(law, data.zero.get((maneuver, law))
-                             or at_zero(data.s, y, marks, law)): y
-                  for law, y in outcome.items()}
+        curves = {_law_label(law, data.zero[(maneuver, law)]): y for law, y in outcome.items()}
         relabel = dict(zip(outcome, curves))
         shown = [replace(m, series=relabel[m.series]) for m in marks
                  if m.kind in ("jump", "kink")]  # the C^1 law's second derivative: not the point

@@ -18,7 +18,6 @@ from biped_opt.paper.figures import (
     cost_mark,
     fixed_data,
 )
-from biped_opt.piecewise import theta_grid
 
 
 def test_cost_mark_maps_limits_through_the_cost_and_slopes_through_its_gradient():
@@ -48,16 +47,13 @@ def test_fixed_data_holds_the_sweep_its_costs_and_modes():
     assert data.marks == () and data.cost_marks == ()
 
 
-def test_at_zero_reads_the_engines_point_else_the_grids_slopes():
-    s = theta_grid(-0.02, 0.02, 41)
-    y = 0.8 * s + 3.0 * s**2
+def test_at_zero_reads_the_engines_point_of_that_curve_only():
     kink = Mark(s=0.0, kind="kink", slopes=(0.79, 0.71), series="a")
     jump = Mark(s=0.0, kind="jump", limits=(0.02, -0.006), series="b")
-    assert at_zero(s, y, [kink, jump], "a") == ("kink", (0.79, 0.71))
-    assert at_zero(s, y, [kink, jump], "b") == ("jump", (0.02, -0.006))
-    kind, (left, right) = at_zero(s, y, [kink, jump], "c")  # no point of its own: the grid's
-    assert kind == "C1"
-    assert (left, right) == pytest.approx((0.8, 0.8), abs=1e-10)  # a quadratic: exact fits
+    elsewhere = Mark(s=0.01, kind="jump", limits=(1.0, 2.0), series="c")
+    assert at_zero([kink, jump, elsewhere], "a") == ("kink", (0.79, 0.71))
+    assert at_zero([kink, jump, elsewhere], "b") == ("jump", (0.02, -0.006))
+    assert at_zero([kink, jump, elsewhere], "c") is None  # not at 0
 
 
 @pytest.fixture(scope="module")
@@ -72,9 +68,9 @@ def test_control_experiment_behaviour_at_zero(experiment):
     assert kind == "kink" and slopes == pytest.approx((0.7962438835, 0.7143664519), abs=1e-6)
     kind, limits = zero[("liftoff", "coupled")]
     assert kind == "jump" and limits == pytest.approx((0.026283950, -0.006532702), abs=1e-7)
-    # decoupled: C^1, slopes from a grid of spacing 1e-3 (a quartic over 1.6e-2 per side:
-    # measured within 1e-7 of SYSTEMS.md's; 1e-5 still tells 0.8304 from the coupled 0.7962)
+    # decoupled: C^1, slopes of the variational equation (exact up to the integrator's
+    # tolerance); SYSTEMS.md gives 10 decimals whose two sides differ by 2e-10: 1e-8
     kind, slopes = zero[("touchdown", "decoupled")]
-    assert kind == "C1" and slopes == pytest.approx((0.8304310463, 0.8304310461), abs=1e-5)
+    assert kind == "C1" and slopes == pytest.approx((0.8304310463, 0.8304310461), abs=1e-8)
     kind, slopes = zero[("liftoff", "decoupled")]
-    assert kind == "C1" and slopes == pytest.approx((0.4926096190, 0.4926096191), abs=1e-5)
+    assert kind == "C1" and slopes == pytest.approx((0.4926096190, 0.4926096191), abs=1e-8)
