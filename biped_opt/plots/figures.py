@@ -4,15 +4,15 @@
 - Fig. 3 (a, b): contact mode over time and th0 at fixed inputs (where the mode order flips);
 - Fig. 4 (a-f): optimal outcome, policy and value over th0, touchdown and liftoff.
 
-Plotting takes plain arrays (:class:`FixedSweepData`, :class:`OptimalSweepData`) so the same
-functions draw live sweeps and sweeps read back from a recording. Nonsmooth points are marked and
-annotated with their one-sided limits or slopes.
+Plotting takes plain arrays (:class:`~biped_opt.paper.figures.FixedSweepData`,
+:class:`~biped_opt.paper.figures.OptimalSweepData`, computed by :mod:`biped_opt.paper.figures`)
+so the same functions draw live sweeps and sweeps read back from a recording. Nonsmooth points
+are marked and annotated with their one-sided limits or slopes.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import matplotlib
@@ -24,6 +24,11 @@ import numpy.typing as npt  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 
 from biped_opt.model.modes import ContactMode  # noqa: E402
+from biped_opt.paper.figures import (  # noqa: E402
+    FixedSweepData,
+    NonsmoothMark,
+    OptimalSweepData,
+)
 
 __all__ = [
     "FixedSweepData",
@@ -45,48 +50,6 @@ MODE_COLOURS = {
     ContactMode.GROUND: "#636363",
 }
 MANEUVER_TITLES = {"touchdown": "touchdown", "liftoff": "liftoff"}
-
-
-@dataclass(frozen=True)
-class NonsmoothMark:
-    """A nonsmooth point to mark on a curve: where, what, and its one-sided numbers."""
-
-    theta0: float
-    kind: str  #: "kink", "jump" or "second-derivative"
-    left: float
-    right: float
-    value: float  #: the curve's value at theta0 (where the marker goes)
-    label: str = ""  #: what left/right are ("limit", "slope", ...)
-
-
-@dataclass(frozen=True)
-class FixedSweepData:
-    """A fixed-input sweep of one maneuver: outcomes, costs and mode timelines per angle."""
-
-    maneuver: str
-    inputs: tuple[float, float, float]
-    theta0: Array
-    outcome: Array
-    cost: Array
-    #: per angle: event times (entry into each later mode) and the mode sequence
-    event_times: Sequence[Array]
-    modes: Sequence[Sequence[int]]
-    t_final: Array
-    marks: Sequence[NonsmoothMark] = field(default=())  #: on the outcome panels
-    cost_marks: Sequence[NonsmoothMark] = field(default=())  #: on the cost panels
-
-
-@dataclass(frozen=True)
-class OptimalSweepData:
-    """An optimal sweep of one maneuver: outcome, policy (one array per decision) and value."""
-
-    maneuver: str
-    theta0: Array
-    outcome: Array
-    policy: dict[str, Array]
-    value: Array
-    bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
-    marks: dict[str, Sequence[NonsmoothMark]] = field(default_factory=dict)
 
 
 def _annotate(ax, marks: Sequence[NonsmoothMark], fmt: str = "{:+.4g}") -> None:

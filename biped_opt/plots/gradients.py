@@ -17,21 +17,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from biped_opt.analysis.figure_data import smoothed_curve  # noqa: E402
 from biped_opt.plots.figures import _finish  # noqa: E402
 
 __all__ = ["gradient_figure", "smoothed_curve"]
-
-
-def smoothed_curve(u: np.ndarray, cost: np.ndarray, sigma: float) -> np.ndarray:
-    """J_sigma on the uniform grid u by discrete Gaussian convolution (weights renormalised at
-    the ends of the grid, where part of the kernel falls outside it)."""
-    du = float(u[1] - u[0])
-    half = int(np.ceil(4 * sigma / du))
-    k = np.exp(-0.5 * (np.arange(-half, half + 1) * du / sigma) ** 2)
-    finite = np.isfinite(cost)
-    num = np.convolve(np.where(finite, cost, 0.0), k, mode="same")
-    den = np.convolve(finite.astype(float), k, mode="same")
-    return num / np.maximum(den, 1e-300)
 
 
 def gradient_figure(study: Any, name: str, path: str | Path) -> Path:

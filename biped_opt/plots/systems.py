@@ -1,29 +1,36 @@
 """Figures for any system, and the control experiment of the paper's claim (SYSTEMS.md Secs. 2-3).
 
 The drawing functions take data (arrays and simple records), never a solver, so any analysis
-can feed them; each writes one PNG and returns its path:
+can feed them; each writes one PNG and returns its path. What they show is computed in the core:
+:mod:`biped_opt.analysis.figure_data` (sweeps, contact-mode bands, nonsmooth points of any
+system) and :mod:`biped_opt.paper.figures` (the control experiment's data); the names defined
+there are also importable from here.
 
 - :func:`outcome_figure`: outcomes or costs over s, each curve broken at its jumps (never a
   vertical segment joining two branches), nonsmooth points marked per kind;
-- :func:`modes_figure`: contact mode over time and s (Fig. 3 of [1]_ for any system), from
-  :func:`mode_bands`;
+- :func:`draw_modes` (and :func:`modes_figure`, a compiled system's sweep): contact mode over
+  time and s (Fig. 3 of [1]_ for any system), from
+  :func:`~biped_opt.analysis.figure_data.mode_bands`;
 - :func:`policy_value_figure`: an optimal policy (one curve per input) and value over s;
 - :func:`fixed_input_figures` and :func:`optimal_figures` (``biped-opt figures --system``): a
-  system's sweep at fixed inputs, or a problem's optimal sweep, analysed and drawn with the
-  figures above into one directory, with captions.txt and data.json (what each figure shows);
+  system's sweep at fixed inputs, or a problem's optimal sweep
+  (:func:`~biped_opt.analysis.figure_data.fixed_input_curves`,
+  :func:`~biped_opt.analysis.figure_data.optimal_curves`) drawn with the figures above into one
+  directory, with captions.txt and data.json (what each figure shows);
 - :func:`control_experiment_figure`: the paper's point in one picture. The two-leg walker under
   the coupled input law (the paper's biped) and under the decoupled law (each leg's input acts
   whenever its foot is down, Pace & Burden 2017): same mechanics, only the coupling differs; the
   coupled touchdown outcome is kinked and its liftoff outcome jumps at th0 = 0, the decoupled ones
   are C^1 there. Beside them the rocking bar, whose coupling is inertial: its outcome jumps
-  without any input at all. Its data comes from :func:`control_experiment_data`.
+  without any input at all. Its data comes from
+  :func:`biped_opt.paper.figures.control_experiment_data`.
 
 A nonsmooth point ("point" below) is any record with attributes or keys ``s`` (or ``theta0``)
 and ``kind`` ("kink", "jump", ...), and optionally ``cause``, ``left``/``right`` (one-sided
 limits for a jump, slopes for a kink), ``at`` (the value at s), ``series`` (or ``input``: the
 curve it belongs to; none: every curve) and ``quantity`` ("policy"/"value": the panel it belongs
-to). :class:`Mark` is such a record, and so is
-:class:`biped_opt.optimal.nonsmooth.NonsmoothPoint`.
+to). :class:`~biped_opt.analysis.figure_data.Mark` is such a record, and so is
+:class:`biped_opt.analysis.switches.NonsmoothPoint`.
 
 .. [1] B. Banjanin and S. A. Burden, "Nonsmooth optimal value and policy functions in mechanical
    systems subject to unilateral constraints", IEEE Control Systems Letters 4(2), 2020.
@@ -44,15 +51,26 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import numpy.typing as npt  # noqa: E402
 
-from biped_opt.analysis.nonsmooth import find_nonsmooth, find_nonsmooth_optimal  # noqa: E402
+from biped_opt.analysis.figure_data import (  # noqa: E402
+    Mark,
+    ModeBands,
+    SweepCurves,
+    fixed_input_curves,
+    fixed_input_sweep,
+    grid_one_sided,
+    mode_bands,
+    optimal_curves,
+    system_marks,
+)
 from biped_opt.analysis.switches import NonsmoothReport  # noqa: E402
 from biped_opt.control.problems import Problem  # noqa: E402
 from biped_opt.errors import InvalidInputError  # noqa: E402
 from biped_opt.model.modes import ContactMode  # noqa: E402
-from biped_opt.piecewise import (  # noqa: E402
-    OneSided,
-    one_sided,
-    theta_grid,  # noqa: E402
+from biped_opt.paper.figures import (  # noqa: E402
+    LIFTOFF_INPUTS,
+    TOUCHDOWN_INPUTS,
+    ControlExperiment,
+    control_experiment_data,
 )
 from biped_opt.plots.figures import MODE_COLOURS, _finish  # noqa: E402
 from biped_opt.simulation.compiled import CompiledSystem  # noqa: E402
@@ -66,6 +84,7 @@ __all__ = [
     "mode_bands",
     "mode_name",
     "modes_figure",
+    "draw_modes",
     "policy_value_figure",
     "system_marks",
     "fixed_input_sweep",
@@ -74,6 +93,8 @@ __all__ = [
     "optimal_figures",
     "grid_one_sided",
     "control_experiment_data",
+    "TOUCHDOWN_INPUTS",
+    "LIFTOFF_INPUTS",
     "control_experiment_figure",
     "CONTROL_EXPERIMENT_CAPTION",
 ]
@@ -89,21 +110,6 @@ KIND_STYLES = {
 }
 #: curve colours in series order (coupled first, decoupled second in the control experiment)
 SERIES_COLOURS = ("#b2182b", "#2166ac", "#1b7837", "#4d4d4d", "#8c510a", "#01665e")
-
-
-@dataclass(frozen=True)
-class Mark:
-    """A nonsmooth point of one curve (see the module docstring for what the fields mean)."""
-
-    s: float
-    kind: str
-    cause: str = ""
-    left: float = math.nan
-    right: float = math.nan
-    at: float = math.nan
-    limits: tuple[float, float] = (math.nan, math.nan)  #: one-sided limits (any kind)
-    slopes: tuple[float, float] = (math.nan, math.nan)  #: one-sided first derivatives
-    series: str | None = None
 
 
 def _get(point: Any, *names: str, default: Any = None) -> Any:
@@ -250,46 +256,6 @@ def policy_value_figure(path: str | Path, s: npt.ArrayLike, policy: Mapping[str,
 
 
 # --- contact modes over time and s --------------------------------------------------------------
-@dataclass(frozen=True)
-class ModeBands:
-    """The contact modes of one trajectory as time intervals [starts[k], ends[k]] in mode
-    modes[k], and the times of all its contact events with the constraints each one switched
-    (a mask; an impact that separates at once, as with restitution, leaves the mode unchanged
-    but is an event)."""
-
-    s: float
-    modes: tuple[int, ...]
-    starts: tuple[float, ...]
-    ends: tuple[float, ...]
-    events: tuple[float, ...]
-    switched: tuple[int, ...]
-    status: str
-
-
-def mode_bands(compiled: CompiledSystem, maneuver: str, s_grid: npt.ArrayLike,
-               inputs: Any = None) -> list[ModeBands]:
-    """Simulate ``maneuver`` at every s and cut each trajectory into its mode intervals."""
-    bands = []
-    for s in np.atleast_1d(np.asarray(s_grid, dtype=np.float64)):
-        tr = compiled.simulate(maneuver, float(s), inputs)
-        times = (0.0, *tr.event_times, tr.t_final)
-        # a contact event that does not change the mode (impact and immediate separation)
-        # splits no band
-        modes, starts, ends = [tr.modes[0]], [0.0], []
-        for k, mode in enumerate(tr.modes[1:], start=1):
-            if mode != modes[-1]:
-                ends.append(times[k])
-                modes.append(mode)
-                starts.append(times[k])
-        ends.append(tr.t_final)
-        bands.append(ModeBands(s=float(s), modes=tuple(modes), starts=tuple(starts),
-                               ends=tuple(ends), events=tuple(tr.event_times),
-                               switched=tuple(int(r[2]) | int(r[3])
-                                              for r in tr.events[: len(tr.event_times)]),
-                               status=tr.status))
-    return bands
-
-
 def _mode_colour(mode: int) -> Any:
     if mode in {m.value for m in ContactMode}:
         return MODE_COLOURS[ContactMode(mode)]  # the biped's colours for the biped's masks
@@ -298,12 +264,26 @@ def _mode_colour(mode: int) -> Any:
 
 def modes_figure(path: str | Path, compiled: CompiledSystem, maneuver: str,
                  s_grid: npt.ArrayLike, inputs: Any = None, *, title: str = "",
-                 figsize: tuple[float, float] = (9.0, 5.0)) -> Path:
-    """Contact mode over time t (x) and s (y) as coloured bands, contact events as ticks."""
-    bands = mode_bands(compiled, maneuver, s_grid, inputs)
+                 figsize: tuple[float, float] = (9.0, 5.0),
+                 bands: Sequence[ModeBands] | None = None) -> Path:
+    """Contact mode over time t (x) and s (y) as coloured bands, contact events as ticks;
+    ``bands`` are :func:`biped_opt.analysis.figure_data.mode_bands` of ``s_grid`` (computed
+    there when not given)."""
+    if bands is None:
+        bands = mode_bands(compiled, maneuver, s_grid, inputs)
+    return draw_modes(path, bands, compiled.derived.constraint_names,
+                      s_name=str(compiled.system.s),
+                      title=title or f"{compiled.name} {maneuver}: contact mode over time and "
+                      f"{compiled.system.s}", figsize=figsize)
+
+
+def draw_modes(path: str | Path, bands: Sequence[ModeBands], constraint_names: Sequence[str],
+               *, s_name: str = "s", title: str = "",
+               figsize: tuple[float, float] = (9.0, 5.0)) -> Path:
+    """The mode bands of a sweep (one row per s) drawn, modes named by the constraints."""
     if not bands:
         raise InvalidInputError("s_grid must hold at least one value")
-    names = compiled.derived.constraint_names
+    names = tuple(constraint_names)
     ss = np.array([b.s for b in bands])
     steps = np.diff(ss)
     height = float(np.min(np.abs(steps))) if steps.size else 1.0
@@ -328,36 +308,10 @@ def modes_figure(path: str | Path, compiled: CompiledSystem, maneuver: str,
     ax.add_artist(legend)
     ax.legend(loc="lower left", bbox_to_anchor=(1.01, 0.0), fontsize=8)
     ax.set_xlabel("time t")
-    ax.set_ylabel(str(compiled.system.s))
+    ax.set_ylabel(s_name)
     ax.set_ylim(ss[0] - height, ss[-1] + height)
-    ax.set_title(title or f"{compiled.name} {maneuver}: contact mode over time and "
-                 f"{compiled.system.s}", fontsize=10)
+    ax.set_title(title, fontsize=10)
     return _finish(fig, Path(path))
-
-
-# --- nonsmooth points of a compiled system along a grid -----------------------------------------
-def fixed_input_sweep(compiled: CompiledSystem, maneuver: str, grid: npt.ArrayLike,
-                      inputs: Any = None, *, progress: bool = False
-                      ) -> tuple[tuple[float, ...], Array, NonsmoothReport]:
-    """The inputs (checked, in declared order), the outcome along ``grid`` (one batch) and its
-    nonsmooth report (:func:`biped_opt.analysis.nonsmooth.find_nonsmooth`: every change of the
-    mode sequence located to 1e-10 in s and classified from extrapolated one-sided limits and
-    slopes)."""
-    s = np.asarray(grid, dtype=np.float64)
-    u = compiled.simulate(maneuver, float(s[0]), inputs).inputs
-    batch = compiled.simulate_batch(maneuver, s, u)
-    report = find_nonsmooth(compiled, maneuver, u, s=s, progress=progress)
-    return u, batch["outcome"], report
-
-
-def system_marks(compiled: CompiledSystem, maneuver: str, grid: npt.ArrayLike,
-                 inputs: Any = None, *, series: str | None = None) -> tuple[Array, list[Mark]]:
-    """The outcome along ``grid`` and its nonsmooth points as marks of the curve ``series``
-    (:func:`fixed_input_sweep`)."""
-    _, outcome, report = fixed_input_sweep(compiled, maneuver, grid, inputs)
-    marks = [Mark(s=p.theta0, kind=p.kind, cause=p.cause, left=p.left, right=p.right, at=p.at,
-                  limits=p.limits, slopes=p.derivatives, series=series) for p in report.points]
-    return outcome, marks
 
 
 # --- every figure of one system's sweep, with captions and data ---------------------------------
@@ -432,13 +386,17 @@ def _write_outputs(out: Path, subject: str, grid: Array, curves: dict[str, Array
 
 def fixed_input_figures(out: str | Path, compiled: CompiledSystem, maneuver: str,
                         grid: npt.ArrayLike, inputs: Any = None, *,
-                        progress: bool = False) -> SystemFigures:
+                        progress: bool = False, data: SweepCurves | None = None
+                        ) -> SystemFigures:
     """``maneuver`` swept over ``grid`` at fixed ``inputs``: ``outcome.png`` (the outcome with
     its nonsmooth points marked), ``modes.png`` (contact modes over time and s), captions.txt
-    and data.json in ``out``."""
+    and data.json in ``out``. ``data`` is what
+    :func:`biped_opt.analysis.figure_data.fixed_input_curves` computes for these arguments
+    (computed there when not given)."""
     out = Path(out)
-    s = np.asarray(grid, dtype=np.float64)
-    u, outcome, report = fixed_input_sweep(compiled, maneuver, s, inputs, progress=progress)
+    if data is None:
+        data = fixed_input_curves(compiled, maneuver, grid, inputs, progress=progress)
+    s, u, outcome, report = data.s, data.inputs, data.curves["outcome"], data.report
     shown = ", ".join(f"{k} = {v:g}" for k, v in zip(compiled.inputs, u)) or "none"
     subject = f"{compiled.name} {maneuver}"
     name = str(compiled.derived.maneuvers[maneuver].description.outcome)
@@ -447,7 +405,7 @@ def fixed_input_figures(out: str | Path, compiled: CompiledSystem, maneuver: str
                        points=report.points, ylabel=f"outcome {name}(t_f)",
                        xlabel=str(compiled.system.s),
                        title=f"{subject}: outcome at inputs {shown}"),
-        modes_figure(out / "modes.png", compiled, maneuver, s, u),
+        modes_figure(out / "modes.png", compiled, maneuver, s, u, bands=data.bands),
     )
     lines = [
         _caption(None, f"{subject} at fixed inputs {shown}."),
@@ -464,20 +422,21 @@ def fixed_input_figures(out: str | Path, compiled: CompiledSystem, maneuver: str
 
 
 def optimal_figures(out: str | Path, problem: Problem, grid: npt.ArrayLike, *,
-                    progress: bool = False) -> SystemFigures:
+                    progress: bool = False, data: SweepCurves | None = None) -> SystemFigures:
     """The optimal control of ``problem`` over ``grid``: ``outcome.png`` (the optimal outcome)
     and ``policy_value.png`` (policy and value), each with the nonsmooth points of
     :func:`biped_opt.analysis.nonsmooth.find_nonsmooth_optimal` on its curves, captions.txt and
-    data.json in ``out``."""
-    from biped_opt.control.solve import compiled_for, optimal_sweep, policy_table
-    from biped_opt.progress import bar as _bar
+    data.json in ``out``. ``data`` is what :func:`biped_opt.analysis.figure_data.optimal_curves`
+    computes for these arguments (computed there when not given)."""
+    from biped_opt.control.solve import compiled_for
 
     out = Path(out)
-    s = np.asarray(grid, dtype=np.float64)
+    if data is None:
+        data = optimal_curves(problem, grid, progress=progress)
+    s, report = data.s, data.report
+    table = {"outcome": data.curves["outcome"], "value": data.curves["value"],
+             **{d: data.curves[f"policy:{d}"] for d in problem.decision_names}}
     compiled = compiled_for(problem)
-    bar = _bar(progress, s.size, f"{problem.name} curves")
-    table = policy_table(optimal_sweep(problem, s, callback=bar.update))
-    report = find_nonsmooth_optimal(problem, s, progress=progress)
     names = problem.decision_names
     name = str(compiled.derived.maneuvers[problem.maneuver].description.outcome)
     subject = f"problem {problem.name} on {compiled.name}"
@@ -510,18 +469,10 @@ def optimal_figures(out: str | Path, problem: Problem, grid: npt.ArrayLike, *,
     ]
     about = {"problem": spec, "system": compiled.name, "maneuver": problem.maneuver,
              "parameters": compiled.parameters}
-    curves = {"outcome": table["outcome"], "value": table["value"],
-              **{f"policy:{d}": table[d] for d in names}}
-    return _write_outputs(out, subject, s, curves, report, figures, lines, about)
+    return _write_outputs(out, subject, s, data.curves, report, figures, lines, about)
 
 
 # --- the control experiment ---------------------------------------------------------------------
-#: SYSTEMS.md Sec. 3: the paper's fixed inputs (u1, u2, u_body) of the two-leg walker
-TOUCHDOWN_INPUTS = (2.0, 0.5, 0.0)
-LIFTOFF_INPUTS = (1.5, 3.0, 0.0)
-LAWS = ("coupled", "decoupled")
-
-
 #: what control_experiment.png shows, for the captions file next to it
 CONTROL_EXPERIMENT_CAPTION = """\
 control_experiment.png  The paper's claim as a controlled experiment (SYSTEMS.md Secs. 2-3).
@@ -530,77 +481,21 @@ control_experiment.png  The paper's claim as a controlled experiment (SYSTEMS.md
           mechanics and inputs: touchdown u = (2, 0.5, 0), liftoff u = (1.5, 3, 0), 801
           angles in [-0.02, 0.02], 0 included. Coupled: touchdown kinked, liftoff jumping at
           th0 = 0 (the dot is the simultaneous liftoff itself); decoupled: C^1 (legend: one-
-          sided slopes from the grid). Inset: outcome minus its chord (a V is a kink).
+          sided slopes at 0 from the variational equation). Inset: outcome minus its chord
+          (a V is a kink).
           (c) The rocking bar (no input; inertial coupling) dropped at pitch th0: its outcome
           th'(t_f) jumps at 0 and where a third impact meets the apex. Curves are broken at
           jumps; circles are one-sided limits, diamonds kinks, located to 1e-10."""
 
 
-@dataclass(frozen=True)
-class ControlExperiment:
-    """Walker outcomes under both input laws on one grid (0 included), and the rocking bar's."""
-
-    s: Array
-    touchdown: dict[str, Array]  #: law -> outcome th(t_f)
-    liftoff: dict[str, Array]
-    touchdown_marks: tuple[Mark, ...]  #: each with ``series`` = its law
-    liftoff_marks: tuple[Mark, ...]
-    bar_s: Array
-    bar: Array  #: the rocking bar's drop outcome th'(t_f)
-    bar_marks: tuple[Mark, ...]
-
-
-def control_experiment_data(*, half_width: float = 0.02, num: int = 801,
-                            bar_num: int = 1201) -> ControlExperiment:
-    """Outcomes of the two-leg walker, coupled and decoupled, at touchdown (u = (2, 0.5, 0))
-    and liftoff (u = (1.5, 3, 0)) for th0 in [-half_width, half_width] (``num`` angles), and
-    of the rocking bar's drop over its whole range (``bar_num`` angles), with their nonsmooth
-    points."""
-    if not 0.0 < half_width <= 0.3:
-        raise InvalidInputError(f"half_width must lie in (0, 0.3], got {half_width!r}")
-    for name, n in (("num", num), ("bar_num", bar_num)):
-        if isinstance(n, bool) or not isinstance(n, int) or n < 5:
-            raise InvalidInputError(f"{name} must be an integer >= 5, got {n!r}")
-    s = theta_grid(-half_width, half_width, num)
-    outcomes: dict[str, dict[str, Array]] = {"touchdown": {}, "liftoff": {}}
-    marks: dict[str, list[Mark]] = {"touchdown": [], "liftoff": []}
-    for law in LAWS:
-        walker = CompiledSystem(f"walker2_{law}")
-        for maneuver, u in (("touchdown", TOUCHDOWN_INPUTS), ("liftoff", LIFTOFF_INPUTS)):
-            y, found = system_marks(walker, maneuver, s, u, series=law)
-            outcomes[maneuver][law] = y
-            marks[maneuver] += found
-    bar = CompiledSystem("rocking_bar")
-    lo, hi = bar.derived.maneuvers["drop"].description.s_range
-    bar_s = theta_grid(lo, hi, bar_num)
-    bar_y, bar_marks = system_marks(bar, "drop", bar_s)
-    return ControlExperiment(s=s, touchdown=outcomes["touchdown"], liftoff=outcomes["liftoff"],
-                             touchdown_marks=tuple(marks["touchdown"]),
-                             liftoff_marks=tuple(marks["liftoff"]), bar_s=bar_s, bar=bar_y,
-                             bar_marks=tuple(bar_marks))
-
-
-def grid_one_sided(s: Array, y: Array, x: float, side: int, *, levels: int = 5) -> OneSided:
-    """One-sided limit and slope at the grid point x from the grid's own values: the
-    polynomial extrapolation of :func:`biped_opt.piecewise.one_sided` on the ladder of grid
-    points x + side 2^k h, h the spacing, k = levels-1 .. 0 (y at x itself is never used)."""
-    k = int(np.flatnonzero(s == x)[0])
-    spacing = float(s[k + side] - s[k]) * side
-    at = {round((float(v) - x) / spacing): float(w) for v, w in zip(s, y)}
-    return one_sided(lambda v: at[round((v - x) / spacing)], x, side,
-                     h0=spacing * 2 ** (levels - 1), levels=levels)
-
-
-def _law_label(law: str, s: Array, y: Array, marks: Sequence[Mark]) -> str:
-    """'coupled: kink, slopes 0.796 | 0.714' or 'decoupled: C^1, slopes 0.830 | 0.830'."""
-    mine = {m.kind: m for m in marks if m.series == law and m.s == 0.0}
-    if "jump" in mine:
-        m = mine["jump"]
-        return f"{law}: jump, limits {m.limits[0]:+.4f} | {m.limits[1]:+.4f}"
-    if "kink" in mine:
-        m = mine["kink"]
-        return f"{law}: kink, slopes {m.slopes[0]:.4f} | {m.slopes[1]:.4f}"
-    left, right = (grid_one_sided(s, y, 0.0, side).derivative for side in (-1, 1))
+def _law_label(law: str, behaviour: tuple[str, tuple[float, float]]) -> str:
+    """'coupled: kink, slopes 0.796 | 0.714' or 'decoupled: C^1, slopes 0.830 | 0.830' from
+    :attr:`biped_opt.paper.figures.ControlExperiment.zero`."""
+    kind, (left, right) = behaviour
+    if kind == "jump":
+        return f"{law}: jump, limits {left:+.4f} | {right:+.4f}"
+    if kind == "kink":
+        return f"{law}: kink, slopes {left:.4f} | {right:.4f}"
     return f"{law}: C$^1$, slopes {left:.4f} | {right:.4f}"
 
 
@@ -630,7 +525,7 @@ def control_experiment_figure(path: str | Path, data: ControlExperiment | None =
     for ax, maneuver, u, outcome, marks in (
             (axes[0], "touchdown", TOUCHDOWN_INPUTS, data.touchdown, data.touchdown_marks),
             (axes[1], "liftoff", LIFTOFF_INPUTS, data.liftoff, data.liftoff_marks)):
-        curves = {_law_label(law, data.s, y, marks): y for law, y in outcome.items()}
+        curves = {_law_label(law, data.zero[(maneuver, law)]): y for law, y in outcome.items()}
         relabel = dict(zip(outcome, curves))
         shown = [replace(m, series=relabel[m.series]) for m in marks
                  if m.kind in ("jump", "kink")]  # the C^1 law's second derivative: not the point

@@ -3,7 +3,8 @@
 Nothing runs but this code: the SweepPoints of one or more recordings (``/biped/sweep``: angle,
 policy, value, outcome, final time, mode sequence, event times) and each file's ``biped_opt.sweep``
 metadata record (maneuver, fixed-input or optimal, inputs, cost) are turned into the plain arrays
-of :mod:`biped_opt.plots.figures` through the helpers of :mod:`biped_opt.plots.reproduce`:
+of the paper's figures by the helpers of :mod:`biped_opt.paper.figures` and drawn by
+:mod:`biped_opt.plots.figures`:
 
 - Fig. 2 (outcome and cost at fixed inputs) and Fig. 3 (contact mode over t and th0, drawn from
   the recorded mode sequences and event times) from fixed-input sweeps;
@@ -17,19 +18,20 @@ system's constraints, and a plot of the outcome over s; a fixed-input sweep has 
 value), an optimal one (its problem in the ``biped_opt.sweep`` record's ``problem``) adds the
 value and the policy to the table and the plot. ``refine`` re-locates the biped's points only.
 
-**Nonsmoothness at grid resolution.** Along a sweep, outcome, policy and value are smooth while
-the mode order (and, for optima, which bound holds the policy) stays fixed ([1]_ Sec. III), so
-every change of that label between neighbouring recorded angles brackets a candidate point; for
-optimal sweeps a policy step much larger than its neighbours' (the optimum moving to another local
-minimum with the same mode order) is one too. A label held by a single angle between two others
-(th0 = 0, where both feet touch down or lift off at once) is one point at that angle. On each side
-a cubic through the 4 nearest recorded points of that side is extrapolated to the point to give
-one-sided limits and slopes; the difference to the quadratic through the 3 nearest is the error
-estimate. Limits further apart than 3x their errors are a **jump**, else slopes further apart than
-3x theirs a **kink**. These are estimates from the recording, as good as its grid: the bracket
-width (the recorded spacing) bounds the location error, and the table says so. ``refine=True``
-re-locates every point to 1e-10 with the core (:mod:`biped_opt.optimal.nonsmooth`, which simulates
-and optimises again) and prints both.
+**Nonsmoothness at grid resolution.** The recorded angles are handed to the core as
+:class:`~biped_opt.analysis.sampled.Samples` and :func:`biped_opt.analysis.sampled.grid_nonsmooth`
+estimates the points they hold: every change of the mode order (for optima also of the bound
+holding the policy, or a policy step much larger than its neighbours') between neighbouring
+recorded angles brackets a point; cubics through the 4 nearest recorded points of each side give
+one-sided limits and slopes, the quadratics through 3 their error estimates, and differences
+beyond 3x the errors are a **jump** or a **kink**. These are estimates from the recording, as good
+as its grid: the bracket width (the recorded spacing) bounds the location error, and the table
+says so. ``refine=True`` re-locates every point to 1e-10 with the core's engine
+(:mod:`biped_opt.optimal.nonsmooth`, which simulates and optimises again) and prints both.
+
+Nothing is drawn here either: the figures are :mod:`biped_opt.plots`' (Figs. 2-4 from
+:mod:`biped_opt.paper.figures`' data, another system's sweep by
+:func:`biped_opt.plots.recorded.sweep_figure`).
 
 .. [1] B. Banjanin and S. A. Burden, "Nonsmooth optimal value and policy functions in mechanical
    systems subject to unilateral constraints", IEEE Control Systems Letters 4(2), 2020.
@@ -38,7 +40,6 @@ and optimises again) and prints both.
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,11 +48,13 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from biped_opt.analysis.sampled import GridPoint, Samples, labels
+from biped_opt.analysis.sampled import grid_nonsmooth as _grid_nonsmooth
 from biped_opt.errors import BipedOptError
 from biped_opt.hybrid.simulate import INPUT_NAMES
 from biped_opt.model.modes import ContactMode
 from biped_opt.optimal import OptimalControlProblem, get_problem
-from biped_opt.optimal.nonsmooth import NonsmoothPoint, NonsmoothReport
+from biped_opt.optimal.nonsmooth import NonsmoothReport
 from biped_opt.optimal.sweep import FixedSweep, OptimalSweep
 from biped_opt.record.reader import read_raw, recorded_system
 from biped_opt.ros.interfaces import load_interfaces
@@ -61,6 +64,7 @@ __all__ = [
     "ReportError",
     "RecordedSweep",
     "GridPoint",
+    "samples",
     "Report",
     "load_sweep",
     "grid_nonsmooth",
@@ -69,16 +73,6 @@ __all__ = [
 ]
 
 Array = npt.NDArray[np.float64]
-
-#: one-sided fits use this many recorded points per side (a cubic); the error estimate drops one
-FIT_POINTS = 4
-#: a difference counts when it exceeds this many times the summed extrapolation error estimates
-SIGNIFICANCE = 3.0
-#: a policy within this of a bound is held by it (the optimiser stops ~1e-8 from a bound)
-BOUND_TOL = 1e-7
-#: a policy step this many times larger than both neighbouring steps is a jump candidate
-STEP_RATIO = 10.0
-
 
 class ReportError(BipedOptError, ValueError):
     """A recording holds no sweep that can be analysed."""
@@ -181,7 +175,7 @@ def load_sweep(path: str | Path) -> RecordedSweep:
     typename = raw.channels["/biped/sweep"].type
     points: dict[float, Any] = {}
     for m in sweep:
-        msg = ts.deserialize_cdr(m.data, typename)
+        msg: Any = ts.deserialize_cdr(m.data, typename)
         points[float(msg.theta0)] = msg  # a repeated angle: the later point wins
     msgs = [points[k] for k in sorted(points)]
     meta = raw.metadata.get("biped_opt.sweep", {})
@@ -234,188 +228,21 @@ def load_sweep(path: str | Path) -> RecordedSweep:
 
 
 # --- nonsmoothness from the recorded grid ------------------------------------------------------
-@dataclass(frozen=True)
-class GridPoint:
-    """A nonsmooth point estimated from the recorded grid (see the module docstring).
-
-    ``point`` carries the estimate in the core's form (limits and slopes at ``point.theta0``;
-    second derivatives are not estimated: NaN); ``*_error`` are the extrapolation error estimates
-    (left, right); ``bracket`` is the recorded interval that holds the point.
-    """
-
-    point: NonsmoothPoint
-    limit_error: tuple[float, float]
-    slope_error: tuple[float, float]
-
-    @property
-    def width(self) -> float:
-        return self.point.bracket[1] - self.point.bracket[0]
-
-
-def _labels(s: RecordedSweep) -> list[tuple[Any, ...]]:
-    if not s.optimal:
-        return [(b,) for b in s.branch]
-    out = []
-    for k, b in enumerate(s.branch):
-        held = []
-        for d, (lo, hi) in s.decision_bounds:
-            v = s.policy[d][k]
-            held.append("lower" if abs(v - lo) <= BOUND_TOL else
-                        "upper" if abs(v - hi) <= BOUND_TOL else None)
-        out.append((b, tuple(held)))
-    return out
-
-
-def _quantities(s: RecordedSweep) -> dict[str, Array]:
+def samples(s: RecordedSweep) -> Samples:
+    """The recorded sweep as the core's :class:`~biped_opt.analysis.sampled.Samples`: outcome,
+    the decisions' policies of an optimal sweep, and the value where a cost defines one."""
     q = {"outcome": s.outcome}
     q.update({f"policy:{d}": s.policy[d] for d, _ in s.decision_bounds})
     if s.has_value:  # (another system's fixed inputs have no cost, hence no value)
         q["value"] = s.value
-    return q
-
-
-def _fit(x: Array, y: Array, xref: float) -> tuple[Array, Array | None]:
-    """Polynomials in (x - xref) through the FIT_POINTS nearest points (nearest first) and
-    through one point fewer (for an error estimate); None where too few points."""
-    n = min(FIT_POINTS, x.size)
-    c = np.polyfit(x[:n] - xref, y[:n], max(n - 1, 0))
-    c2 = np.polyfit(x[: n - 1] - xref, y[: n - 1], n - 2) if n > 2 else None
-    return c, c2
-
-
-def _at(fit: tuple[Array, Array | None], dx: float) -> tuple[float, float, float, float]:
-    """(value, slope, value error, slope error) of a fit at offset dx."""
-    c, c2 = fit
-    value = float(np.polyval(c, dx))
-    slope = float(np.polyval(np.polyder(c), dx)) if c.size > 1 else math.nan
-    if c2 is None:
-        return value, slope, math.inf, math.inf
-    return (value, slope, abs(value - float(np.polyval(c2, dx))),
-            abs(slope - float(np.polyval(np.polyder(c2), dx))) if c2.size > 1 else math.inf)
-
-
-def _crossing(left: tuple[Array, Array | None], right: tuple[Array, Array | None],
-              lo: float, hi: float) -> float | None | bool:
-    """Where the two one-sided fits meet inside the bracket [lo, hi] (offsets from the fits'
-    reference): the continuous quantity's kink. None if they do not meet there (a jump); True if
-    they coincide (no break at all)."""
-    diff = np.polysub(left[0], right[0])
-    scale = max(1.0, float(np.max(np.abs(left[0]))), float(np.max(np.abs(right[0]))))
-    if np.all(np.abs(diff) <= 1e-12 * scale):
-        return True
-    diff = np.trim_zeros(diff, "f")
-    if diff.size <= 1:
-        return None
-    roots = [r.real for r in np.roots(diff) if abs(r.imag) <= 1e-12 and lo <= r.real <= hi]
-    return min(roots, key=lambda r: abs(r - 0.5 * (lo + hi))) if roots else None
-
-
-def _events(s: RecordedSweep) -> list[tuple[int, int, int | None, str]]:
-    """(last index left, first index right, isolated index or None, cause) per candidate."""
-    labels = _labels(s)
-    n = len(labels)
-    runs: list[tuple[int, int]] = []
-    start = 0
-    for k in range(1, n + 1):
-        if k == n or labels[k] != labels[start]:
-            runs.append((start, k - 1))
-            start = k
-    events = []
-    r = 0
-    while r < len(runs) - 1:
-        a, b = runs[r], runs[r + 1]
-        if b[0] == b[1] and r + 2 < len(runs):
-            c = runs[r + 2]
-            events.append((a[1], c[0], b[0], _cause(s, labels, a[1], c[0], b[0])))
-            r += 2
-        else:
-            events.append((a[1], b[0], None, _cause(s, labels, a[1], b[0], None)))
-            r += 1
-    if s.optimal:
-        # the optimum may jump to another local minimum with the same mode order
-        known = {(lo, hi) for lo, hi, _, _ in events}
-        for d, _ in s.decision_bounds:
-            step = np.abs(np.diff(s.policy[d]))
-            for k in range(1, step.size - 1):
-                big = step[k] > STEP_RATIO * max(step[k - 1], step[k + 1]) and step[k] > 1e-6
-                if big and labels[k] == labels[k + 1] and (k, k + 1) not in known:
-                    events.append((k, k + 1, None,
-                                   f"policy {d} steps with the mode order unchanged "
-                                   "(the optimum moves to another local minimum)"))
-                    known.add((k, k + 1))
-    return sorted(events)
-
-
-def _cause(s: RecordedSweep, labels: list[Any], i: int, j: int, mid: int | None) -> str:
-    left, right = s.branch[i], s.branch[j]
-    parts = []
-    if left != right:
-        via = f" (th0 = {s.theta0[mid]:g}: {s.branch[mid]})" if mid is not None else ""
-        parts.append(f"mode order changes: {left} | {right}{via}")
-    if s.optimal:
-        for (d, _), hl, hr in zip(s.decision_bounds, labels[i][1], labels[j][1]):
-            if hl != hr:
-                what = (f"reaches its {hr} bound" if hl is None else
-                        f"leaves its {hl} bound" if hr is None else f"moves to its {hr} bound")
-                parts.append(f"input {d} {what}")
-    return "; ".join(parts) or "label change"
+    return Samples(s=s.theta0, branch=s.branch, quantities=q, optimal=s.optimal,
+                   bounds=s.decision_bounds)
 
 
 def grid_nonsmooth(s: RecordedSweep) -> list[GridPoint]:
-    """Nonsmooth points estimated from the recorded angles (see the module docstring).
-
-    Each quantity gets a cubic through the 4 nearest recorded angles on each side of a bracket.
-    Where the two meet inside the bracket the quantity is continuous there and the meeting point
-    locates its kink; where they do not, it jumps. The bracket's location is the isolated
-    recorded angle between the sides if there is one (th0 = 0 with its simultaneous events),
-    else the kink of the continuous quantity whose slopes differ most, else the bracket's
-    centre (0 when the bracket straddles it); all quantities are evaluated there.
-    """
-    out = []
-    th = s.theta0
-    quantities = _quantities(s)
-    for i, j, mid, cause in _events(s):
-        lo, hi = float(th[i]), float(th[j])
-        xref = float(th[mid]) if mid is not None else (0.0 if lo < 0.0 < hi else 0.5 * (lo + hi))
-        left_idx = np.arange(i, -1, -1)  # nearest first
-        right_idx = np.arange(j, th.size)
-        fits = {name: (_fit(th[left_idx], y[left_idx], xref), _fit(th[right_idx], y[right_idx],
-                                                                   xref))
-                for name, y in quantities.items()}
-        meets = {name: _crossing(L, R, lo - xref, hi - xref) for name, (L, R) in fits.items()}
-        x0 = xref
-        if mid is None:
-            best = 0.0
-            for name, where in meets.items():
-                if isinstance(where, float):
-                    L, R = fits[name]
-                    jump_in_slope = abs(_at(L, where)[1] - _at(R, where)[1])
-                    if jump_in_slope > best:
-                        best, x0 = jump_in_slope, xref + where
-        for name, (L, R) in fits.items():
-            ll, sl, el, esl = _at(L, x0 - xref)
-            lr, sr, er, esr = _at(R, x0 - xref)
-            scale = max(1.0, abs(ll), abs(lr))
-            continuous = meets[name] is not None or mid is not None
-            if meets[name] is None and abs(lr - ll) > SIGNIFICANCE * (el + er) + 1e-12 * scale:
-                kind, a, b = "jump", ll, lr
-            elif mid is not None and abs(lr - ll) > SIGNIFICANCE * (el + er) + 1e-12 * scale:
-                kind, a, b = "jump", ll, lr
-            elif continuous and abs(sr - sl) > SIGNIFICANCE * (esl + esr) + 1e-9 * max(
-                    1.0, abs(sl), abs(sr)):
-                kind, a, b = "kink", sl, sr
-            else:
-                continue
-            y = quantities[name]
-            at = float(y[mid]) if mid is not None else 0.5 * (ll + lr)
-            family, _, comp = name.partition(":")
-            point = NonsmoothPoint(
-                theta0=x0, quantity=family, input=comp or None, kind=kind, left=a, right=b,
-                cause=cause, limits=(ll, lr), derivatives=(sl, sr),
-                second_derivatives=(math.nan, math.nan), at=at, bracket=(lo, hi),
-                labels=(s.branch[i], s.branch[j]))
-            out.append(GridPoint(point, (el, er), (esl, esr)))
-    return out
+    """Nonsmooth points estimated from the recorded angles
+    (:func:`biped_opt.analysis.sampled.grid_nonsmooth`)."""
+    return _grid_nonsmooth(samples(s))
 
 
 def grid_table(s: RecordedSweep, points: Sequence[GridPoint]) -> str:
@@ -472,10 +299,10 @@ def _fixed_sweep(s: RecordedSweep) -> FixedSweep:
 
 
 def _optimal_sweep(s: RecordedSweep) -> OptimalSweep:
+    assert s.problem is not None  # (a sweep of the biped always has its problem)
     n = s.theta0.size
-    labels = _labels(s)
     bound = []
-    for lab in labels:
+    for lab in labels(samples(s)):
         held = [h for h in lab[1] if h is not None]
         bound.append(held[0] if held else None)
     return OptimalSweep(
@@ -488,8 +315,9 @@ def _optimal_sweep(s: RecordedSweep) -> OptimalSweep:
 def report(paths: Sequence[str | Path], out_dir: str | Path, *, refine: bool = False
            ) -> Report:
     """Figures (whichever the recordings allow) and the nonsmoothness table into ``out_dir``."""
+    from biped_opt.paper.figures import fixed_data, optimal_data
     from biped_opt.plots.figures import figure2, figure3, figure4
-    from biped_opt.plots.reproduce import fixed_data, nonsmooth_table, optimal_data
+    from biped_opt.plots.reproduce import nonsmooth_table
 
     if not paths:
         raise ReportError("no recordings given")
@@ -515,6 +343,7 @@ def report(paths: Sequence[str | Path], out_dir: str | Path, *, refine: bool = F
             figures.append(_system_figure(
                 s, pts, out / f"{s.system}_{s.maneuver}{'_optimal' if s.optimal else ''}.png"))
         elif kind == "fixed":
+            assert s.problem is not None  # (a sweep of the biped always has its problem)
             fixed[label] = fixed_data(_fixed_sweep(s), s.problem, core)
         else:
             optimal[label] = optimal_data(_optimal_sweep(s), core)
@@ -533,6 +362,7 @@ def report(paths: Sequence[str | Path], out_dir: str | Path, *, refine: bool = F
             if s.kind == "fixed":
                 refined.append(find_nonsmooth_fixed(s.maneuver, s.theta0, s.inputs))
             else:
+                assert s.problem is not None
                 refined.append(find_nonsmooth_optimal(s.problem, s.theta0))
         blocks.append("REFINED with the core (simulated/optimised again, located to 1e-10):\n\n"
                       + nonsmooth_table(refined))
@@ -549,36 +379,15 @@ def report(paths: Sequence[str | Path], out_dir: str | Path, *, refine: bool = F
 
 def _system_figure(s: RecordedSweep, points: Sequence[GridPoint], path: Path) -> Path:
     """Outcome over s of another system's recorded sweep, coloured by mode sequence, with the
-    grid-resolution nonsmooth points marked; an optimal sweep adds its value and policy."""
-    from biped_opt.plots.figures import plt  # (its import selects the file backend)
+    grid-resolution nonsmooth points marked; an optimal sweep adds its value and policy
+    (:func:`biped_opt.plots.recorded.sweep_figure`)."""
+    from biped_opt.plots.recorded import sweep_figure
 
-    rows = [("outcome", {"": s.outcome})]
-    if s.optimal:
-        rows += [("value", {"": s.value}), ("policy", {d: s.policy[d] for d, _ in
-                                                        s.decision_bounds})]
-    fig, axes = plt.subplots(len(rows), 1, figsize=(6.4, 2.2 + 1.8 * len(rows)), sharex=True,
-                             squeeze=False)
-    branches = s.branch
-    for ax, (what, series) in zip(axes[:, 0], rows):
-        for name, y in series.items():
-            for branch in dict.fromkeys(branches):
-                k = np.array([b == branch for b in branches])
-                ax.plot(s.theta0[k], y[k], ".", label=branch if what == "outcome" else None,
-                        color=f"C{list(dict.fromkeys(branches)).index(branch)}")
-            if name:
-                ax.plot(s.theta0, y, "-", color="0.7", lw=0.6, zorder=0)
-                ax.annotate(name, (s.theta0[-1], y[-1]), fontsize="small")
-        for g in points:
-            ax.axvline(g.point.theta0, color="0.6", lw=0.8, ls="--")
-        ax.set_ylabel(what)
-    axes[-1, 0].set_xlabel("s")
-    axes[0, 0].set_title(f"{s.system}: {s.maneuver} "
-                         f"({'optimal' if s.optimal else 'fixed inputs'})")
-    axes[0, 0].legend(fontsize="small", title="mode sequence")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return sweep_figure(
+        path, s.theta0, s.branch, s.outcome, value=s.value if s.optimal else None,
+        policy={d: s.policy[d] for d, _ in s.decision_bounds} if s.optimal else None,
+        points=[g.point.theta0 for g in points],
+        title=f"{s.system}: {s.maneuver} ({'optimal' if s.optimal else 'fixed inputs'})")
 
 
 def _comparison(grid: dict[str, tuple[GridPoint, ...]], sweeps: list[RecordedSweep],
