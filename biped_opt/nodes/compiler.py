@@ -25,9 +25,10 @@ from pathlib import Path
 from typing import Any
 
 from biped_opt.errors import BipedOptError, InvalidInputError
+from biped_opt.nodes.refusals import failure_message
 from biped_opt.nodes.sources import Sources, SystemLimits
 
-__all__ = ["BUSY", "Busy", "Compiler", "prepare", "failure_message", "main"]
+__all__ = ["BUSY", "Busy", "Compiler", "prepare", "main"]
 
 #: the start of a refusal that a retry may cure (a client or coordinator waits and asks again)
 BUSY = "busy: "
@@ -37,16 +38,6 @@ COMPILE_TIMEOUT_S = 900.0
 
 class Busy(BipedOptError, RuntimeError):
     """The system of a request is being prepared; its message starts with :data:`BUSY`."""
-
-
-def failure_message(exc: BaseException, what: str = "") -> str:
-    """One line for any failure, also of the kinds that are not errors (SystemExit,
-    KeyboardInterrupt raised by a system file's code), then prefixed by ``what``."""
-    if isinstance(exc, BipedOptError):
-        return str(exc)
-    text = str(exc)
-    line = f"{type(exc).__name__}{': ' + text if text else ''}"[:500]
-    return f"{what}: {line}" if what else line
 
 
 def _sources(job: dict[str, Any]) -> Sources:

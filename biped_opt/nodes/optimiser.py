@@ -80,16 +80,9 @@ from biped_opt.errors import (
 from biped_opt.maneuvers import Maneuver
 from biped_opt.nodes import convert
 from biped_opt.nodes.compiler import COMPILE_TIMEOUT_S, Compiler
-from biped_opt.nodes.run import (
-    announce_ready,
-    answers,
-    float_parameter,
-    int_parameter,
-    refuse,
-    run_node,
-    string_list_parameter,
-    warm_up_kernels,
-)
+from biped_opt.nodes.parameters import float_parameter, int_parameter, string_list_parameter
+from biped_opt.nodes.refusals import answers, refuse
+from biped_opt.nodes.run import announce_ready, run_node, warm_up_kernels
 from biped_opt.nodes.simulator import BIPED
 from biped_opt.nodes.sources import (
     PROBLEM_SUFFIXES,

@@ -29,7 +29,8 @@ if TYPE_CHECKING:
     from biped_opt.systems.description import System
 
 __all__ = ["MAX_NAME", "PROBLEM_SUFFIXES", "SystemLimits", "Sources", "check_name", "name_of",
-           "directories", "declare_request_limits", "request_study"]
+           "directories", "declare_request_limits", "request_study", "check_maneuver_of",
+           "check_problem_on"]
 
 #: longest system, problem or worker name a request may give
 MAX_NAME = 64
@@ -108,6 +109,28 @@ def directories(values: Iterable[Any]) -> tuple[Path, ...]:
             raise InvalidParameterError(f"system_paths: {text}: no such directory")
         out.append(path)
     return tuple(out)
+
+
+def check_maneuver_of(described: Any, maneuver: str) -> None:
+    """``maneuver`` must be one of the described system's; the error names the field."""
+    if maneuver not in described.maneuvers:
+        raise InvalidInputError(
+            f"maneuver: {described.name} has no maneuver {quoted(maneuver)} "
+            f"(maneuvers: {', '.join(described.maneuvers) or 'none'})")
+
+
+def check_problem_on(found: Problem, described: Any, maneuver: str) -> Problem:
+    """``found``, a request's problem, must be on the requested system (``described``; None:
+    any) and on ``maneuver``; each error names the field."""
+    if described is not None and found.description.name != described.name:
+        raise InvalidInputError(
+            f"problem: {found.name} is a problem on {found.description.name}, not on "
+            f"{described.name}")
+    if found.maneuver != maneuver:
+        raise InvalidInputError(
+            f"maneuver: problem {found.name} is on maneuver {found.maneuver!r}, not "
+            f"{quoted(maneuver)}")
+    return found
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -190,8 +213,6 @@ class Sources:
         compiling anything (its description is cheap to build): the problem declared or a file
         of system_paths, else the maneuver. Refuses at once what a compile would only refuse
         later, so that names no compile can serve never reach the compile queue."""
-        from biped_opt.nodes.convert import check_maneuver_of
-
         if problem:
             check_name("problem", problem, "problem")
         if maneuver is not None:
@@ -232,7 +253,6 @@ class Sources:
         a slow or failing description holds up nobody else."""
         from biped_opt.control.problems import Problem, get_problem, load_problem, read_yaml
         from biped_opt.errors import BipedOptError
-        from biped_opt.nodes.convert import check_maneuver_of, check_problem_on
 
         source = self.system("system", system) if system else ""
         name = problem or maneuver
@@ -304,7 +324,7 @@ def declare_request_limits(node: Any) -> tuple[Sources, StudyLimits, int]:
     (``system_paths``, ``max_legs``, ``max_coordinates``, ``max_points``, ``max_num``,
     ``max_values``, ``max_request_chars``): the node's :class:`Sources`, study limits and
     longest study text. A bad value stops the node (one line, status 2)."""
-    from biped_opt.nodes.run import int_parameter, string_list_parameter
+    from biped_opt.nodes.parameters import int_parameter, string_list_parameter
     from biped_opt.studies.study import StudyLimits
 
     for name, default in (("system_paths", []), ("max_legs", MAX_LEGS),
