@@ -26,7 +26,7 @@ from typing import Any
 
 from biped_opt.errors import BipedOptError, InvalidInputError
 from biped_opt.nodes.refusals import failure_message
-from biped_opt.nodes.sources import Sources, SystemLimits
+from biped_opt.nodes.sources import Names, Sources, SystemLimits
 
 __all__ = ["BUSY", "Busy", "Compiler", "prepare", "main"]
 
@@ -48,11 +48,12 @@ def _sources(job: dict[str, Any]) -> Sources:
 
 def prepare(job: dict[str, Any]) -> Any:
     """Build and exercise what a job names (in the compile process, then in the node):
-    ``kind`` "policy" (an OptimalPolicy request's system, problem and maneuver: returns its
-    Problem) or "study" (a study's system and problem: returns None)."""
+    ``kind`` "policy" (an OptimalPolicy request's names, as :meth:`Sources.check_request`
+    resolved them: returns its Problem) or "study" (a study's system and problem: returns
+    None)."""
     sources = _sources(job)
     if job["kind"] == "policy":
-        problem = sources.problem(job["system"], job["problem"], job["maneuver"])
+        problem = sources.problem(Names(**job["names"]))
     else:  # a study: the fixed-input kernels, and its problem's if it has one
         from biped_opt.control.problems import load_problem
 
