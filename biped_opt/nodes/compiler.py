@@ -25,9 +25,10 @@ from pathlib import Path
 from typing import Any
 
 from biped_opt.errors import BipedOptError, InvalidInputError
-from biped_opt.nodes.sources import Sources, SystemLimits
+from biped_opt.nodes.refusals import failure_message
+from biped_opt.nodes.sources import Names, Sources, SystemLimits
 
-__all__ = ["BUSY", "Busy", "Compiler", "prepare", "failure_message", "main"]
+__all__ = ["BUSY", "Busy", "Compiler", "prepare", "main"]
 
 #: the start of a refusal that a retry may cure (a client or coordinator waits and asks again)
 BUSY = "busy: "
@@ -39,16 +40,6 @@ class Busy(BipedOptError, RuntimeError):
     """The system of a request is being prepared; its message starts with :data:`BUSY`."""
 
 
-def failure_message(exc: BaseException, what: str = "") -> str:
-    """One line for any failure, also of the kinds that are not errors (SystemExit,
-    KeyboardInterrupt raised by a system file's code), then prefixed by ``what``."""
-    if isinstance(exc, BipedOptError):
-        return str(exc)
-    text = str(exc)
-    line = f"{type(exc).__name__}{': ' + text if text else ''}"[:500]
-    return f"{what}: {line}" if what else line
-
-
 def _sources(job: dict[str, Any]) -> Sources:
     return Sources(tuple(Path(p) for p in job["system_paths"]),
                    SystemLimits(max_legs=job["max_legs"],
@@ -57,11 +48,12 @@ def _sources(job: dict[str, Any]) -> Sources:
 
 def prepare(job: dict[str, Any]) -> Any:
     """Build and exercise what a job names (in the compile process, then in the node):
-    ``kind`` "policy" (an OptimalPolicy request's system, problem and maneuver: returns its
-    Problem) or "study" (a study's system and problem: returns None)."""
+    ``kind`` "policy" (an OptimalPolicy request's names, as :meth:`Sources.check_request`
+    resolved them: returns its Problem) or "study" (a study's system and problem: returns
+    None)."""
     sources = _sources(job)
     if job["kind"] == "policy":
-        problem = sources.problem(job["system"], job["problem"], job["maneuver"])
+        problem = sources.problem(Names(**job["names"]))
     else:  # a study: the fixed-input kernels, and its problem's if it has one
         from biped_opt.control.problems import load_problem
 

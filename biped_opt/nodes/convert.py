@@ -17,7 +17,7 @@ from biped_opt import ros
 from biped_opt.errors import BipedOptError, InvalidInputError, quoted
 from biped_opt.hybrid.trajectory import Trajectory
 from biped_opt.maneuvers import Maneuver, check_theta0, parse_maneuver
-from biped_opt.nodes.sources import PROBLEM_SUFFIXES
+from biped_opt.nodes.sources import PROBLEM_SUFFIXES, check_maneuver_of, check_problem_on
 
 if TYPE_CHECKING:  # the systems' modules (SymPy) load only where a system is used
     from biped_opt.control.problems import Problem
@@ -242,25 +242,3 @@ def request_problem(system: str, problem: str, maneuver: str) -> Problem:
     except BipedOptError as exc:
         raise InvalidInputError(f"problem: {exc}") from None
     return check_problem_on(found, described, maneuver)
-
-
-def check_maneuver_of(described: Any, maneuver: str) -> None:
-    """``maneuver`` must be one of the described system's; the error names the field."""
-    if maneuver not in described.maneuvers:
-        raise InvalidInputError(
-            f"maneuver: {described.name} has no maneuver {quoted(maneuver)} "
-            f"(maneuvers: {', '.join(described.maneuvers) or 'none'})")
-
-
-def check_problem_on(found: Problem, described: Any, maneuver: str) -> Problem:
-    """``found``, a request's problem, must be on the requested system (``described``; None:
-    any) and on ``maneuver``; each error names the field."""
-    if described is not None and found.description.name != described.name:
-        raise InvalidInputError(
-            f"problem: {found.name} is a problem on {found.description.name}, not on "
-            f"{described.name}")
-    if found.maneuver != maneuver:
-        raise InvalidInputError(
-            f"maneuver: problem {found.name} is on maneuver {found.maneuver!r}, not "
-            f"{quoted(maneuver)}")
-    return found

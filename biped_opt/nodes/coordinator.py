@@ -54,13 +54,9 @@ from typing import Any
 from biped_opt import ros
 from biped_opt.errors import BipedOptError, InvalidInputError, InvalidParameterError, quoted
 from biped_opt.nodes.compiler import BUSY
-from biped_opt.nodes.run import (
-    announce_ready,
-    answers,
-    float_parameter,
-    int_parameter,
-    refusal,
-)
+from biped_opt.nodes.parameters import float_parameter, int_parameter
+from biped_opt.nodes.refusals import answers, refusal
+from biped_opt.nodes.run import announce_ready
 from biped_opt.nodes.sources import declare_request_limits, name_of, request_study
 from biped_opt.record.study_table import StudySummary, StudyTable, spec_path
 from biped_opt.studies.study import Study, StudyRow

@@ -80,19 +80,13 @@ from biped_opt.errors import (
 from biped_opt.maneuvers import Maneuver
 from biped_opt.nodes import convert
 from biped_opt.nodes.compiler import COMPILE_TIMEOUT_S, Compiler
-from biped_opt.nodes.run import (
-    announce_ready,
-    answers,
-    float_parameter,
-    int_parameter,
-    refuse,
-    run_node,
-    string_list_parameter,
-    warm_up_kernels,
-)
+from biped_opt.nodes.parameters import float_parameter, int_parameter, string_list_parameter
+from biped_opt.nodes.refusals import answers, refuse
+from biped_opt.nodes.run import announce_ready, run_node, warm_up_kernels
 from biped_opt.nodes.simulator import BIPED
 from biped_opt.nodes.sources import (
     PROBLEM_SUFFIXES,
+    Names,
     check_name,
     declare_request_limits,
     name_of,
@@ -199,9 +193,12 @@ class OptimiserNode(ros.Node):
         )
 
     # -- other systems -----------------------------------------------------------------------
-    def _job(self, kind: str, system: str, problem: str, maneuver: str = "") -> dict[str, Any]:
-        """What the compiler prepares (see :func:`biped_opt.nodes.compiler.prepare`)."""
-        return {"kind": kind, "system": system, "problem": problem, "maneuver": maneuver,
+    def _job(self, kind: str, system: str, problem: str, names: Names | None = None
+             ) -> dict[str, Any]:
+        """What the compiler prepares (see :func:`biped_opt.nodes.compiler.prepare`): a study's
+        ``system`` and ``problem``, or a policy's checked ``names``."""
+        return {"kind": kind, "system": system, "problem": problem,
+                "names": None if names is None else dataclasses.asdict(names),
                 "system_paths": [str(p) for p in self._sources.system_paths],
                 "max_legs": self._sources.limits.max_legs,
                 "max_coordinates": self._sources.limits.max_coordinates}
@@ -220,8 +217,9 @@ class OptimiserNode(ros.Node):
             self._compiler.prepare_now(("study", system, ""), self._job("study", system, ""))
             for name, problem in described.problems.items():
                 key = ("policy", system, name, problem["maneuver"])
-                self._compiler.prepare_now(key, self._job("policy", system, name,
-                                                          problem["maneuver"]))
+                names = Names(source=source, problem=name, maneuver=problem["maneuver"],
+                              checked=True)
+                self._compiler.prepare_now(key, self._job("policy", system, name, names))
         except BipedOptError as exc:
             text = str(exc)
             raise InvalidParameterError(
@@ -241,14 +239,15 @@ class OptimiserNode(ros.Node):
             biped = self._problems[maneuver]
             return self._cached((maneuver, th, biped),
                                 lambda: Answer.of(biped, optimal_policy(biped, th)))
-        # names only, checked before anything is compiled (see biped_opt.nodes.sources)
-        self._sources.check_request(system, problem, maneuver_text)
+        # names only, checked before anything is compiled (see biped_opt.nodes.sources); the
+        # compiler then checks only what needs the system built (Sources.problem)
+        names = self._sources.check_request(system, problem, maneuver_text)
         s = convert.request_s(theta0)
         name = problem or maneuver_text
         on = self._compiler.get(
             ("policy", system, name, maneuver_text),
             f"system {system or 'biped'} (problem {name})",
-            self._job("policy", system, problem, maneuver_text))
+            self._job("policy", system, problem, names))
         key = ("system", id(on.description), json.dumps(on.as_dict(), sort_keys=True), s)
 
         def answer() -> Answer:

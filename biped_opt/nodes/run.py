@@ -12,65 +12,15 @@ from collections.abc import Callable
 from typing import Any
 
 from biped_opt import ros
-from biped_opt.errors import BipedOptError, InvalidParameterError
 from biped_opt.hybrid import kernels_cached, warm_up
-from biped_opt.nodes.compiler import failure_message
 
-__all__ = ["LOG_THROTTLE_S", "announce_ready", "refuse", "refusal", "run_node", "stop_on_sigterm",
-           "warm_up_kernels", "answers", "int_parameter", "float_parameter",
-           "string_list_parameter"]
-
-#: at most one log line per call site and this many seconds for rejected requests
-LOG_THROTTLE_S = 1.0
+__all__ = ["announce_ready", "run_node", "stop_on_sigterm", "warm_up_kernels"]
 
 #: what a first compile takes on a 2-core machine [s] (measured 27-63 s)
 FIRST_COMPILE_S = (30, 60)
 #: after SIGINT/SIGTERM, how long callbacks under way may take to return before the process
 #: ends without them [s]
 STOP_GRACE_S = 3.0
-
-
-def answers(exc: BaseException) -> bool:
-    """Whether a callback turns ``exc`` into a refused request: anything a request's code can
-    raise (SystemExit and KeyboardInterrupt of a system file's code too), but not the
-    KeyboardInterrupt of Ctrl-C or SIGTERM, which arrives on the main thread and stops the node."""
-    return not (isinstance(exc, KeyboardInterrupt)
-                and threading.current_thread() is threading.main_thread())
-
-
-def int_parameter(node: Any, name: str, low: int) -> int:
-    """The integer parameter ``name``, at least ``low``; else one error naming it (the node
-    stops with status 2)."""
-    value = node.get_parameter(name).value
-    if isinstance(value, bool) or not isinstance(value, int) or value < low:
-        raise InvalidParameterError(f"{name} must be an integer >= {low}, got {value!r}")
-    return value
-
-
-def float_parameter(node: Any, name: str) -> float:
-    """The positive, finite number parameter ``name``; else one error naming it."""
-    value = node.get_parameter(name).value
-    if isinstance(value, bool) or not isinstance(value, (int, float)) \
-            or not 0 < float(value) < float("inf"):
-        raise InvalidParameterError(f"{name} must be a number > 0, got {value!r}")
-    return float(value)
-
-
-def string_list_parameter(node: Any, name: str) -> list[str]:
-    """A list-of-strings parameter, also when given as one string in ROS 2's list syntax
-    (``-p systems:=[rocking_bar, walker3]`` reaches a backend that reads no YAML as text)."""
-    value = node.get_parameter(name).value
-    if isinstance(value, str):
-        import yaml
-
-        text = value.strip()
-        try:
-            value = yaml.safe_load(text) if text.startswith("[") else [text] if text else []
-        except yaml.YAMLError:
-            raise InvalidParameterError(f"{name}: not a list: {value!r}") from None
-    if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value):
-        raise InvalidParameterError(f"{name} must be a list of strings, got {value!r}")
-    return [v.strip() for v in value if v.strip()]
 
 
 def stop_on_sigterm() -> None:
@@ -103,28 +53,6 @@ def announce_ready(node: Any, *, serves: tuple[str, ...] = (), calls: tuple[str,
     parts = [f"{verb} {', '.join(names)}" for verb, names in (
         ("serving", serves), ("calling", calls), ("publishing", publishes)) if names]
     node.get_logger().info("ready: " + "; ".join(parts))
-
-
-def refusal(exc: BaseException) -> str:
-    """The reply's message for ``exc``: a :class:`BipedOptError` is a bad request (its message
-    names the field); anything else (a bug, MemoryError, RecursionError, SystemExit of a system
-    file's code) is ``internal error: ...``, one line."""
-    message = failure_message(exc)
-    return message if isinstance(exc, BipedOptError) else f"internal error: {message}"
-
-
-def refuse(node: Any, service: str, response: Any, exc: BaseException) -> Any:
-    """``response`` as a refusal (:func:`refusal`: ``success = false`` and why): a bad request
-    or a bug costs one request, not the node. Logged, one line a second at most."""
-    message = refusal(exc)
-    if isinstance(exc, BipedOptError):
-        node.get_logger().warning(f"rejected {service} request: {message}",
-                                  throttle_duration_sec=LOG_THROTTLE_S)
-    else:
-        node.get_logger().error(f"{service} request failed: {message}",
-                                throttle_duration_sec=LOG_THROTTLE_S)
-    response.success, response.message = False, message
-    return response
 
 
 def run_node(make_node: Callable[[], Any], args: list[str] | None, *, threads: int = 1) -> None:

@@ -28,8 +28,9 @@ if TYPE_CHECKING:
     from biped_opt.studies.study import StudyLimits
     from biped_opt.systems.description import System
 
-__all__ = ["MAX_NAME", "PROBLEM_SUFFIXES", "SystemLimits", "Sources", "check_name", "name_of",
-           "directories", "declare_request_limits", "request_study"]
+__all__ = ["MAX_NAME", "PROBLEM_SUFFIXES", "Names", "SystemLimits", "Sources", "check_name",
+           "name_of", "directories", "declare_request_limits", "request_study",
+           "check_maneuver_of", "check_problem_on"]
 
 #: longest system, problem or worker name a request may give
 MAX_NAME = 64
@@ -110,6 +111,28 @@ def directories(values: Iterable[Any]) -> tuple[Path, ...]:
     return tuple(out)
 
 
+def check_maneuver_of(described: Any, maneuver: str) -> None:
+    """``maneuver`` must be one of the described system's; the error names the field."""
+    if maneuver not in described.maneuvers:
+        raise InvalidInputError(
+            f"maneuver: {described.name} has no maneuver {quoted(maneuver)} "
+            f"(maneuvers: {', '.join(described.maneuvers) or 'none'})")
+
+
+def check_problem_on(found: Problem, described: Any, maneuver: str) -> Problem:
+    """``found``, a request's problem, must be on the requested system (``described``; None:
+    any) and on ``maneuver``; each error names the field."""
+    if described is not None and found.description.name != described.name:
+        raise InvalidInputError(
+            f"problem: {found.name} is a problem on {found.description.name}, not on "
+            f"{described.name}")
+    if found.maneuver != maneuver:
+        raise InvalidInputError(
+            f"maneuver: problem {found.name} is on maneuver {found.maneuver!r}, not "
+            f"{quoted(maneuver)}")
+    return found
+
+
 @dataclass(frozen=True, kw_only=True)
 class SystemLimits:
     """The largest systems a node derives and compiles (node parameters ``max_legs``: unilateral
@@ -148,6 +171,22 @@ class SystemLimits:
                 "(parameters max_legs, max_coordinates)")
 
 
+@dataclass(frozen=True, kw_only=True)
+class Names:
+    """What a request names, checked (:meth:`Sources.check_request`) and resolved: ``source``
+    what :func:`biped_opt.control.problems.describe` loads (a library name or the path of a
+    file of system_paths; "" when the request names no system: the biped, or the system its
+    problem file names), ``problem`` and ``maneuver`` plain names (``problem`` "": the one
+    named like the maneuver; ``maneuver`` "": a study's). ``checked``: the system's description
+    was built, its size checked and the problem or maneuver found in it (a library system; a
+    file's description runs its code, so that waits for the compile)."""
+
+    source: str
+    problem: str
+    maneuver: str
+    checked: bool
+
+
 @dataclass(frozen=True)
 class Sources:
     """Resolves the names a request gives (see the module docstring)."""
@@ -176,7 +215,10 @@ class Sources:
 
     def problem_file(self, field: str, text: str) -> Path | None:
         """``<dir>/<name>.yaml`` (.yml, .py) of the problem name ``text``, or None."""
-        name = check_name(field, text, "problem")
+        return self._problem_path(check_name(field, text, "problem"))
+
+    def _problem_path(self, name: str) -> Path | None:
+        """:meth:`problem_file` of a name already checked."""
         for folder in self.system_paths:
             for suffix in PROBLEM_SUFFIXES:
                 path = folder / f"{name}{suffix}"
@@ -184,27 +226,30 @@ class Sources:
                     return path
         return None
 
-    def check_request(self, system: str, problem: str, maneuver: str | None = None) -> None:
+    def check_request(self, system: str, problem: str, maneuver: str | None = None
+                      ) -> Names:
         """A request's names (``system`` "": the biped; ``maneuver`` None: a study's, which
         names no compile), and what can be checked of them on a library system without
         compiling anything (its description is cheap to build): the problem declared or a file
         of system_paths, else the maneuver. Refuses at once what a compile would only refuse
-        later, so that names no compile can serve never reach the compile queue."""
-        from biped_opt.nodes.convert import check_maneuver_of
-
+        later, so that names no compile can serve never reach the compile queue. Returns them
+        resolved, for :meth:`problem`."""
         if problem:
             check_name("problem", problem, "problem")
         if maneuver is not None:
             check_name("maneuver", maneuver, "maneuver")
         source = self.system("system", system) if system else "biped"
-        if Path(source).suffix == ".py":
-            return  # (a file's description runs its code: that waits for the compiler)
+        names = Names(source=source if system else "", problem=problem,
+                      maneuver=maneuver or "", checked=Path(source).suffix != ".py")
+        if not names.checked:
+            return names  # (a file's description runs its code: that waits for the compiler)
         described = self.describe("system", source)
         if problem:
-            if problem not in described.problems and self.problem_file("problem", problem) is None:
+            if problem not in described.problems and self._problem_path(problem) is None:
                 raise self._no_problem(described, problem)
         elif maneuver is not None:
             check_maneuver_of(described, maneuver)
+        return names
 
     def _no_problem(self, described: System, problem: str) -> InvalidInputError:
         return InvalidInputError(
@@ -225,24 +270,34 @@ class Sources:
         self.limits.check(field, system)
         return system
 
-    def problem(self, system: str, problem: str, maneuver: str) -> Problem:
-        """The problem of a request: ``system`` a name ("": the biped, or the system a problem
-        file names), ``problem`` a name (""): the one named like ``maneuver``). The problem
-        must be on ``maneuver``. Runs the system's description (a file's code): call it where
-        a slow or failing description holds up nobody else."""
-        from biped_opt.control.problems import Problem, get_problem, load_problem, read_yaml
+    def problem(self, names: Names) -> Problem:
+        """The problem of a request's names (:meth:`check_request`; ``problem`` "": the one named
+        like the maneuver), which must be on the maneuver. Checks only what the names' check
+        could not: a system file's description (its size, its maneuver), the problem found (on
+        the system and maneuver asked; the size of the system a problem file names). Runs the
+        system's description (a file's code): call it where a slow or failing description holds
+        up nobody else."""
+        from biped_opt.control.problems import (
+            Problem,
+            describe,
+            get_problem,
+            load_problem,
+            read_yaml,
+        )
         from biped_opt.errors import BipedOptError
-        from biped_opt.nodes.convert import check_maneuver_of, check_problem_on
 
-        source = self.system("system", system) if system else ""
+        source, problem, maneuver = names.source, names.problem, names.maneuver
         name = problem or maneuver
         described = None
         if source or not problem:
-            described = self.describe("system", source or "biped")
-            if not problem:
-                check_maneuver_of(described, maneuver)
+            if names.checked:  # (described, its size and the maneuver checked already)
+                described = describe(source or "biped")
+            else:
+                described = self.describe("system", source or "biped")
+                if not problem:
+                    check_maneuver_of(described, maneuver)
         declared = described is not None and name in described.problems
-        path = None if declared else self.problem_file("problem", name)
+        path = None if declared else self._problem_path(name)
         try:
             if path is None:
                 found = get_problem(source or "biped", name)
@@ -258,7 +313,8 @@ class Sources:
                 found = Problem.from_spec(spec, where=str(path))
         except BipedOptError as exc:
             raise InvalidInputError(f"problem: {exc}") from None
-        self.limits.check("system", found.description)
+        if found.description is not described:  # (a problem file's system)
+            self.limits.check("system", found.description)
         return check_problem_on(found, described, maneuver)
 
     def _file_system(self, path: Path, value: Any, source: str) -> str:
@@ -304,7 +360,7 @@ def declare_request_limits(node: Any) -> tuple[Sources, StudyLimits, int]:
     (``system_paths``, ``max_legs``, ``max_coordinates``, ``max_points``, ``max_num``,
     ``max_values``, ``max_request_chars``): the node's :class:`Sources`, study limits and
     longest study text. A bad value stops the node (one line, status 2)."""
-    from biped_opt.nodes.run import int_parameter, string_list_parameter
+    from biped_opt.nodes.parameters import int_parameter, string_list_parameter
     from biped_opt.studies.study import StudyLimits
 
     for name, default in (("system_paths", []), ("max_legs", MAX_LEGS),

@@ -52,3 +52,29 @@ def test_a_study_problem_file_names_a_library_system_or_a_file_beside_it(tmp_pat
     with pytest.raises(InvalidInputError, match=r"declares no problem 'none' \(problems: drop\) "
                                                 r"and system_paths has no such file$"):
         sources.study("rocking_bar", "none")
+
+
+def test_checked_names_are_resolved_once_and_the_compile_checks_only_what_needs_the_system(
+        tmp_path):
+    """A request's names are checked at the edge and come back resolved; building the problem
+    from them (the compile) checks only what the edge could not see: a file's description
+    and maneuvers, and the problem found against the system and maneuver asked."""
+    (tmp_path / "bar_copy.py").write_text(
+        "from biped_opt.systems.library import rocking_bar\nSYSTEM = rocking_bar()\n")
+    sources = Sources((tmp_path,))
+    library = sources.check_request("rocking_bar", "", "drop")
+    assert (library.source, library.checked) == ("rocking_bar", True)
+    problem = sources.problem(library)
+    assert (problem.name, problem.maneuver, problem.description.name) == \
+        ("drop", "drop", "rocking_bar")
+    # a file's description runs its code: its maneuver is checked by the compile, with the
+    # message the edge gives for a library system
+    names = sources.check_request("bar_copy", "", "hop")
+    assert (names.source, names.checked) == (str(tmp_path / "bar_copy.py"), False)
+    with pytest.raises(InvalidInputError, match=r"^maneuver: rocking_bar has no maneuver 'hop'"):
+        sources.problem(names)
+    # a declared problem on another maneuver than the one asked
+    names = sources.check_request("rocking_bar", "drop", "hop")
+    with pytest.raises(InvalidInputError, match=r"^maneuver: problem drop is on maneuver 'drop', "
+                                                r"not 'hop'"):
+        sources.problem(names)

@@ -31,7 +31,7 @@ from cyclonedds.util import duration
 from biped_opt.errors import BipedOptError, quoted
 
 from . import graph
-from .entities import delete_dds
+from .lifetime import delete_dds
 
 __all__ = [
     "Context", "InvalidDomainError", "NotInitializedError", "get_default_context", "init",

@@ -1,8 +1,9 @@
 """What a node owns on Cyclone DDS: publishers, subscriptions, timers, and their common base.
 
 Every entity knows the DDS entities it created and deletes them itself, children first, when it
-is destroyed (:meth:`Entity.destroy`), instead of leaving them to the garbage collector: an
-entity collected during interpreter shutdown calls into a DDS library that may be tearing down.
+is destroyed (:meth:`Entity.destroy`), instead of leaving them to the garbage collector
+(:mod:`.lifetime`). An entity needs of its node only what :class:`Owner` names, so this module
+does not depend on the node module that creates its entities.
 Taking and destroying are serialised by a lock, so an executor never takes from a reader that is
 being deleted. Samples that do not decode are dropped with one log line (rate-limited), never
 raised out of the executor (:mod:`.wire`).
@@ -14,7 +15,7 @@ import itertools
 import threading
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from cyclonedds.core import (
     DDSException,
@@ -29,12 +30,16 @@ from cyclonedds.sub import DataReader
 
 from ..interfaces import load_interfaces
 from . import graph, wire
+from .lifetime import delete_dds
+from .log import Logger
 from .qos import QoSProfile, to_dds_qos
 
 if TYPE_CHECKING:
-    from .node import Node
+    from cyclonedds.topic import Topic
 
-__all__ = ["Entity", "Publisher", "Subscription", "Timer", "delete_dds", "endpoint_id",
+    from .context import Context
+
+__all__ = ["Entity", "Owner", "Publisher", "Subscription", "Timer", "endpoint_id",
            "ignore_deleted", "type_hash_user_data", "user_data_id", "NOT_READ",
            "LOG_THROTTLE_S"]
 
@@ -84,26 +89,26 @@ def user_data_id(qos: Any, key: str) -> str | None:
     return None
 
 
+class Owner(Protocol):
+    """What an entity uses of the node that owns it (:class:`.node.Node`, which creates its
+    entities and so sits above them): its context, its topics by DDS name, its logger."""
+
+    context: Context
+
+    def _topic(self, dds_name: str, dds_type: type) -> Topic: ...
+
+    def get_logger(self) -> Logger: ...
+
+
 def _ros_type(msg_type: type) -> str:
     return str(getattr(msg_type, "_ros_type", ""))
-
-
-def delete_dds(*entities: Any) -> None:
-    """Delete Cyclone DDS entities now, in the order given (children before parents).
-
-    ``Entity.__del__`` deletes the C entity once and forgets it, so a later garbage collection
-    of the Python object does nothing.
-    """
-    for entity in entities:
-        if entity is not None:
-            entity.__del__()
 
 
 class Entity:
     """Base of everything a node owns: a read condition for the executor's WaitSet (or None),
     ``_take`` returning the callbacks that are ready, ``_guids`` for the graph, ``destroy``."""
 
-    node: Node
+    node: Owner
     callback_group: Any = None
     condition: ReadCondition | None = None
 
@@ -159,7 +164,7 @@ class Entity:
 class Publisher(Entity):
     """``rclpy.publisher.Publisher``: ``publish(msg)``, ``topic_name``."""
 
-    def __init__(self, node: Node, msg_type: type, topic: str, qos: QoSProfile) -> None:
+    def __init__(self, node: Owner, msg_type: type, topic: str, qos: QoSProfile) -> None:
         super().__init__()
         self.node, self.msg_type, self.topic_name, self.qos_profile = node, msg_type, topic, qos
         self._writer: DataWriter | None = DataWriter(
@@ -192,7 +197,7 @@ class Publisher(Entity):
 class Subscription(Entity):
     """``rclpy.subscription.Subscription``: calls ``callback(msg)`` from an executor."""
 
-    def __init__(self, node: Node, msg_type: type, topic: str, callback: Callable[[Any], None],
+    def __init__(self, node: Owner, msg_type: type, topic: str, callback: Callable[[Any], None],
                  qos: QoSProfile, group: Any) -> None:
         super().__init__()
         self.node, self.msg_type, self.topic_name = node, msg_type, topic
@@ -224,7 +229,7 @@ class Subscription(Entity):
 class Timer(Entity):
     """``rclpy.timer.Timer``: periodic ``callback()`` run by an executor."""
 
-    def __init__(self, node: Node, period_sec: float, callback: Callable[[], None],
+    def __init__(self, node: Owner, period_sec: float, callback: Callable[[], None],
                  group: Any) -> None:
         super().__init__()
         if not period_sec > 0:

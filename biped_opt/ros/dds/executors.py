@@ -24,8 +24,8 @@ from typing import Any
 from cyclonedds.core import DDSException, WaitSet
 
 from . import context as _ctx
-from .entities import delete_dds
 from .futures import Future
+from .lifetime import delete_dds
 
 __all__ = ["Executor", "SingleThreadedExecutor", "MultiThreadedExecutor",
            "spin", "spin_once", "spin_until_future_complete"]

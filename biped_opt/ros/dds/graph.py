@@ -15,6 +15,8 @@ from typing import Any
 from cyclonedds.idl import IdlMeta, IdlStruct
 from cyclonedds.idl import types as dt
 
+from .lifetime import delete_dds
+
 __all__ = ["GRAPH_TOPIC", "ServiceDirectory", "graph_layout", "graph_types", "gid_bytes"]
 
 GRAPH_TOPIC = "ros_discovery_info"
@@ -100,6 +102,4 @@ class ServiceDirectory:
         return [(name, sorted(kinds)) for name, kinds in sorted(found.items())]
 
     def delete(self) -> None:
-        from .entities import delete_dds
-
         delete_dds(self._alive, self._reader)

@@ -23,7 +23,8 @@ from biped_opt.errors import BipedOptError, quoted
 from ..interfaces import ServiceType, load_interfaces
 from ..params_file import load_parameters
 from . import context as _ctx
-from .entities import Entity, Publisher, Subscription, Timer, delete_dds
+from .entities import Entity, Publisher, Subscription, Timer
+from .lifetime import delete_dds
 from .log import Logger
 from .qos import QoSProfile, as_profile, qos_profile_services_default
 from .services import Client, Service

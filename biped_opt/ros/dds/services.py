@@ -44,7 +44,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import replace
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from cyclonedds.core import ReadCondition
 from cyclonedds.pub import DataWriter
@@ -58,6 +58,7 @@ from .entities import (
     LOG_THROTTLE_S,
     NOT_READ,
     Entity,
+    Owner,
     endpoint_id,
     ignore_deleted,
     type_hash_user_data,
@@ -65,9 +66,6 @@ from .entities import (
 )
 from .futures import Future
 from .qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, to_dds_qos
-
-if TYPE_CHECKING:
-    from .node import Node
 
 __all__ = ["Service", "Client", "MalformedMessageError"]
 
@@ -110,7 +108,7 @@ class _RequestReply(Entity):
     #: that reproduces an rmw endpoint, e.g. to measure what its clients see)
     reader_keeps_all = True
 
-    def _endpoints(self, node: Node, qos: QoSProfile, key: str) -> tuple[Any, Any]:
+    def _endpoints(self, node: Owner, qos: QoSProfile, key: str) -> tuple[Any, Any]:
         """Create the pair; returns (request topic + qos, reply topic + qos) for the caller to
         decide which side reads; sets ``self.endpoint_id``."""
         participant = node.context.participant
@@ -155,7 +153,7 @@ class Service(_RequestReply):
     # the client waiting forever, so wait up to 1 s (only a client not yet matched ever waits)
     reply_wait_s = 1.0
 
-    def __init__(self, node: Node, srv_type: ServiceType, name: str,
+    def __init__(self, node: Owner, srv_type: ServiceType, name: str,
                  callback: Callable[[Any, Any], Any], qos: QoSProfile, group: Any) -> None:
         super().__init__()
         self.node, self.srv_type, self.srv_name = node, srv_type, name
@@ -250,7 +248,7 @@ class Client(_RequestReply):
     """``rclpy.client.Client``: ``wait_for_service``, ``call_async -> Future``, ``call``,
     ``remove_pending_request``."""
 
-    def __init__(self, node: Node, srv_type: ServiceType, name: str, qos: QoSProfile,
+    def __init__(self, node: Owner, srv_type: ServiceType, name: str, qos: QoSProfile,
                  group: Any) -> None:
         super().__init__()
         self.node, self.srv_type, self.srv_name = node, srv_type, name
