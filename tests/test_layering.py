@@ -149,8 +149,6 @@ def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return out
 
 
-@pytest.mark.xfail(strict=True, reason="cycles remain while the redesign lands: "
-                   "nodes/{compiler,convert,run,sources}, ros/dds")
 def test_no_import_cycles():
     assert _cycles(GRAPH) == []
 
