@@ -4,11 +4,19 @@ from __future__ import annotations
 
 import json
 import math
+from types import SimpleNamespace
 
 import pytest
 
-from biped_opt.analysis.nonsmooth import find_nonsmooth, find_nonsmooth_optimal
-from biped_opt.analysis.switches import LOCATE_TOL
+from biped_opt.analysis.nonsmooth import WORDS, find_nonsmooth, find_nonsmooth_optimal
+from biped_opt.analysis.switches import (
+    LOCATE_TOL,
+    Evaluator,
+    Sample,
+    bound_labels,
+    bound_relocation,
+    describe_change,
+)
 from biped_opt.control.problems import get_problem
 from biped_opt.optimal.nonsmooth import find_nonsmooth_fixed
 from biped_opt.optimal.nonsmooth import find_nonsmooth_optimal as biped_find_optimal
@@ -117,3 +125,55 @@ def test_the_edge_of_a_failed_region_is_a_failure_boundary_not_a_kink() -> None:
     assert report.points[0].limits[1] == pytest.approx(
         -report.points[2].limits[0], abs=10 * (slope * 2 * LOCATE_TOL + 1e-10))
     assert json.loads(report.to_json())["points"][0]["limits"][0] is None
+
+
+# --- the engine's bound relocation and causes, on stand-in samples (no simulation) -------------
+def _optimum(branch: str, active: str | None, bound: str | None) -> Sample:
+    """A sample as an optimum labels it; its problem holds every decision in [0, 3]."""
+    problem = SimpleNamespace(bound=lambda d: (0.0, 3.0))
+    result = SimpleNamespace(problem=problem, candidates=(), policy={})
+    return Sample(label=(branch, active, bound), values={}, branch=branch, active=active,
+                  bound=bound, result=result)
+
+
+@pytest.mark.parametrize(("left", "right", "expected"), [
+    # the variant's jump at 0: u2 acts on the left (on its lower bound), u1 on the right; u2's
+    # bound does not shape the value where u2 acts on nothing, so it is not a bound change
+    (("a", "u2", "lower"), ("b", "u1", None),
+     "mode sequence changes: a | b; acting inputs change: u2 | u1"),
+    (("a", "u1", None), ("a", "u1", "upper"), "input u1 reaches its upper bound 3"),
+    (("a", "u1", "lower"), ("a", "u1", "upper"), "input u1 moves to its upper bound 3"),
+    # several acting decisions: each one acting on both sides is compared
+    (("a", "u1+u2", "u1=upper"), ("a", "u1+u2", None), "input u1 leaves its upper bound 3"),
+    (("a", "u1+u2", "u2=lower"), ("a", "u1", "upper"),
+     "acting inputs change: u1+u2 | u1; input u1 reaches its upper bound 3"),
+    (("a", "u1", "upper"), ("a", "u1", "upper"), "change of label without a mode change"),
+])
+def test_a_bound_is_a_cause_only_for_a_decision_acting_on_both_sides(
+        left: tuple, right: tuple, expected: str) -> None:
+    cause = describe_change(WORDS)
+    assert cause(_optimum(*left), _optimum(*right), True, False) == expected
+
+
+def test_bound_labels_read_one_or_several_decisions() -> None:
+    assert bound_labels("upper", "u1") == {"u1": "upper"}
+    assert bound_labels("u1=upper,u3=lower", "u1+u2+u3") == {"u1": "upper", "u3": "lower"}
+    assert bound_labels(None, "u1") == {} and bound_labels("lower", None) == {}
+
+
+def test_bound_relocation_bisects_the_slope_at_the_bound() -> None:
+    """A decision reaching its upper bound 3 where the slope d c / d u there, s - 0.3, turns
+    negative (outward): the optimiser's bracket 3e-9 off is moved to one of LOCATE_TOL around
+    0.3 (the slope is exact here, so 0.3 lies in it); any other change keeps its bracket."""
+    ev = Evaluator(lambda s: _optimum("a", "u1", "upper" if s > 0.3 + 3e-9 else None))
+    relocate = bound_relocation(ev, 1.0, lambda held, d, s: 0.3 - s)
+    lo, hi = 0.3 + 3e-9, 0.3 + 3e-9 + 5e-11
+    a, b = relocate(lo, hi, ("a", "u1", None), ("a", "u1", "upper"))
+    assert a <= 0.3 <= b and b - a <= LOCATE_TOL
+    for la, lb in ((("a", "u1", None), ("b", "u1", "upper")),  # the branch changes too
+                   (("a", "u1", "lower"), ("a", "u1", "upper")),  # bound to bound
+                   (("a", "u2", None), ("a", "u1", "upper"))):  # the acting input changes
+        assert relocate(lo, hi, la, lb) == (lo, hi)
+    # a slope that keeps its sign over the search (MERGE_TOL around the bracket): kept too
+    kept = bound_relocation(ev, 1.0, lambda held, d, s: -1.0)
+    assert kept(lo, hi, ("a", "u1", None), ("a", "u1", "upper")) == (lo, hi)
