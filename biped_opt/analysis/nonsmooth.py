@@ -1,6 +1,6 @@
 """Where any system's outcome, optimal policy and value are not C^1 in s, and why.
 
-The same engine as the biped's tables (:func:`biped_opt.optimal.nonsmooth.analyse_switches`):
+The same engine as the biped's tables (:func:`biped_opt.analysis.switches.analyse_switches`):
 label every grid point by its mode sequence (impacts that separated at once included, see
 :func:`biped_opt.control.solve.branch_of`) - and, for optimal control, by which decisions act
 and which bounds hold them -, locate every change of label by bisection to 1e-10 (a decision

@@ -274,9 +274,11 @@ def _bound_change(la: Hashable, lb: Hashable) -> tuple[str, str, int] | None:
         return None
     (d,) = changed
     a, b = left.get(d), right.get(d)
-    if a is not None and b is not None:  # from one bound to the other: not a KKT crossing
-        return None
-    return (d, a, -1) if a is not None else (d, b, 1)  # type: ignore[return-value]
+    if a is not None and b is None:
+        return d, a, -1
+    if b is not None and a is None:
+        return d, b, 1
+    return None  # from one bound to the other: not where a free optimum meets a bound
 
 
 def bound_relocation(ev: Evaluator, limit: float, slope: BoundSlope) -> Relocate:
