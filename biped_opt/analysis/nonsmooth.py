@@ -1,9 +1,11 @@
 """Where any system's outcome, optimal policy and value are not C^1 in s, and why.
 
-The same engine as the biped's tables (:func:`biped_opt.optimal.nonsmooth.analyse_switches`):
+The same engine as the biped's tables (:func:`biped_opt.analysis.switches.analyse_switches`):
 label every grid point by its mode sequence (impacts that separated at once included, see
 :func:`biped_opt.control.solve.branch_of`) - and, for optimal control, by which decisions act
-and which bounds hold them -, locate every change of label by bisection to 1e-10, measure
+and which bounds hold them -, locate every change of label by bisection to 1e-10 (a decision
+reaching or leaving a bound: on the sign of the cost's exact slope at the bound, the
+Karush-Kuhn-Tucker point, :func:`biped_opt.analysis.switches.bound_relocation`), measure
 one-sided limits and derivatives there by extrapolation and classify **jump**, **kink** or
 **second-derivative**. A change of label whose sides agree to C^1 (the decoupled walker's
 simultaneous touchdown) is not a nonsmooth point and is not listed.
@@ -17,15 +19,33 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from biped_opt.analysis.switches import Evaluator, NonsmoothReport, Sample, analyse_switches
+from biped_opt.analysis.switches import (
+    CauseWords,
+    Evaluator,
+    NonsmoothReport,
+    Sample,
+    analyse_switches,
+    bound_relocation,
+    describe_change,
+)
 from biped_opt.control.problems import Problem
-from biped_opt.control.solve import SystemOptimalResult, branch_of, optimal_policy, optimal_sweep
+from biped_opt.control.solve import (
+    SystemOptimalResult,
+    branch_of,
+    compiled_for,
+    optimal_policy,
+    optimal_sweep,
+)
+from biped_opt.control.theorem1 import cost_gradient, polish_optimum
 from biped_opt.errors import InvalidInputError
 from biped_opt.piecewise import theta_grid
 from biped_opt.progress import bar as _bar
 from biped_opt.simulation.compiled import STATUS_NAMES, CompiledSystem
 
-__all__ = ["find_nonsmooth", "find_nonsmooth_optimal", "s_grid"]
+__all__ = ["find_nonsmooth", "find_nonsmooth_optimal", "s_grid", "bound_slope", "WORDS"]
+
+#: any system's tables name a change of contact modes a mode sequence
+WORDS = CauseWords(modes="mode sequence changes", acting="acting inputs change")
 
 
 def s_grid(compiled: CompiledSystem, maneuver: str, num: int,
@@ -82,7 +102,7 @@ def find_nonsmooth(system: CompiledSystem | str, maneuver: str, inputs: Any = No
                                     branch=label)
     bar = _bar(progress, 1, f"{compiled.name} {maneuver} locating")
     points = analyse_switches(ev, grid, ["outcome"], _limit(grid), False, bar,
-                              cause=_system_cause)
+                              cause=describe_change(WORDS))
     return NonsmoothReport(subject=f"{compiled.name}:{maneuver}", optimal=False,
                            theta0_range=(float(grid[0]), float(grid[-1])),
                            grid_size=int(grid.size), points=tuple(points), nsim=nsim[0],
@@ -101,8 +121,6 @@ def find_nonsmooth_optimal(problem: Problem, s: npt.ArrayLike | None = None, *,
     """Nonsmooth points of the optimal outcome, policy and value of ``problem`` in s."""
     if not isinstance(problem, Problem):
         raise InvalidInputError(f"problem must be a Problem, got {problem!r}")
-    from biped_opt.control.solve import compiled_for
-
     compiled = compiled_for(problem)
     grid = s_grid(compiled, problem.maneuver, num) if s is None else \
         np.unique(np.asarray(s, dtype=np.float64))
@@ -122,48 +140,26 @@ def find_nonsmooth_optimal(problem: Problem, s: npt.ArrayLike | None = None, *,
         ev.cache[float(r.s)] = _sample_of(r)
     quantities = ["outcome", *(f"policy:{d}" for d in problem.decision_names), "value"]
     locate = _bar(progress, 1, f"{problem.name} locating")
-    points = analyse_switches(ev, grid, quantities, _limit(grid), True, locate,
-                              cause=_system_cause)
+    limit = _limit(grid)
+    points = analyse_switches(ev, grid, quantities, limit, True, locate,
+                              bound_relocation(ev, limit, bound_slope),
+                              cause=describe_change(WORDS))
     return NonsmoothReport(subject=problem.name, optimal=True,
                            theta0_range=(float(grid[0]), float(grid[-1])),
                            grid_size=int(grid.size), points=tuple(points), nsim=nsim[0],
                            parameter=str(compiled.system.s))
 
 
-def _bounds(text: str | None, active: str | None) -> dict[str, str]:
-    """{decision: "lower"/"upper"} from a result's ``bound`` label."""
-    if not text:
-        return {}
-    if "=" not in text:
-        return {active: text} if active else {}
-    return dict(part.split("=", 1) for part in text.split(","))
-
-
-def _system_cause(sl: Sample, sr: Sample, optimal: bool, policy_jumps: bool) -> str:
-    """Why the label changes between the two sides, in the problem's own names."""
-    causes = []
-    if sl.branch != sr.branch:
-        both = (sl.result is not None and sr.result is not None
-                and sr.branch in {c.branch for c in sl.result.candidates}
-                and sl.branch in {c.branch for c in sr.result.candidates})
-        if optimal and policy_jumps and both:
-            causes.append(f"optimal branch switches: {sl.branch} | {sr.branch} "
-                          "(the global minimum moves to another local minimum)")
-        else:
-            causes.append(f"mode sequence changes: {sl.branch} | {sr.branch}")
-    if optimal and sl.active != sr.active:
-        causes.append(f"acting inputs change: {sl.active or 'none'} | {sr.active or 'none'}")
-    if optimal and sl.result is not None:
-        problem = sl.result.problem
-        left, right = _bounds(sl.bound, sl.active), _bounds(sr.bound, sr.active)
-        for d in problem.decision_names:
-            a, b = left.get(d), right.get(d)
-            if a == b:
-                continue
-            lo, hi = problem.bound(d)
-            if b is not None:
-                verb = "reaches" if a is None else "moves to"
-                causes.append(f"input {d} {verb} its {b} bound {lo if b == 'lower' else hi:g}")
-            else:
-                causes.append(f"input {d} leaves its {a} bound {lo if a == 'lower' else hi:g}")
-    return "; ".join(causes) if causes else "change of label without a mode change"
+def bound_slope(held: Sample, decision: str, s: float) -> float:
+    """d c / d ``decision`` at s with the decision on the bound it has in the optimum ``held``
+    (a :class:`~biped_opt.analysis.switches.BoundSlope`): the exact sensitivities of
+    :func:`biped_opt.control.derivatives.outcome_gradient` through the whole cost
+    (:func:`biped_opt.control.theorem1.cost_gradient`: outcome, final-state and input terms).
+    The other acting decisions off their bounds are first polished to their optimum at s
+    (Newton on D_u c = 0 with the decision held, :func:`polish_optimum`): the slope at the bound
+    is that of the constrained optimum, which meets the free one where the slope is 0."""
+    result: SystemOptimalResult = held.result
+    problem = result.problem
+    polished = polish_optimum(problem, s, result, side=1)
+    column = 1 + problem.description.u.names().index(decision)
+    return float(cost_gradient(problem, polished.gradient, polished.inputs)[column])

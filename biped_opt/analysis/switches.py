@@ -12,15 +12,16 @@ can only arise where one of them changes, so the analysis
    :data:`MERGE_TOL` (the simultaneous events around th0 = 0 have a label of their own) is
    widened over it, and changes closer than MERGE_TOL are one point, put at 0 when the band
    holds 0. A bound reached or left is bisected again on the sign of the cost's slope at the
-   bound (:func:`_bound_bracket`): the optimiser's own verdict flickers near it. So the bracket
-   holds the point on any grid, two angles included;
+   bound (:func:`bound_relocation`): the optimiser's own verdict flickers near it. So the
+   bracket holds the point on any grid, two angles included;
 3. measures one-sided limits, first and second derivatives of each quantity there
    (:func:`biped_opt.piecewise.one_sided`) and classifies: **jump** (limits differ), **kink**
    (continuous, first derivatives differ), **second-derivative** (C^1, second derivatives differ;
    outcome and value only: the policy's second differences are dominated by the optimiser's
    tolerance);
 4. names the cause from the labels on both sides (mode order change, optimal branch switch,
-   change of acting input, bound reached or left).
+   change of acting input, bound reached or left by a decision that acts on both sides: the
+   bound of a decision that acts on nothing does not shape the value, :func:`describe_change`).
 
 Where the simulation (or the optimum) fails on one side - its label reads ``FAILED:<status>`` -
 the change is a **failure** boundary, not a jump or kink of the outcome: it is reported once,
@@ -46,11 +47,13 @@ import numpy as np
 import numpy.typing as npt
 
 from biped_opt import strict_json
+from biped_opt.errors import SimulationError
 from biped_opt.piecewise import OneSided, locate_switch, one_sided
 from biped_opt.progress import Progress
 
 __all__ = ["NonsmoothPoint", "NonsmoothReport", "Sample", "Evaluator", "analyse_switches",
-           "Relocate", "LOCATE_TOL", "MERGE_TOL", "FAILED"]
+           "Relocate", "BoundSlope", "bound_relocation", "bound_labels", "CauseWords",
+           "describe_change", "LOCATE_TOL", "MERGE_TOL", "FAILED"]
 
 #: width of the th0 bracket every point is located to
 LOCATE_TOL = 1e-10
@@ -236,6 +239,84 @@ def _across_band(ev: Evaluator, lo: float, hi: float, la: Hashable, lb: Hashable
 
 #: (lo, hi, label_left, label_right) -> a better bracket [lo, hi] of that change
 Relocate = Callable[[float, float, Hashable, Hashable], tuple[float, float]]
+#: (held, decision, th) -> d c / d u_decision at th, the decision on the bound it has in the
+#: sample ``held`` and the other decisions as ``held``'s optimum sets them (at th)
+BoundSlope = Callable[[Sample, str, float], float]
+
+
+def _acting(active: str | None) -> list[str]:
+    """The acting decisions of a label's ``active`` part ("u1", "u1+u2" or None)."""
+    return [d for d in (active or "").split("+") if d]
+
+
+def bound_labels(bound: str | None, active: str | None) -> dict[str, str]:
+    """{decision: "lower"/"upper"} from a label's ``bound`` part: "lower"/"upper" for the single
+    acting decision, ``"u1=lower,u2=upper"`` when several act."""
+    if not bound:
+        return {}
+    if "=" not in bound:
+        return {active: bound} if active else {}
+    return dict(part.split("=", 1) for part in bound.split(","))
+
+
+def _bound_change(la: Hashable, lb: Hashable) -> tuple[str, str, int] | None:
+    """(decision, bound, side held) when the only change between the labels (branch, active,
+    bound) is one decision, acting on both sides, reaching or leaving a bound (side -1: held on
+    the left); None for any other change."""
+    if not (isinstance(la, tuple) and isinstance(lb, tuple) and len(la) == len(lb) == 3):
+        return None
+    (branch_a, active_a, bound_a), (branch_b, active_b, bound_b) = la, lb
+    if branch_a != branch_b or active_a != active_b or not _acting(active_a):
+        return None
+    left, right = bound_labels(bound_a, active_a), bound_labels(bound_b, active_b)
+    changed = [d for d in _acting(active_a) if left.get(d) != right.get(d)]
+    if len(changed) != 1:
+        return None
+    (d,) = changed
+    a, b = left.get(d), right.get(d)
+    if a is not None and b is None:
+        return d, a, -1
+    if b is not None and a is None:
+        return d, b, 1
+    return None  # from one bound to the other: not where a free optimum meets a bound
+
+
+def bound_relocation(ev: Evaluator, limit: float, slope: BoundSlope) -> Relocate:
+    """A :data:`Relocate` that brackets a decision reaching or leaving a bound by the sign of the
+    cost's slope d c / d u there (Karush-Kuhn-Tucker), for the biped's and any system's tables.
+
+    The optimiser decides "on the bound" from a differenced cost slope whose noise (~2e-10)
+    flickers its verdict over ~2e-8 in s around the true point (measured at the biped's
+    touchdown u1 bound: brackets from 2 and 41 angles lay 9e-9 apart, each 1e-10 wide, so one
+    missed it). The slope at the bound from exact sensitivities (``slope``) is smooth in s and
+    crosses 0 where the free optimum meets the bound, to ~1e-11 in s: its sign is bisected over
+    MERGE_TOL around the optimiser's bracket instead. Other changes of label, a slope whose sign
+    does not change there, or a slope that cannot be had (SimulationError, LinAlgError) keep
+    the bracket. The window is MERGE_TOL: the joint optimiser of several acting decisions
+    (L-BFGS-B on differenced gradients) can put its verdict further off (~1.2e-7 measured on the
+    decoupled two-leg walker's variant), and there the optimiser's bracket stays.
+    """
+
+    def relocate(lo: float, hi: float, la: Hashable, lb: Hashable) -> tuple[float, float]:
+        change = _bound_change(la, lb)
+        if change is None:
+            return lo, hi
+        decision, which, side = change
+        held_sample = ev(lo if side < 0 else hi)
+        outward = 1.0 if which == "upper" else -1.0
+
+        def held(th: float) -> bool:  # the cost falls (or is flat) towards the bound
+            return outward * slope(held_sample, decision, th) <= 0.0
+
+        a, b = max(lo - MERGE_TOL, -limit), min(hi + MERGE_TOL, limit)
+        try:
+            if held(a) == held(b):  # the slope does not confirm the change: the optimiser's
+                return lo, hi
+            return locate_switch(held, a, b, tol=LOCATE_TOL)
+        except (SimulationError, np.linalg.LinAlgError):  # no slope (a singular polish too)
+            return lo, hi
+
+    return relocate
 
 
 def _switches(ev: Evaluator, grid: npt.NDArray[np.float64], limit: float, progress: Progress,
@@ -292,40 +373,65 @@ def _classify(
     return None
 
 
-def _cause(sl: Sample, sr: Sample, optimal: bool, policy_jumps: bool) -> str:
-    causes = []
-    if sl.branch != sr.branch:
-        # the optimum changes branch although both branches exist on both sides: the global
-        # minimum jumps between two local minima (not a change of which modes are possible)
-        both = (
-            sl.result is not None and sr.result is not None
-            and sr.branch in {c.branch for c in sl.result.candidates}
-            and sl.branch in {c.branch for c in sr.result.candidates}
-        )
-        if optimal and policy_jumps and both:
-            causes.append(
-                f"optimal branch switches: {sl.branch} | {sr.branch} "
-                "(the global minimum moves to another local minimum)"
+@dataclass(frozen=True)
+class CauseWords:
+    """How a table words a change of mode order and of acting inputs (the biped's tables say
+    "mode order changes", any system's "mode sequence changes")."""
+
+    modes: str = "mode order changes"
+    acting: str = "acting input changes"
+
+
+#: the biped's tables' words (MODEL.md Sec. 6, the paper's demo table)
+BIPED_WORDS = CauseWords()
+
+
+def describe_change(words: CauseWords = BIPED_WORDS
+                    ) -> Callable[[Sample, Sample, bool, bool], str]:
+    """The cause of a point from the samples on its two sides, in ``words``: mode order change
+    or optimal branch switch, change of acting inputs, and a bound reached, left or swapped by
+    each decision that acts on both sides. A decision acting on one side only sits at its
+    cheapest value on the other, on a bound or not: its bound does not shape the value there
+    (the change of acting inputs already names it), so it is not a bound change."""
+
+    def cause(sl: Sample, sr: Sample, optimal: bool, policy_jumps: bool) -> str:
+        causes = []
+        if sl.branch != sr.branch:
+            # the optimum changes branch although both branches exist on both sides: the global
+            # minimum jumps between two local minima (not a change of which modes are possible)
+            both = (
+                sl.result is not None and sr.result is not None
+                and sr.branch in {c.branch for c in sl.result.candidates}
+                and sl.branch in {c.branch for c in sr.result.candidates}
             )
-        else:
-            causes.append(f"mode order changes: {sl.branch} | {sr.branch}")
-    if optimal and sl.active != sr.active:
-        causes.append(f"acting input changes: {sl.active or 'none'} | {sr.active or 'none'}")
-    if optimal and sl.bound != sr.bound and sl.active == sr.active and sl.result is not None:
-        d = sl.active
-        problem = sl.result.problem
-        if d is not None:
-            lo, hi = problem.bound(d)
-            if sr.bound is not None:
-                which: str | None = sr.bound
-                value = lo if which == "lower" else hi
-                verb = "reaches" if sl.bound is None else "moves to"
-                causes.append(f"input {d} {verb} its {which} bound {value:g}")
+            if optimal and policy_jumps and both:
+                causes.append(
+                    f"optimal branch switches: {sl.branch} | {sr.branch} "
+                    "(the global minimum moves to another local minimum)"
+                )
             else:
-                which = sl.bound
-                value = lo if which == "lower" else hi
-                causes.append(f"input {d} leaves its {which} bound {value:g}")
-    return "; ".join(causes) if causes else "change of label without a mode change"
+                causes.append(f"{words.modes}: {sl.branch} | {sr.branch}")
+        if optimal and sl.active != sr.active:
+            causes.append(f"{words.acting}: {sl.active or 'none'} | {sr.active or 'none'}")
+        if optimal and sl.result is not None:
+            problem = sl.result.problem
+            left, right = bound_labels(sl.bound, sl.active), bound_labels(sr.bound, sr.active)
+            on_right = set(_acting(sr.active))
+            for d in (d for d in _acting(sl.active) if d in on_right):
+                a, b = left.get(d), right.get(d)
+                if a == b:
+                    continue
+                lo, hi = problem.bound(d)
+                if b is not None:
+                    verb = "reaches" if a is None else "moves to"
+                    causes.append(f"input {d} {verb} its {b} bound "
+                                  f"{lo if b == 'lower' else hi:g}")
+                else:
+                    causes.append(f"input {d} leaves its {a} bound "
+                                  f"{lo if a == 'lower' else hi:g}")
+        return "; ".join(causes) if causes else "change of label without a mode change"
+
+    return cause
 
 
 def analyse_switches(
@@ -340,8 +446,8 @@ def analyse_switches(
 ) -> list[NonsmoothPoint]:
     """Locate the label changes of ``ev`` along ``grid`` and classify each quantity there
     (the engine of both the biped's and any system's tables; ``cause`` names why a point is
-    there from the samples on its two sides, by default :func:`_cause`)."""
-    cause = cause or _cause
+    there from the samples on its two sides, by default :func:`describe_change`'s)."""
+    cause = cause or describe_change()
     switches = _switches(ev, grid, limit, progress, relocate)
     points: list[NonsmoothPoint] = []
     xs = [0.0 if lo <= 0.0 <= hi else 0.5 * (lo + hi) for lo, hi, _, _ in switches]

@@ -3,19 +3,18 @@
 
 from __future__ import annotations
 
-from collections.abc import Hashable
-
 import numpy as np
 import numpy.typing as npt
 
 from biped_opt.analysis.switches import (
     LOCATE_TOL,
-    MERGE_TOL,
+    BoundSlope,
     Evaluator,
     NonsmoothPoint,
     NonsmoothReport,
     Sample,
     analyse_switches,
+    bound_relocation,
 )
 from biped_opt.errors import InvalidInputError
 from biped_opt.fixed_sweep import FIXED_INPUTS
@@ -27,7 +26,6 @@ from biped_opt.optimal.derivatives import outcome_sensitivity
 from biped_opt.optimal.problems import OptimalControlProblem
 from biped_opt.optimal.solve import OptimalResult, branch_label, optimal_policy
 from biped_opt.optimal.sweep import sweep_fixed, sweep_grid, sweep_optimal
-from biped_opt.piecewise import locate_switch
 from biped_opt.progress import bar as _bar
 
 __all__ = ["find_nonsmooth_fixed", "find_nonsmooth_optimal", "NonsmoothPoint", "NonsmoothReport",
@@ -41,37 +39,18 @@ def _optimal_sample(r: OptimalResult) -> Sample:
                    active=r.active, bound=r.bound, result=r)
 
 
-def _bound_bracket(problem: OptimalControlProblem, limit: float, lo: float, hi: float,
-                   la: Hashable, lb: Hashable) -> tuple[float, float]:
-    """Bracket of a decision reaching or leaving a bound, from the sign of d c / d u there.
+def _bound_slope(problem: OptimalControlProblem) -> BoundSlope:
+    """d c / d u at the bound from the exact sensitivity d th_f / d u (a single decision acts
+    at a time in the biped's problems: the others stay at their defaults)."""
 
-    The optimiser decides "on the bound" from a differenced cost slope whose noise (~2e-10)
-    flickers its verdict over ~2e-8 in th0 around the true point (measured at touchdown's u1
-    bound: brackets from 2 and 41 angles lay 9e-9 apart, each 1e-10 wide, so one missed it).
-    The slope at the bound, from the exact sensitivity d th_f / d u, is smooth in th0 and
-    vanishes where the free optimum meets the bound (Karush-Kuhn-Tucker), to ~1e-11 in th0:
-    its sign is bisected over the flicker zone instead. ``la``, ``lb`` are the (branch, acting
-    decision, bound) labels of the two sides; other changes keep [lo, hi].
-    """
-    (branch_a, active_a, bound_a), (branch_b, active_b, bound_b) = la, lb  # type: ignore[misc]
-    if (branch_a != branch_b or active_a != active_b or active_a is None
-            or bound_a == bound_b or None not in (bound_a, bound_b)):
-        return lo, hi
-    lower, upper = problem.bound(active_a)
-    end, outward = (upper, 1.0) if "upper" in (bound_a, bound_b) else (lower, -1.0)
-    u = problem.inputs({active_a: end})
+    def slope(held: Sample, decision: str, th: float) -> float:
+        end = held.result.policy[decision]
+        s = outcome_sensitivity(problem.maneuver, th, problem.inputs({decision: end}),
+                                params=problem.params, options=problem.options)
+        return (problem.outcome_slope(s.outcome) * s.d_input(decision)
+                + 2.0 * problem.alpha(decision) * end)
 
-    def held(th: float) -> bool:
-        s = outcome_sensitivity(problem.maneuver, th, u, params=problem.params,
-                                options=problem.options)
-        slope = (problem.outcome_slope(s.outcome) * s.d_input(active_a)
-                 + 2.0 * problem.alpha(active_a) * end)
-        return outward * slope <= 0.0  # the cost falls (or is flat) towards the bound
-
-    a, b = max(lo - MERGE_TOL, -limit), min(hi + MERGE_TOL, limit)
-    if held(a) == held(b):  # the slope does not confirm the change nearby: keep the optimiser's
-        return lo, hi
-    return locate_switch(held, a, b, tol=LOCATE_TOL)
+    return slope
 
 
 # --- public API -------------------------------------------------------------------------------
@@ -149,11 +128,8 @@ def find_nonsmooth_optimal(
     quantities = ["outcome", *(f"policy:{d}" for d in problem.decisions), "value"]
     bar = _bar(progress, 1, f"{problem.name} locating")
     limit = spec(problem.maneuver).theta0_limit
-
-    def relocate(lo: float, hi: float, la: Hashable, lb: Hashable) -> tuple[float, float]:
-        return _bound_bracket(problem, limit, lo, hi, la, lb)
-
-    points = analyse_switches(ev, sweep.theta0, quantities, limit, True, bar, relocate)
+    points = analyse_switches(ev, sweep.theta0, quantities, limit, True, bar,
+                              bound_relocation(ev, limit, _bound_slope(problem)))
     return NonsmoothReport(
         subject=problem.name,
         optimal=True,
