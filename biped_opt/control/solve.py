@@ -25,6 +25,7 @@ the wrong piece. The method:
 
 from __future__ import annotations
 
+import enum
 import itertools
 import math
 import threading
@@ -283,11 +284,13 @@ class OptimalResult:
             "problem": self.problem.name,
             "system": self.problem.description.name,
             "s": self.s,
+            "theta0": self.s,  # (the biped's name for s)
             "policy": dict(self.policy),
             "value": self.value,
             "outcome": self.outcome,
             "t_final": self.t_final,
-            "modes": [int(m) for m in self.modes],
+            # named modes (a preset's enumeration) by name, bit masks as numbers
+            "modes": [m.name if isinstance(m, enum.Enum) else int(m) for m in self.modes],
             "branch": self.branch,
             "event_times": [float(t) for t in self.event_times],
             "active": self.active,
