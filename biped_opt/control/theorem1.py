@@ -12,9 +12,9 @@ at s itself, with p = (s, u) and the exact first-order sensitivities of
 - value: dV/ds = D_s c (envelope theorem, Eq. (12): D_u c = 0 on the free decisions and du/ds
   = 0 on the bound ones);
 - policy: du*/ds = -(D_uu c)^-1 D_us c on the free decisions (implicit function theorem,
-  Eq. (13)), D_us c the one-sided difference of D_u c along sigma (Richardson-extrapolated), the
-  Hessian differenced again at the polished optimum; 0
-  for decisions on a bound or acting on nothing;
+  Eq. (13)), D_uu c and D_us c = D_u (D_s c) from central differences in u of the exact
+  gradient on the branch at the polished optimum (Richardson-extrapolated); 0 for decisions on a
+  bound or acting on nothing;
 - outcome: d o/ds + D_u o du*/ds.
 
 with c = w (o - target)^2 + sum_k W_k (y_k(t_f) - r_k)^2 + sum_i alpha_i u_i^2. The result is
@@ -54,8 +54,6 @@ Array = npt.NDArray[np.float64]
 
 #: central-difference step of the Hessian D_uu c, relative to each decision's bound interval
 HESSIAN_STEP = 1e-4
-#: one-sided step in s of the mixed derivative D_us c (halved twice for Richardson)
-MIXED_STEP = 1e-4
 #: Newton iterations of the polish at most
 NEWTON_STEPS = 4
 #: the polish stops once its Newton step is below this relative to max(1, |u|): the exact
@@ -121,10 +119,10 @@ class DerivativeErrors:
     """Error estimates of a :class:`Derivatives` record's slopes,
     (left, right) as there; each is a size, not a bound (tests multiply it by a safety factor).
 
-    - policy: |H^-1| (|e_mixed| + e_H |du*/ds|), e_mixed the change between the Richardson
-      extrapolants of D_us c from steps (h, h/2) and (h/2, h/4), and e_H that of the Hessian H
-      (central differences of the exact gradient at steps h and h/2, Richardson-extrapolated):
-      the largest change the extrapolation made or asymmetry left (an exact Hessian is
+    - policy: |H^-1| (|e_mixed| + e_H |du*/ds|), e_mixed the change the Richardson
+      extrapolation made to D_us c, and e_H that of the Hessian H (both central differences of
+      the exact gradient in u at steps h and h/2, Richardson-extrapolated): the largest change
+      the extrapolation made or asymmetry left (an exact Hessian is
       symmetric);
     - value: |D_us c| . |u - u*| (D_s c taken off the optimum by the polish's distance) plus the
       variational integration's relative tolerance;
@@ -179,27 +177,39 @@ class _Costs:
     def grad_u(self, x: float, u: Array) -> Array:
         return cost_gradient(self.problem, self.branch(x, u), u)[[1 + c for c in self.cols]]
 
-    def hessian(self, x: float, u: Array, extrapolate: bool = True) -> tuple[Array, float]:
-        """D_uu c over the columns by central differences of D_u c with steps h and h/2,
-        Richardson-extrapolated (or step h alone), and an estimate of its error: the largest
-        entry of the change made by the extrapolation or of the asymmetry (an exact Hessian is
-        symmetric)."""
+    def second_derivatives(self, x: float, u: Array, extrapolate: bool = True
+                           ) -> tuple[Array, float, Array, Array]:
+        """D_uu c over the columns and D_us c = D_u (D_s c), by central differences in u of
+        the exact D_(s, u) c on the branch, with steps h and h/2, Richardson-extrapolated (or
+        step h alone), and their error estimates: for D_uu c the largest entry of the change
+        made by the extrapolation or of the asymmetry (an exact Hessian is symmetric), for
+        D_us c the change per entry. (One set of gradients gives both: D_us c as a difference in
+        s would need more, and amplify the gradient's noise over a one-sided step.)"""
         n = len(self.cols)
+        rows = [0, *(1 + c for c in self.cols)]
         levels = []
         for scale in ((1.0, 0.5) if extrapolate else (1.0,)):
-            out = np.zeros((n, n))
+            out = np.zeros((n + 1, n))
             for j, c in enumerate(self.cols):
                 lo, hi = self.problem.bound(self.problem.description.u.names()[c])
                 step = scale * HESSIAN_STEP * (hi - lo)
                 up, down = u.copy(), u.copy()
                 up[c] += step
                 down[c] -= step
-                out[:, j] = (self.grad_u(x, up) - self.grad_u(x, down)) / (2.0 * step)
+                g_up = cost_gradient(self.problem, self.branch(x, up), up)[rows]
+                g_down = cost_gradient(self.problem, self.branch(x, down), down)[rows]
+                out[:, j] = (g_up - g_down) / (2.0 * step)
             levels.append(out)
         extrapolated = (4.0 * levels[1] - levels[0]) / 3.0 if extrapolate else levels[0]
-        error = float(max(np.max(np.abs(extrapolated - levels[-1])),
-                          np.max(np.abs(extrapolated - extrapolated.T)))) if n else 0.0
-        return 0.5 * (extrapolated + extrapolated.T), error
+        change = np.abs(extrapolated - levels[-1])
+        hessian, mixed = extrapolated[1:], extrapolated[0]
+        error = float(max(np.max(change[1:]), np.max(np.abs(hessian - hessian.T)))) if n else 0.0
+        return 0.5 * (hessian + hessian.T), error, mixed, change[0]
+
+    def hessian(self, x: float, u: Array, extrapolate: bool = True) -> tuple[Array, float]:
+        """D_uu c and its error estimate (:meth:`second_derivatives`)."""
+        hessian, error, _, _ = self.second_derivatives(x, u, extrapolate)
+        return hessian, error
 
 
 def value_slopes(problem: Problem, result: OptimalResult) -> tuple[float, float]:
@@ -324,23 +334,16 @@ def _side(problem: Problem, compiled: CompiledSystem, s: float, side: int, probe
     costs = _Costs(problem, compiled, side, cols, variational)
     # the Hessian again at the polished optimum: the polish's is at the optimum of s + side *
     # probe, |du*/ds| probe away (2e-6 on the walkers), enough to move the slope by ~1e-6
-    hessian, asym = costs.hessian(s, u) if cols else (polished.hessian, 0.0)
     dc = cost_gradient(problem, g, u)
     slope = np.zeros(len(names))
     slope_error = np.zeros(len(names))
     value_error = 0.0
     floor = variational.rtol  # the sensitivities' relative integration tolerance
     if cols:
-        h = MIXED_STEP
-        base = dc[[1 + c for c in cols]]  # D_u c at (s, u), from the gradient just taken
-        quotients = [(costs.grad_u(s + side * step, u) - base) / (side * step)
-                     for step in (h, h / 2, h / 4)]
-        # Richardson on each pair of steps (O(h^2)); the change between the two extrapolants
-        # is the error estimate of the finer one
-        coarse, mixed = (2.0 * quotients[k + 1] - quotients[k] for k in (0, 1))
+        hessian, asym, mixed, mixed_error = costs.second_derivatives(s, u)
         slope[cols] = -np.linalg.solve(hessian, mixed)
         inverse = np.abs(np.linalg.inv(hessian))
-        slope_error[cols] = inverse @ (np.abs(mixed - coarse) + asym * np.abs(slope[cols]))
+        slope_error[cols] = inverse @ (mixed_error + asym * np.abs(slope[cols]))
         value_error = float(np.abs(mixed).sum() * polished.error)
     value_error += floor * max(1.0, abs(float(dc[0])))
     outcome_slope = float(g.gradient[0] + g.gradient[1:] @ slope)

@@ -13,7 +13,7 @@ from biped_opt.control.derivatives import DEFAULT_VARIATIONAL
 from biped_opt.control.problems import get_problem
 from biped_opt.control.solve import optimal_policy
 from biped_opt.control.theorem1 import (
-    MIXED_STEP,
+    HESSIAN_STEP,
     optimal_derivatives_with_errors,
     polish_optimum,
 )
@@ -43,8 +43,8 @@ def test_biped_problems_match_the_biped_derivatives(name: str, biped_name: str,
                 # its differences of a zero gradient (in the decision, over its own
                 # second_order_step 1e-3, then solved against D_uu c; at most 4.4e-10 measured
                 # on these cases): bounded as our mixed difference of a gradient good to rtol
-                # over MIXED_STEP would be, times SAFETY
-                tol = SAFETY * DEFAULT_VARIATIONAL.rtol / MIXED_STEP
+                # over HESSIAN_STEP would be, times SAFETY
+                tol = SAFETY * DEFAULT_VARIATIONAL.rtol / HESSIAN_STEP
             else:
                 tol = 2 * SAFETY * err.policy[d][k]
             assert ours.policy[d][k] == pytest.approx(pair[k], abs=tol), (d, k)
