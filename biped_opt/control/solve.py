@@ -1,4 +1,6 @@
-"""Optimal policies and values of any system's problems (Eqs. (4)-(6) of [1]_, SYSTEMS.md).
+"""Optimal policies and values of any system's problems (Eqs. (4)-(6) of [1]_, SYSTEMS.md): the
+one solver, the paper's biped included (:mod:`biped_opt.optimal.solve` names its results in the
+paper's words).
 
 For a :class:`~biped_opt.control.problems.Problem` and a value of the maneuver's parameter s,
 minimise c(s, u) over the decision box. The cost is piecewise smooth in u (smooth while the mode
@@ -13,8 +15,8 @@ the wrong piece. The method:
    every grid point that is no worse than its axis neighbours is a candidate (the best 8);
 3. **refine each candidate** with SciPy: one decision - ``minimize_scalar(method="bounded")``
    inside the run of grid points with the same mode sequence (extended to the located switch),
-   then a Newton polish and a Karush-Kuhn-Tucker test at a near bound (as for the biped,
-   :mod:`biped_opt.optimal.solve`); two or more decisions, optimised jointly -
+   then a Newton polish and a Karush-Kuhn-Tucker test at a near bound
+   (:func:`refine_minimum`); two or more decisions, optimised jointly -
    ``minimize(method="L-BFGS-B")`` within the bounds, gradients by central differences;
 4. the best candidate is the optimum; if it visits a mode where a decision left at its default
    acts, the search is repeated with that decision included.
