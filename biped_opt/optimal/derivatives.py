@@ -138,4 +138,5 @@ def one_sided_derivatives(
         problem = dataclasses.replace(problem, params=params)
     th0 = check_theta0(problem.maneuver, theta0)
     d = optimal_derivatives(problem.problem, th0, probe=float(probe), variational=variational)
-    return dataclasses.replace(d, branches=tuple(paper_branch(b) for b in d.branches))
+    left, right = d.branches
+    return dataclasses.replace(d, branches=(paper_branch(left), paper_branch(right)))
