@@ -40,6 +40,7 @@ import numpy.typing as npt
 import sympy as sp
 
 from biped_opt.errors import InvalidParameterError, quoted
+from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
 from biped_opt.systems.description import System
 from biped_opt.systems.files import load_system
 
@@ -86,6 +87,8 @@ class Problem:
     final_state: tuple[tuple[str, float, float], ...] = ()  #: (name, weight, target)
     parameters: tuple[tuple[str, float], ...] = ()
     name: str = ""
+    #: the simulator's settings (the default: each maneuver's own event budget and horizon)
+    options: SimulatorOptions = field(default=DEFAULT_OPTIONS, compare=True)
     description: System = field(init=False, repr=False, compare=False)
     #: the decisions' columns in the input vector, and (state column, weight, target) of each
     #: final-state term: looked up once, the cost is evaluated per simulation
@@ -187,6 +190,9 @@ class Problem:
         object.__setattr__(self, "decision_columns", tuple(inputs.index(d) for d in names))
         object.__setattr__(self, "final_state_columns", tuple(
             (states.index(k), w, r) for k, w, r in self.final_state))
+        if not isinstance(self.options, SimulatorOptions):
+            raise InvalidParameterError(f"{where}: options must be SimulatorOptions, got "
+                                        f"{self.options!r}")
         for k, _ in self.parameters:
             if k not in system.defaults:
                 raise InvalidParameterError(

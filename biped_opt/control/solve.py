@@ -1,4 +1,6 @@
-"""Optimal policies and values of any system's problems (Eqs. (4)-(6) of [1]_, SYSTEMS.md).
+"""Optimal policies and values of any system's problems (Eqs. (4)-(6) of [1]_, SYSTEMS.md): the
+one solver, the paper's biped included (:mod:`biped_opt.optimal.solve` names its results in the
+paper's words).
 
 For a :class:`~biped_opt.control.problems.Problem` and a value of the maneuver's parameter s,
 minimise c(s, u) over the decision box. The cost is piecewise smooth in u (smooth while the mode
@@ -13,8 +15,8 @@ the wrong piece. The method:
    every grid point that is no worse than its axis neighbours is a candidate (the best 8);
 3. **refine each candidate** with SciPy: one decision - ``minimize_scalar(method="bounded")``
    inside the run of grid points with the same mode sequence (extended to the located switch),
-   then a Newton polish and a Karush-Kuhn-Tucker test at a near bound (as for the biped,
-   :mod:`biped_opt.optimal.solve`); two or more decisions, optimised jointly -
+   then a Newton polish and a Karush-Kuhn-Tucker test at a near bound
+   (:func:`refine_minimum`); two or more decisions, optimised jointly -
    ``minimize(method="L-BFGS-B")`` within the bounds, gradients by central differences;
 4. the best candidate is the optimum; if it visits a mode where a decision left at its default
    acts, the search is repeated with that decision included.
@@ -25,6 +27,7 @@ the wrong piece. The method:
 
 from __future__ import annotations
 
+import enum
 import itertools
 import math
 import threading
@@ -42,8 +45,8 @@ from biped_opt.piecewise import locate_switch
 from biped_opt.simulation.compiled import STATUS_NAMES, CompiledSystem, SystemTrajectory
 from biped_opt.systems.derive import mode_name
 
-__all__ = ["Candidate", "SystemOptimalResult", "optimal_policy", "optimal_sweep", "compiled_for",
-           "branch_of", "GRID_AXIS"]
+__all__ = ["Candidate", "OptimalResult", "SystemOptimalResult", "optimal_policy",
+           "optimal_sweep", "compiled_for", "branch_of", "GRID_AXIS"]
 
 Array = npt.NDArray[np.float64]
 
@@ -228,12 +231,20 @@ class Candidate:
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
-class SystemOptimalResult:
-    """Optimal policy and value at one s. ``active`` names the acting decision ("u1+u2" when
-    several act, None when none does); ``bound`` is "lower"/"upper" when a single acting
-    decision sits on that bound, or ``"u1=lower,u2=upper"`` for several."""
+class OptimalResult:
+    """Optimal policy pi(s) and value nu(s) of a problem at one s (Eqs. (5), (6) of [1]_).
 
-    problem: Problem = field(repr=False)
+    ``problem`` is the problem asked (a :class:`Problem`, or a preset that stands for one and
+    offers ``decision_names``, ``name`` and ``description``); ``inputs`` the full input vector
+    simulated; ``modes`` the contact modes visited (bit masks) and ``branch`` their sequence as
+    text. ``active`` names the acting decision ("u1+u2" when several act, None when none does);
+    ``bound`` is "lower"/"upper" when a single acting decision sits on that bound, or
+    ``"u1=lower,u2=upper"`` for several. ``status`` is 0 on success, 1 when no simulation of
+    the search succeeded, 2 when the one at the optimum failed. ``nsim`` counts simulations,
+    ``nfev`` the right-hand-side evaluations of the single ones (a batch does not report
+    them), ``nit`` the bounded-Brent iterations."""
+
+    problem: Any = field(repr=False)
     s: float
     policy: dict[str, float]
     inputs: Array = field(repr=False)
@@ -250,11 +261,20 @@ class SystemOptimalResult:
     success: bool
     message: str
     nsim: int
+    status: int = 0
+    nfev: int = 0
+    nit: int = 0
     trajectory: SystemTrajectory | None = field(repr=False, default=None)
 
     @property
-    def theta0(self) -> float:  # the biped's name for s, used by the shared nonsmooth engine
+    def theta0(self) -> float:
+        """The biped's name for s (its initial pitch)."""
         return self.s
+
+    @property
+    def fun(self) -> float:
+        """SciPy's name for the optimal value."""
+        return self.value
 
     @property
     def x(self) -> Array:
@@ -266,20 +286,30 @@ class SystemOptimalResult:
             "problem": self.problem.name,
             "system": self.problem.description.name,
             "s": self.s,
+            "theta0": self.s,  # (the biped's name for s)
             "policy": dict(self.policy),
             "value": self.value,
             "outcome": self.outcome,
             "t_final": self.t_final,
+            # named modes (a preset's enumeration) by name, bit masks as numbers
+            "modes": [m.name if isinstance(m, enum.Enum) else int(m) for m in self.modes],
             "branch": self.branch,
-            "event_times": list(self.event_times),
+            "event_times": [float(t) for t in self.event_times],
             "active": self.active,
             "bound": self.bound,
             "candidates": [{"branch": c.branch, "policy": c.policy, "value": c.value}
                            for c in self.candidates],
             "success": self.success,
+            "status": self.status,
             "message": self.message,
             "nsim": self.nsim,
+            "nfev": self.nfev,
+            "nit": self.nit,
         }
+
+
+#: the name the any-system lane's result had before it became the only one
+SystemOptimalResult = OptimalResult
 
 
 class _Runner:
@@ -287,11 +317,13 @@ class _Runner:
 
     def __init__(self, problem: Problem, compiled: CompiledSystem, s: float) -> None:
         self.problem, self.compiled, self.s = problem, compiled, s
-        self.nsim = 0
+        self.nsim = self.nfev = self.nit = 0
 
     def __call__(self, u: Array) -> tuple[float, str, SystemTrajectory]:
-        tr = self.compiled.simulate(self.problem.maneuver, self.s, u)
+        tr = self.compiled.simulate(self.problem.maneuver, self.s, u,
+                                    options=self.problem.options)
         self.nsim += 1
+        self.nfev += tr.nfev
         label = branch_of(self.compiled, tr.modes[0], tr.events[: len(tr.event_times)],
                           tr.status)
         cost = float(self.problem.cost(tr.outcome, tr.y_final, u)) if tr.success else math.inf
@@ -299,7 +331,7 @@ class _Runner:
 
     def batch(self, rows: Array) -> tuple[Array, list[str]]:
         out = self.compiled.simulate_batch(self.problem.maneuver, np.full(len(rows), self.s),
-                                           rows)
+                                           rows, options=self.problem.options)
         self.nsim += len(rows)
         ok = out["status"] == 0
         costs = np.where(ok, self.problem.cost(out["outcome"], out["y_final"], rows), np.inf)
@@ -359,8 +391,9 @@ def _refine_one(problem: Problem, run: _Runner, decision: str, base: Array,
         x[j] = u
         return run(x)
 
-    best_u, best_c, _, _ = refine_minimum(at, axis, costs, labels, k, problem.bound(decision),
-                                          xatol)
+    best_u, best_c, nit, _ = refine_minimum(at, axis, costs, labels, k, problem.bound(decision),
+                                            xatol)
+    run.nit += nit
     return best_u, best_c
 
 
@@ -430,7 +463,7 @@ def _search(problem: Problem, run: _Runner, acting: list[str], base: Array,
 
 
 def optimal_policy(problem: Problem, s: float, *, grid_points: int | None = None,
-                   xatol: float = XATOL) -> SystemOptimalResult:
+                   xatol: float = XATOL) -> OptimalResult:
     """The optimal policy and value of ``problem`` at s (see the module docstring).
 
     ``grid_points`` overrides the bracketing grid's points per axis.
@@ -443,6 +476,9 @@ def optimal_policy(problem: Problem, s: float, *, grid_points: int | None = None
     if grid_points is not None and (isinstance(grid_points, bool) or
                                     not isinstance(grid_points, int) or grid_points < 3):
         raise InvalidInputError(f"grid_points must be an integer >= 3, got {grid_points!r}")
+    if isinstance(xatol, bool) or not isinstance(xatol, (int, float)) \
+            or not math.isfinite(xatol) or xatol <= 0:
+        raise InvalidInputError(f"xatol must be a positive number, got {xatol!r}")
     compiled = compiled_for(problem)
     run = _Runner(problem, compiled, s)
     names = problem.description.u.names()
@@ -473,18 +509,21 @@ def optimal_policy(problem: Problem, s: float, *, grid_points: int | None = None
     ok = tr.success and math.isfinite(value)
     message = ("optimum found" if acting_now else
                "no decision acts on the outcome at this s: decisions at their cheapest value")
+    status = 0
     if not ok:
+        status = 1 if not math.isfinite(value) else 2
         message = f"no successful simulation at the optimum ({tr.status})"
-    return SystemOptimalResult(
+    return OptimalResult(
         problem=problem, s=s, policy=policy, inputs=u, value=value, outcome=tr.outcome,
         t_final=tr.t_final, y_final=tr.y_final, modes=tr.modes, event_times=tr.event_times,
         branch=branch, active=active, bound=bound, candidates=candidates, success=ok,
-        message=message, nsim=run.nsim, trajectory=tr)
+        message=message, nsim=run.nsim, status=status, nfev=run.nfev, nit=run.nit,
+        trajectory=tr)
 
 
 def optimal_sweep(problem: Problem, s: npt.ArrayLike, *, grid_points: int | None = None,
                   xatol: float = XATOL, callback: Callable[[int, int], None] | None = None
-                  ) -> tuple[SystemOptimalResult, ...]:
+                  ) -> tuple[OptimalResult, ...]:
     """:func:`optimal_policy` at every s; ``callback(done, total)`` after each."""
     values = np.atleast_1d(np.asarray(s, dtype=np.float64))
     if values.ndim != 1 or values.size == 0:
@@ -497,7 +536,7 @@ def optimal_sweep(problem: Problem, s: npt.ArrayLike, *, grid_points: int | None
     return tuple(out)
 
 
-def policy_table(results: Sequence[SystemOptimalResult]) -> Mapping[str, Array]:
+def policy_table(results: Sequence[OptimalResult]) -> Mapping[str, Array]:
     """Columns s, value, outcome and one per decision, for figures and files."""
     problem = results[0].problem
     table: dict[str, Array] = {

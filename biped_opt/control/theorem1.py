@@ -12,13 +12,13 @@ at s itself, with p = (s, u) and the exact first-order sensitivities of
 - value: dV/ds = D_s c (envelope theorem, Eq. (12): D_u c = 0 on the free decisions and du/ds
   = 0 on the bound ones);
 - policy: du*/ds = -(D_uu c)^-1 D_us c on the free decisions (implicit function theorem,
-  Eq. (13)), D_us c the one-sided difference of D_u c along sigma (Richardson-extrapolated), the
-  Hessian differenced again at the polished optimum; 0
-  for decisions on a bound or acting on nothing;
+  Eq. (13)), D_uu c and D_us c = D_u (D_s c) from central differences in u of the exact
+  gradient on the branch at the polished optimum (Richardson-extrapolated); 0 for decisions on a
+  bound or acting on nothing;
 - outcome: d o/ds + D_u o du*/ds.
 
 with c = w (o - target)^2 + sum_k W_k (y_k(t_f) - r_k)^2 + sum_i alpha_i u_i^2. The result is
-the biped's :class:`~biped_opt.optimal.derivatives.Derivatives` record (``theta0`` holding s);
+a :class:`Derivatives` record (``theta0`` holding s);
 :func:`optimal_derivatives_with_errors` adds an error estimate of every slope
 (:class:`DerivativeErrors`).
 
@@ -35,9 +35,14 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from biped_opt.control.derivatives import DEFAULT_VARIATIONAL, OutcomeGradient, outcome_gradient
+from biped_opt.control.derivatives import (
+    DEFAULT_VARIATIONAL,
+    OutcomeGradient,
+    VariationalOptions,
+    outcome_gradient,
+)
 from biped_opt.control.problems import Problem
-from biped_opt.control.solve import SystemOptimalResult, compiled_for, optimal_policy
+from biped_opt.control.solve import OptimalResult, compiled_for, optimal_policy
 from biped_opt.errors import InvalidInputError, SimulationError
 from biped_opt.simulation.compiled import CompiledSystem
 
@@ -49,8 +54,6 @@ Array = npt.NDArray[np.float64]
 
 #: central-difference step of the Hessian D_uu c, relative to each decision's bound interval
 HESSIAN_STEP = 1e-4
-#: one-sided step in s of the mixed derivative D_us c (halved twice for Richardson)
-MIXED_STEP = 1e-4
 #: Newton iterations of the polish at most
 NEWTON_STEPS = 4
 #: the polish stops once its Newton step is below this relative to max(1, |u|): the exact
@@ -113,13 +116,13 @@ def cost_gradient(problem: Problem, g: OutcomeGradient, inputs: Array) -> Array:
 
 @dataclass(frozen=True)
 class DerivativeErrors:
-    """Error estimates of a :class:`~biped_opt.optimal.derivatives.Derivatives` record's slopes,
+    """Error estimates of a :class:`Derivatives` record's slopes,
     (left, right) as there; each is a size, not a bound (tests multiply it by a safety factor).
 
-    - policy: |H^-1| (|e_mixed| + e_H |du*/ds|), e_mixed the change between the Richardson
-      extrapolants of D_us c from steps (h, h/2) and (h/2, h/4), and e_H that of the Hessian H
-      (central differences of the exact gradient at steps h and h/2, Richardson-extrapolated):
-      the largest change the extrapolation made or asymmetry left (an exact Hessian is
+    - policy: |H^-1| (|e_mixed| + e_H |du*/ds|), e_mixed the change the Richardson
+      extrapolation made to D_us c, and e_H that of the Hessian H (both central differences of
+      the exact gradient in u at steps h and h/2, Richardson-extrapolated): the largest change
+      the extrapolation made or asymmetry left (an exact Hessian is
       symmetric);
     - value: |D_us c| . |u - u*| (D_s c taken off the optimum by the polish's distance) plus the
       variational integration's relative tolerance;
@@ -158,8 +161,9 @@ class _Costs:
     """D c on one branch (direction sigma e_s), counting the sensitivity solves."""
 
     def __init__(self, problem: Problem, compiled: CompiledSystem, side: int,
-                 cols: list[int]) -> None:
+                 cols: list[int], variational: VariationalOptions = DEFAULT_VARIATIONAL) -> None:
         self.problem, self.compiled, self.cols = problem, compiled, cols
+        self.variational = variational
         self.direction = np.zeros(1 + len(problem.description.u.names()))
         self.direction[0] = side
         self.count = 0
@@ -167,35 +171,48 @@ class _Costs:
     def branch(self, x: float, u: Array) -> OutcomeGradient:
         self.count += 1
         return outcome_gradient(self.compiled, self.problem.maneuver, x, u,
-                                direction=self.direction)
+                                direction=self.direction, options=self.problem.options,
+                                variational=self.variational)
 
     def grad_u(self, x: float, u: Array) -> Array:
         return cost_gradient(self.problem, self.branch(x, u), u)[[1 + c for c in self.cols]]
 
-    def hessian(self, x: float, u: Array, extrapolate: bool = True) -> tuple[Array, float]:
-        """D_uu c over the columns by central differences of D_u c with steps h and h/2,
-        Richardson-extrapolated (or step h alone), and an estimate of its error: the largest
-        entry of the change made by the extrapolation or of the asymmetry (an exact Hessian is
-        symmetric)."""
+    def second_derivatives(self, x: float, u: Array, extrapolate: bool = True
+                           ) -> tuple[Array, float, Array, Array]:
+        """D_uu c over the columns and D_us c = D_u (D_s c), by central differences in u of
+        the exact D_(s, u) c on the branch, with steps h and h/2, Richardson-extrapolated (or
+        step h alone), and their error estimates: for D_uu c the largest entry of the change
+        made by the extrapolation or of the asymmetry (an exact Hessian is symmetric), for
+        D_us c the change per entry. (One set of gradients gives both: D_us c as a difference in
+        s would need more, and amplify the gradient's noise over a one-sided step.)"""
         n = len(self.cols)
+        rows = [0, *(1 + c for c in self.cols)]
         levels = []
         for scale in ((1.0, 0.5) if extrapolate else (1.0,)):
-            out = np.zeros((n, n))
+            out = np.zeros((n + 1, n))
             for j, c in enumerate(self.cols):
                 lo, hi = self.problem.bound(self.problem.description.u.names()[c])
                 step = scale * HESSIAN_STEP * (hi - lo)
                 up, down = u.copy(), u.copy()
                 up[c] += step
                 down[c] -= step
-                out[:, j] = (self.grad_u(x, up) - self.grad_u(x, down)) / (2.0 * step)
+                g_up = cost_gradient(self.problem, self.branch(x, up), up)[rows]
+                g_down = cost_gradient(self.problem, self.branch(x, down), down)[rows]
+                out[:, j] = (g_up - g_down) / (2.0 * step)
             levels.append(out)
         extrapolated = (4.0 * levels[1] - levels[0]) / 3.0 if extrapolate else levels[0]
-        error = float(max(np.max(np.abs(extrapolated - levels[-1])),
-                          np.max(np.abs(extrapolated - extrapolated.T)))) if n else 0.0
-        return 0.5 * (extrapolated + extrapolated.T), error
+        change = np.abs(extrapolated - levels[-1])
+        hessian, mixed = extrapolated[1:], extrapolated[0]
+        error = float(max(np.max(change[1:]), np.max(np.abs(hessian - hessian.T)))) if n else 0.0
+        return 0.5 * (hessian + hessian.T), error, mixed, change[0]
+
+    def hessian(self, x: float, u: Array, extrapolate: bool = True) -> tuple[Array, float]:
+        """D_uu c and its error estimate (:meth:`second_derivatives`)."""
+        hessian, error, _, _ = self.second_derivatives(x, u, extrapolate)
+        return hessian, error
 
 
-def value_slopes(problem: Problem, result: SystemOptimalResult) -> tuple[float, float]:
+def value_slopes(problem: Problem, result: OptimalResult) -> tuple[float, float]:
     """[left, right] dV/ds of a problem on any system by the envelope theorem: the partial in s
     of c = w (outcome - target)^2 + sum_k W_k (y_k(t_f) - r_k)^2 + sum alpha u^2 at the optimal
     inputs (the input terms do not depend on s), each side with the outcome's and final state's
@@ -208,7 +225,7 @@ def value_slopes(problem: Problem, result: SystemOptimalResult) -> tuple[float, 
     for side in (-1.0, 1.0):
         try:
             g = outcome_gradient(compiled, problem.maneuver, result.s, result.inputs,
-                                 direction=side * e_s)
+                                 direction=side * e_s, options=problem.options)
         except SimulationError:
             out.append(math.nan)
             continue
@@ -216,8 +233,9 @@ def value_slopes(problem: Problem, result: SystemOptimalResult) -> tuple[float, 
     return out[0], out[1]
 
 
-def polish_optimum(problem: Problem, s: float, start: SystemOptimalResult, *, side: int,
-                   hessian: Array | None = None) -> Polished:
+def polish_optimum(problem: Problem, s: float, start: OptimalResult, *, side: int,
+                   hessian: Array | None = None,
+                   variational: VariationalOptions = DEFAULT_VARIATIONAL) -> Polished:
     """``start`` (an optimum of ``problem`` at s) polished by Newton's method on D_u c = 0 over
     its free decisions on the branch s -> s^side, with exact first derivatives.
 
@@ -235,7 +253,7 @@ def polish_optimum(problem: Problem, s: float, start: SystemOptimalResult, *, si
                  start.policy[d] in problem.bound(d))
     free = tuple(d for d in problem.decision_names if d in acting and d not in held)
     cols = [names.index(d) for d in free]
-    costs = _Costs(problem, compiled_for(problem), side, cols)
+    costs = _Costs(problem, compiled_for(problem), side, cols, variational)
     u = start.inputs.copy()
     if hessian is None:
         hessian, _ = costs.hessian(s, u, extrapolate=False)  # Newton needs no more
@@ -256,14 +274,17 @@ def polish_optimum(problem: Problem, s: float, start: SystemOptimalResult, *, si
                     value=float(problem.cost(g.outcome, g.y_final, u)), count=costs.count)
 
 
-def optimal_derivatives(problem: Problem, s: float, *, probe: float = 1e-7) -> Derivatives:
+def optimal_derivatives(problem: Problem, s: float, *, probe: float = 1e-7,
+                        variational: VariationalOptions = DEFAULT_VARIATIONAL) -> Derivatives:
     """(left, right) derivatives in s of the optimal outcome, value and policy of ``problem``
     (see the module docstring); ``probe`` must exceed the accuracy to which a policy jump at s is
-    located and stay below the distance to the next nonsmooth point."""
-    return optimal_derivatives_with_errors(problem, s, probe=probe)[0]
+    located and stay below the distance to the next nonsmooth point; ``variational`` sets the
+    sensitivities' integration."""
+    return optimal_derivatives_with_errors(problem, s, probe=probe, variational=variational)[0]
 
 
-def optimal_derivatives_with_errors(problem: Problem, s: float, *, probe: float = 1e-7
+def optimal_derivatives_with_errors(problem: Problem, s: float, *, probe: float = 1e-7,
+                                    variational: VariationalOptions = DEFAULT_VARIATIONAL
                                     ) -> tuple[Derivatives, DerivativeErrors]:
     """:func:`optimal_derivatives` with an error estimate of every slope
     (:class:`DerivativeErrors`)."""
@@ -275,7 +296,9 @@ def optimal_derivatives_with_errors(problem: Problem, s: float, *, probe: float 
     if not math.isfinite(s):
         raise InvalidInputError(f"{problem.name}: s must be finite, got {s}")
     compiled = compiled_for(problem)
-    sides = {side: _side(problem, compiled, s, side, probe) for side in (-1, 1)}
+    if not isinstance(variational, VariationalOptions):
+        raise InvalidInputError(f"variational must be VariationalOptions, got {variational!r}")
+    sides = {side: _side(problem, compiled, s, side, probe, variational) for side in (-1, 1)}
     left, right = sides[-1], sides[1]
     derivatives = Derivatives(
         problem=problem.name, theta0=s,
@@ -297,37 +320,30 @@ def optimal_derivatives_with_errors(problem: Problem, s: float, *, probe: float 
     return derivatives, errors
 
 
-def _side(problem: Problem, compiled: CompiledSystem, s: float, side: int, probe: float
-          ) -> dict[str, Any]:
+def _side(problem: Problem, compiled: CompiledSystem, s: float, side: int, probe: float,
+          variational: VariationalOptions) -> dict[str, Any]:
     """The derivatives on the branch s -> s^side (module docstring), with error estimates."""
     names = problem.description.u.names()
     start = optimal_policy(problem, s + side * probe)
     if not start.success:
         raise SimulationError(f"{problem.name} at s = {s + side * probe}: no optimum "
                               f"({start.message})")
-    polished = polish_optimum(problem, s, start, side=side)
+    polished = polish_optimum(problem, s, start, side=side, variational=variational)
     u, g = polished.inputs, polished.gradient
     cols = [names.index(d) for d in polished.free]
-    costs = _Costs(problem, compiled, side, cols)
+    costs = _Costs(problem, compiled, side, cols, variational)
     # the Hessian again at the polished optimum: the polish's is at the optimum of s + side *
     # probe, |du*/ds| probe away (2e-6 on the walkers), enough to move the slope by ~1e-6
-    hessian, asym = costs.hessian(s, u) if cols else (polished.hessian, 0.0)
     dc = cost_gradient(problem, g, u)
     slope = np.zeros(len(names))
     slope_error = np.zeros(len(names))
     value_error = 0.0
-    floor = DEFAULT_VARIATIONAL.rtol  # the sensitivities' relative integration tolerance
+    floor = variational.rtol  # the sensitivities' relative integration tolerance
     if cols:
-        h = MIXED_STEP
-        base = dc[[1 + c for c in cols]]  # D_u c at (s, u), from the gradient just taken
-        quotients = [(costs.grad_u(s + side * step, u) - base) / (side * step)
-                     for step in (h, h / 2, h / 4)]
-        # Richardson on each pair of steps (O(h^2)); the change between the two extrapolants
-        # is the error estimate of the finer one
-        coarse, mixed = (2.0 * quotients[k + 1] - quotients[k] for k in (0, 1))
+        hessian, asym, mixed, mixed_error = costs.second_derivatives(s, u)
         slope[cols] = -np.linalg.solve(hessian, mixed)
         inverse = np.abs(np.linalg.inv(hessian))
-        slope_error[cols] = inverse @ (np.abs(mixed - coarse) + asym * np.abs(slope[cols]))
+        slope_error[cols] = inverse @ (mixed_error + asym * np.abs(slope[cols]))
         value_error = float(np.abs(mixed).sum() * polished.error)
     value_error += floor * max(1.0, abs(float(dc[0])))
     outcome_slope = float(g.gradient[0] + g.gradient[1:] @ slope)

@@ -1,3 +1,8 @@
-"""The paper's presets over the one lane: what is Banjanin & Burden's own (the biped's maneuvers,
-fixed inputs and problems, the data of Figs. 2-4 and of the control experiment) rather than any
-system's."""
+"""The paper's presets over the one lane: what is Banjanin & Burden's own [1]_ rather than any
+system's: the biped's problems under their paper names (:mod:`~biped_opt.paper.problems`), its
+sweep tables (:mod:`~biped_opt.paper.sweeps`) and the data of Figs. 2-4 and of the control
+experiment (:mod:`~biped_opt.paper.figures`); MODEL.md specifies them.
+
+.. [1] B. Banjanin and S. A. Burden, "Nonsmooth optimal value and policy functions in mechanical
+   systems subject to unilateral constraints", IEEE Control Systems Letters 4(2), 2020.
+"""

@@ -26,10 +26,10 @@ from biped_opt.control.derivatives import (
 )
 from biped_opt.errors import InvalidInputError, SimulationError
 from biped_opt.hybrid.simulate import SimulatorOptions
-from biped_opt.optimal import derivatives as biped_derivatives
 from biped_opt.simulation.compiled import compile_system
 from biped_opt.systems import System
 from tests.extrapolated import central, extrapolated, relative_noise
+from tests.paper import oracle_biped as biped_derivatives
 
 TIGHT = SimulatorOptions(rtol=1e-13, atol=1e-14)
 #: walker3 touchdown inputs (u1, u2, u3); u_body = 0

@@ -1,5 +1,6 @@
-"""Optimal policies and values on any system (biped_opt.control.solve), checked against the
-biped's own solver and against independent brute-force optimisers written here."""
+"""Optimal policies and values on any system (biped_opt.control.solve), checked against
+independent brute-force optimisers written here. (The biped's problems are checked against the
+numbers the retired biped-only solver recorded: tests/paper/test_same_numbers.py.)"""
 
 from __future__ import annotations
 
@@ -11,26 +12,6 @@ from scipy.optimize import minimize, minimize_scalar
 
 from biped_opt.control.problems import get_problem
 from biped_opt.control.solve import compiled_for, optimal_policy, optimal_sweep
-from biped_opt.optimal.problems import get_problem as biped_problem
-from biped_opt.optimal.solve import optimal_policy as biped_optimal_policy
-
-
-@pytest.mark.parametrize(("name", "biped_name"), [
-    ("touchdown", "touchdown"), ("liftoff", "liftoff"), ("liftoff_variant", "liftoff-variant")])
-@pytest.mark.parametrize("s", [-0.2, -0.05, 0.0, 1e-4, 0.1])
-def test_biped_problems_equal_the_biped_solver(name: str, biped_name: str, s: float) -> None:
-    """The library's biped declares the paper's three problems; the generic solver must find
-    the biped solver's optimum. Values to 1e-12: both costs are simulated to ~1e-14 and the
-    cost is flat at the optimum (a policy error e costs ~e^2). Policies to 1e-6: Brent's stop
-    rule plus the polish leave the minimiser ~1e-8 uncertain where the cost is flattest."""
-    generic = optimal_policy(get_problem("biped", name), s)
-    reference = biped_optimal_policy(biped_problem(biped_name), s)
-    assert generic.success and reference.success
-    assert generic.value == pytest.approx(reference.value, abs=1e-12)
-    for d, v in reference.policy.items():
-        assert generic.policy[d] == pytest.approx(v, abs=1e-6)
-    assert generic.outcome == pytest.approx(reference.outcome, abs=1e-7)
-    assert generic.branch.count("->") == reference.branch.count("->")
 
 
 def _brute_force(problem, s: float, per_axis: int) -> float:

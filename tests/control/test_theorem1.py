@@ -9,17 +9,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from biped_opt.control.derivatives import DEFAULT_VARIATIONAL
 from biped_opt.control.problems import get_problem
 from biped_opt.control.solve import optimal_policy
 from biped_opt.control.theorem1 import (
-    MIXED_STEP,
+    HESSIAN_STEP,
     optimal_derivatives_with_errors,
     polish_optimum,
 )
 from biped_opt.hybrid.simulate import DEFAULT_OPTIONS
-from biped_opt.optimal.derivatives import DEFAULT_VARIATIONAL, one_sided_derivatives
 from biped_opt.optimal.problems import get_problem as biped_problem
 from tests.extrapolated import SAFETY, extrapolated, relative_noise
+from tests.paper.oracle_biped import one_sided_derivatives
 
 
 @pytest.mark.parametrize(("name", "biped_name", "s"), [
@@ -28,8 +29,9 @@ from tests.extrapolated import SAFETY, extrapolated, relative_noise
 ])
 def test_biped_problems_match_the_biped_derivatives(name: str, biped_name: str,
                                                     s: float) -> None:
-    """Same Theorem 1, two implementations with the same steps: each is off by about our error
-    estimate, so they agree to SAFETY times twice it. Value limits: one simulation each."""
+    """Same Theorem 1, two implementations (the oracle's on the hand-written biped physics):
+    each is off by about our error estimate, so they agree to SAFETY times twice it. Value
+    limits: one simulation each."""
     ours, err = optimal_derivatives_with_errors(get_problem("biped", name), s)
     ref = one_sided_derivatives(biped_problem(biped_name), s)
     for k in (0, 1):
@@ -41,8 +43,8 @@ def test_biped_problems_match_the_biped_derivatives(name: str, biped_name: str,
                 # its differences of a zero gradient (in the decision, over its own
                 # second_order_step 1e-3, then solved against D_uu c; at most 4.4e-10 measured
                 # on these cases): bounded as our mixed difference of a gradient good to rtol
-                # over MIXED_STEP would be, times SAFETY
-                tol = SAFETY * DEFAULT_VARIATIONAL.rtol / MIXED_STEP
+                # over HESSIAN_STEP would be, times SAFETY
+                tol = SAFETY * DEFAULT_VARIATIONAL.rtol / HESSIAN_STEP
             else:
                 tol = 2 * SAFETY * err.policy[d][k]
             assert ours.policy[d][k] == pytest.approx(pair[k], abs=tol), (d, k)

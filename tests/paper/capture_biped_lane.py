@@ -8,6 +8,8 @@ It writes ``tests/paper/biped_lane.json``: the numbers the biped-only lane (``bi
 ``biped_opt.maneuvers``, ``biped_opt.optimal``) gives before that lane is retired, which
 ``tests/paper/test_same_numbers.py`` compares with the any-system lane. It uses the biped-only
 lane alone, so it can run only while that lane exists: the file is the record afterwards.
+(``biped_opt.optimal``'s solver, sweeps and derivatives now run the one lane under the same
+names: run again, this would record the one lane's own numbers. Do not.)
 
 - ``trajectories``: both maneuvers at th0 on the ends of their ranges, at 0, within 1e-9 of 0
   and a few ordinary angles, with the paper's fixed inputs, zero, one more input vector each and
