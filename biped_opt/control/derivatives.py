@@ -268,33 +268,14 @@ class _Model:
         """d/dt of w = (y, Z_y) with Z_y = dy/dp (2d x (1 + m), row-major).
 
         Column c of Z_y' is D_y f Z_y[:, c] + D_u f du/dp[:, c]: the derivative of f along that
-        column, by a fourth-order central difference whose step scales with the column. The
-        stencil's states and inputs are formed for all columns at once and the compiled field
-        writes into one buffer (per-column NumPy work cost 100 times the field's own calls).
+        column, by a fourth-order central difference whose step scales with the column
+        (_STEP over the column's largest entry). The generated module's ``variational_field``
+        does it in one compiled call.
         """
-        n, k = self.n, self.ncols
-        vector_field, p, lam = self.mod.vector_field, self.p, self._lam
-        y = np.ascontiguousarray(w[:n])
-        zy = w[n:].reshape(n, k)
         out = np.empty_like(w)
-        vector_field(p, mode, y, 0, self.u, out, 0, lam, 0)
-        scale = np.maximum(np.max(np.abs(zy), axis=0), np.max(np.abs(self.du), axis=0))
-        cols = np.flatnonzero(scale)
-        h = _STEP / scale[cols]
-        offsets = _STENCIL_STEPS[None, :, None] * h[:, None, None]  # (columns, stencil, 1)
-        ys = np.ascontiguousarray(y + offsets * zy.T[cols, None, :])
-        us = np.ascontiguousarray(self.u + offsets * self.du.T[cols, None, :])
-        fs = np.empty_like(ys)
-        for a in range(cols.size):
-            for b in range(_STENCIL_STEPS.size):
-                vector_field(p, mode, ys[a, b], 0, us[a, b], fs[a, b], 0, lam, 0)
-        acc = _STENCIL_WEIGHTS[0] * fs[:, 0]
-        for b in range(1, _STENCIL_WEIGHTS.size):
-            acc = acc + _STENCIL_WEIGHTS[b] * fs[:, b]
-        dz = np.zeros((n, k))
-        dz[:, cols] = (acc / (12.0 * h)[:, None]).T
-        out[n:] = dz.ravel()
-        self.nfev += 1 + _STENCIL_STEPS.size * cols.size
+        self.nfev += int(self.mod.variational_field(
+            self.p, mode, np.ascontiguousarray(w), self.u, self.du, _STEP, _STENCIL_STEPS,
+            _STENCIL_WEIGHTS, out, self._lam))
         return out
 
     # guards ---------------------------------------------------------------------------------
