@@ -11,8 +11,9 @@ from biped_opt.cli.system_cmds import add_system_arguments
 from biped_opt.errors import InvalidInputError
 from biped_opt.hybrid import simulate
 from biped_opt.hybrid.simulate import DEFAULT_OPTIONS, SimulatorOptions
-from biped_opt.hybrid.trajectory import Trajectory
 from biped_opt.maneuvers import Maneuver, check_theta0, parse_maneuver
+from biped_opt.model.modes import ContactMode
+from biped_opt.simulation.trajectory import Trajectory, constraint_names
 
 #: bounds of one run's budget on the command line (a run's events and samples grow with them)
 MAX_EVENTS = 10_000
@@ -60,8 +61,13 @@ def budget(args: argparse.Namespace, options: SimulatorOptions) -> SimulatorOpti
     return dataclasses.replace(options, **changes) if changes else options
 
 
+def _legs(mask: int) -> list[int]:
+    """The biped's legs (1 = left, 2 = right) of a mask over its constraints."""
+    return [j + 1 for j in ContactMode(mask).active]
+
+
 def trajectory_json(tr: Trajectory) -> dict:
-    """The JSON form of a trajectory (the ``--json`` output)."""
+    """The JSON form of a biped's trajectory (the ``--json`` output), in the paper's words."""
     return {
         "maneuver": tr.maneuver,
         "theta0": tr.theta0,
@@ -70,10 +76,11 @@ def trajectory_json(tr: Trajectory) -> dict:
         "t_final": tr.t_final,
         "status": "ok" if tr.success else tr.status.name.lower(),
         "message": tr.message,
-        "modes": [{"t": t, "mode": m.name} for t, m in tr.modes],
+        "modes": [{"t": seg.t_start, "mode": ContactMode(seg.mask).name}
+                  for seg in tr.segments],
         "events": [
-            {"t": e.t, "kind": e.kind, "touchdown": list(e.touchdown),
-             "liftoff": list(e.liftoff), "mode_after": e.mode_after.name}
+            {"t": e.t, "kind": e.kind, "touchdown": _legs(e.mask_entered),
+             "liftoff": _legs(e.mask_left), "mode_after": ContactMode(e.mask_after).name}
             for e in tr.contact_events
         ],
         "state": {"q": tr.q_final.tolist(), "qdot": tr.qdot_final.tolist()},
@@ -116,7 +123,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"status     {tr.status.name}: {tr.message}")
         print(f"outcome    th(t_f) = {tr.outcome:+.15g}")
         print(f"t_final    {tr.t_final:.15g}")
-        print("modes      " + " -> ".join(f"{m.name}@{t:.12g}" for t, m in tr.modes))
+        print("modes      " + " -> ".join(f"{ContactMode(seg.mask).name}@{seg.t_start:.12g}"
+                                          for seg in tr.segments))
         print(f"work       nfev = {tr.nfev}, steps = {tr.nsteps}")
     return 0 if tr.success else 1
 
@@ -137,39 +145,35 @@ def run_system(args: argparse.Namespace) -> int:
                            options=budget(args, compiled.maneuver_options(args.maneuver)))
     names = compiled.system.coordinate_names
     d = len(names)
+
+    def active(mask: int) -> list[str]:  # a mode's constraints, in their declared order
+        return list(constraint_names(mask, tr.constraints))
+
     if args.json:
         print(strict_json.dumps({
             "system": tr.system, "maneuver": tr.maneuver, "s": tr.s,
             "inputs": dict(zip(compiled.inputs, tr.inputs)),
-            "parameters": compiled.parameters, "status": tr.status.lower(),
+            "parameters": compiled.parameters, "status": tr.status.name.lower(),
             "message": tr.message,
             "outcome": tr.outcome, "t_final": tr.t_final,
-            "modes": [_mode_names(compiled, m) for m in tr.modes],
+            "modes": [active(seg.mask) for seg in tr.segments],
             "event_times": list(tr.event_times),
-            "events": [{"t": float(r[0]), "touchdown": _mode_names(compiled, int(r[2])),
-                        "liftoff": _mode_names(compiled, int(r[3])),
-                        "mode_after": _mode_names(compiled, int(r[5]))}
-                       for r in tr.events if r[1] == 1],
+            "events": [{"t": e.t, "touchdown": list(e.entered), "liftoff": list(e.left),
+                        "mode_after": active(e.mask_after)}
+                       for e in tr.contact_events],
             "state": {"q": dict(zip(names, tr.y_final[:d])),
                       "qdot": dict(zip(names, tr.y_final[d:]))},
             "nfev": tr.nfev, "nsteps": tr.nsteps}))
     else:
         print(f"system     {tr.system}  maneuver {tr.maneuver}  s = {tr.s:+.12g}")
-        print(f"status     {tr.status}: {tr.message}")
+        print(f"status     {tr.status.name}: {tr.message}")
         print(f"outcome    {tr.outcome:+.15g}")
         print(f"t_final    {tr.t_final:.15g}")
-        modes = [_mode_names(compiled, m) for m in tr.modes]
-        times = [0.0, *tr.event_times]
         print("modes      " + " -> ".join(
-            f"{{{', '.join(m)}}}@{t:.12g}" for m, t in zip(modes, times)))
-        for r in (r for r in tr.events if r[1] == 1):
-            what = [f"{kind} {{{', '.join(_mode_names(compiled, int(r[k])))}}}"
-                    for kind, k in (("touchdown", 2), ("liftoff", 3)) if r[k]]
-            print(f"event      t = {r[0]:.12g}: {'; '.join(what)}")
+            f"{{{', '.join(active(seg.mask))}}}@{seg.t_start:.12g}" for seg in tr.segments))
+        for e in tr.contact_events:
+            what = [f"{kind} {{{', '.join(found)}}}"
+                    for kind, found in (("touchdown", e.entered), ("liftoff", e.left)) if found]
+            print(f"event      t = {e.t:.12g}: {'; '.join(what)}")
         print(f"work       nfev = {tr.nfev}, steps = {tr.nsteps}")
     return 0 if tr.success else 1
-
-
-def _mode_names(compiled, mode: int) -> list[str]:
-    names = list(compiled.system.constraints)
-    return [names[j] for j in range(len(names)) if mode >> j & 1]

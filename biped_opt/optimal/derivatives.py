@@ -60,13 +60,13 @@ from biped_opt.hybrid.simulate import (
     kernel_config,
     simulate,
 )
-from biped_opt.hybrid.trajectory import Event, Status, Trajectory
 from biped_opt.maneuvers import initial_state, parse_maneuver, spec
 from biped_opt.model.biped import BODY_DZ, NSTATE, dynamics, generalised_forces
 from biped_opt.model.modes import ContactMode
 from biped_opt.model.params import BipedParams
 from biped_opt.optimal.problems import OptimalControlProblem
 from biped_opt.optimal.solve import optimal_policy
+from biped_opt.simulation.trajectory import Event, Trajectory
 
 __all__ = [
     "PARAMETER_NAMES",
@@ -345,17 +345,14 @@ def _continue(
     y_out = np.empty(NSTATE)
     cfg = kernel_config(options, 0.0, touched_down).copy()  # (a shared, cached vector)
     cfg[m.CFG_T_END] = options.t_end - t0
-    status, t_f, mode_f, n_ev, _, nfev, nsteps, nrej, _ = m.simulate_maneuver(
+    status, t_f, mode_f, n_ev, _, nfev, nsteps, nrej, outcome = m.simulate_maneuver(
         k.parameters(params), k.codes[s.code], 0.0, u, cfg, np.empty((0, m.SAMPLE_WIDTH)),
         events, y_out, np.ascontiguousarray(y0, dtype=np.float64), int(mode0),
     )
-    n_rows = n_ev + (1 if status in (Status.OK, Status.APEX_IN_CONTACT) else 0)
-    rows = events[:n_rows].copy()
-    rows[:, 0] += t0
-    return Trajectory(
-        maneuver=s.maneuver.value, theta0=theta0, inputs=u, status=Status(status),
-        t_final=t_f + t0, state_final=y_out, mode_final=ContactMode(mode_f), event_rows=rows,
-        samples=None, nfev=nfev, nsteps=nsteps, nrejected=nrej,
+    events[: n_ev + 1, 0] += t0  # (the rows written: the contact events and a terminal one)
+    return Trajectory.from_kernel(
+        k.name, s.maneuver.value, theta0, tuple(u.tolist()), status, t_f + t0, outcome, y_out,
+        mode_f, int(mode0), n_ev, events, None, nfev, nsteps, nrej, k.constraints, None,
     )
 
 
@@ -448,7 +445,8 @@ def outcome_sensitivity(
     while pending:
         e = pending.pop(0)
         _, z = walker.flow(mode, t, e.t, y, z)
-        feet = [j - 1 for j in (*e.touchdown, *e.liftoff)]
+        # the feet flipped (0 = left), touchdowns first
+        feet = [j for mask in (e.mask_entered, e.mask_left) for j in range(2) if mask >> j & 1]
         touched_down = touched_down or bool(e.touchdown)
         y_cur = e.state_before
         if len(feet) == 1:

@@ -35,11 +35,11 @@ from biped_opt.control.solve import GRID_POINTS, XATOL, refine_minimum
 from biped_opt.errors import InvalidInputError, InvalidParameterError
 from biped_opt.hybrid import simulate, simulate_batch
 from biped_opt.hybrid.simulate import INPUT_NAMES
-from biped_opt.hybrid.trajectory import Trajectory
 from biped_opt.maneuvers import check_theta0
 from biped_opt.model.modes import ContactMode
 from biped_opt.model.params import BipedParams
 from biped_opt.optimal.problems import INPUT_MODES, OptimalControlProblem
+from biped_opt.simulation.trajectory import Trajectory
 
 __all__ = [
     "Candidate",
@@ -269,8 +269,8 @@ def _result(
         inputs=u,
         value=cost,
         outcome=tr.outcome,
-        modes=tr.mode_sequence,
-        event_times=tr.event_times,
+        modes=tuple(map(ContactMode, tr.mode_sequence)),
+        event_times=np.array(tr.event_times),
         branch=label,
         active=active,
         bound=bound,

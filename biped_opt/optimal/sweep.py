@@ -21,13 +21,13 @@ from biped_opt.errors import InvalidInputError
 from biped_opt.fixed_sweep import FIXED_INPUTS, theta_grid
 from biped_opt.hybrid import SimulatorOptions, simulate_batch
 from biped_opt.hybrid.simulate import DEFAULT_OPTIONS, INPUT_NAMES, check_inputs
-from biped_opt.hybrid.trajectory import Status
 from biped_opt.maneuvers import check_theta0, spec
 from biped_opt.model.params import BipedParams
 from biped_opt.optimal.problems import OptimalControlProblem
 from biped_opt.optimal.solve import OptimalResult, branch_label, optimal_sweep
 from biped_opt.progress import Progress
 from biped_opt.progress import bar as _bar
+from biped_opt.simulation.trajectory import Status
 
 __all__ = [
     "Progress",
