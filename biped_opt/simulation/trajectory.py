@@ -16,8 +16,8 @@ values carry both the mask and the set of names.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from functools import cached_property
+from dataclasses import dataclass, field, fields
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -74,7 +74,7 @@ class Event:
     @property
     def simultaneous(self) -> bool:
         """Whether several constraints flipped at this instant (the nonsmooth case)."""
-        return (self.mask_entered | self.mask_left).bit_count() > 1
+        return self.mask_entered.bit_count() + self.mask_left.bit_count() > 1
 
 
 @dataclass(frozen=True)
@@ -102,9 +102,10 @@ def _event(row: Array, names: tuple[str, ...], n: int) -> Event:
         state_before=row[6: 6 + n].copy(), state_after=row[6 + n: 6 + 2 * n].copy())
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(slots=True, eq=False)
 class Trajectory:
-    """One simulated maneuver of a system.
+    """One simulated maneuver of a system (a value: not to be modified; a plain record with
+    slots, as a frozen dataclass's construction cost a fifth of the Python around a run).
 
     ``outcome`` is the maneuver's outcome at the final state (for the biped th(t_f), MODEL.md
     Sec. 4). ``event_rows`` are the kernel's rows: the ``n_events`` contact events, then the
@@ -132,6 +133,8 @@ class Trajectory:
     nrejected: int
     constraints: tuple[str, ...] = field(repr=False)  #: the system's constraint names (bits)
     budget: tuple[int, float] | None = field(repr=False)
+    _events: tuple[Event, ...] | None = field(default=None, init=False, repr=False)
+    _segments: tuple[Segment, ...] | None = field(default=None, init=False, repr=False)
 
     @classmethod
     def from_kernel(
@@ -140,20 +143,12 @@ class Trajectory:
         n_events: int, events: Array, samples: Array | None, nfev: int, nsteps: int,
         nrejected: int, constraints: tuple[str, ...], budget: tuple[int, float] | None,
     ) -> Trajectory:
-        """From the kernel's outputs (``events``: its whole event buffer). Built without the
-        frozen dataclass's ``__init__``, which sets each field through ``object.__setattr__``:
-        this is on the per-trajectory hot path."""
+        """From the kernel's outputs (``events``: its whole event buffer)."""
         code = _STATUSES[status]
-        self = object.__new__(cls)
-        object.__setattr__(self, "__dict__", {
-            "system": system, "maneuver": maneuver, "s": s, "inputs": inputs, "status": code,
-            "t_final": t_final, "outcome": outcome, "y_final": y_final,
-            "mode_final": mode_final, "initial_mode": initial_mode, "n_events": n_events,
-            "event_rows": events[: n_events + 1 if code in _TERMINAL_ROW else n_events],
-            "samples": samples, "nfev": nfev, "nsteps": nsteps, "nrejected": nrejected,
-            "constraints": constraints, "budget": budget,
-        })
-        return self
+        return cls(system, maneuver, s, inputs, code, t_final, outcome, y_final, mode_final,
+                   initial_mode, n_events,
+                   events[: n_events + 1 if code in _TERMINAL_ROW else n_events], samples,
+                   nfev, nsteps, nrejected, constraints, budget)
 
     @property
     def theta0(self) -> float:
@@ -199,19 +194,26 @@ class Trajectory:
                 _describe(e, self.constraints) for e in self.contact_events[-3:])
         return text
 
-    @cached_property
+    @property
     def events(self) -> tuple[Event, ...]:
         """The events in order, the terminal one last when the run reached it."""
-        n = len(self.y_final)
-        return tuple(_event(row, self.constraints, n) for row in self.event_rows)
+        if self._events is None:
+            n = len(self.y_final)
+            self._events = tuple(_event(row, self.constraints, n) for row in self.event_rows)
+        return self._events
 
     @property
     def contact_events(self) -> tuple[Event, ...]:
         return self.events[: self.n_events]
 
-    @cached_property
+    @property
     def segments(self) -> tuple[Segment, ...]:
         """Per-mode segments from t = 0 to t_final."""
+        if self._segments is None:
+            self._segments = self._cut()
+        return self._segments
+
+    def _cut(self) -> tuple[Segment, ...]:
         segs = []
         start, mask = 0.0, self.initial_mode
         for e in self.contact_events:
@@ -293,11 +295,11 @@ class BatchResult:
     def __len__(self) -> int:
         return len(self.s)
 
-    def __getitem__(self, key: str) -> npt.NDArray[np.generic]:
-        value = getattr(self, "event_rows" if key == "events" else key, None)
-        if key.startswith("_") or not isinstance(value, np.ndarray):
+    def __getitem__(self, key: str) -> Any:
+        name = "event_rows" if key == "events" else key
+        if name not in _BATCH_FIELDS:
             raise KeyError(key)
-        return value
+        return getattr(self, name)
 
     @property
     def theta0(self) -> Array:
@@ -325,3 +327,6 @@ class BatchResult:
         """The contact modes (masks) run k visited, from the initial one."""
         rows = self.event_rows[k, : self.n_events[k], 5]
         return (self.initial_mode, *map(int, rows.tolist()))
+
+
+_BATCH_FIELDS = frozenset(f.name for f in fields(BatchResult))
