@@ -184,6 +184,7 @@ def run_benchmark(
     interpreters and reports their entries as None.
     """
     import biped_opt
+    from biped_opt.model.modes import ContactMode
     from biped_opt.optimal.sweep import sweep_fixed
     from biped_opt.piecewise import theta_grid
 
@@ -202,7 +203,7 @@ def run_benchmark(
     def from_biped_opt(tr) -> tuple[float, tuple[str, ...], int]:
         if not tr.success:
             raise RuntimeError(f"biped_opt failed at th0 = {tr.theta0}: {tr.message}")
-        return tr.outcome, tuple(mode.name for mode in tr.mode_sequence), tr.nfev
+        return tr.outcome, tuple(ContactMode(mode).name for mode in tr.mode_sequence), tr.nfev
 
     def from_comparator(r) -> tuple[float, tuple[str, ...], int]:
         return r.outcome, r.mode_sequence, r.nfev

@@ -101,9 +101,9 @@ def mode_bands(compiled: CompiledSystem, maneuver: str, s_grid: npt.ArrayLike,
         ends.append(tr.t_final)
         bands.append(ModeBands(s=float(s), modes=tuple(modes), starts=tuple(starts),
                                ends=tuple(ends), events=tuple(tr.event_times),
-                               switched=tuple(int(r[2]) | int(r[3])
-                                              for r in tr.events[: len(tr.event_times)]),
-                               status=tr.status))
+                               switched=tuple(e.mask_entered | e.mask_left
+                                              for e in tr.contact_events),
+                               status=tr.status.name))
     return bands
 
 

@@ -53,7 +53,7 @@ from biped_opt.control.problems import Problem, get_problem
 from biped_opt.control.solve import branch_of, compiled_for, optimal_policy
 from biped_opt.control.theorem1 import cost_gradient
 from biped_opt.errors import InvalidInputError, SimulationError
-from biped_opt.simulation.compiled import STATUS_NAMES
+from biped_opt.simulation.trajectory import BatchResult
 
 __all__ = [
     "Objective", "DescentRun", "EstimatorStats", "SmoothingResult", "GradientStudy", "VALUE_TOL",
@@ -114,13 +114,13 @@ class Objective:
         out[:, self.cols] = x
         return out
 
-    def batch(self, x: npt.ArrayLike) -> tuple[Array, dict[str, Array]]:
+    def batch(self, x: npt.ArrayLike) -> tuple[Array, BatchResult]:
         rows = self.rows(x)
         out = self.compiled.simulate_batch(self.problem.maneuver, np.full(len(rows), self.s),
                                            rows)
         self.nsim += len(rows)
-        costs = self.problem.cost(out["outcome"], out["y_final"], rows)
-        return np.where(out["status"] == 0, costs, np.inf), out
+        costs = self.problem.cost(out.outcome, out.y_final, rows)
+        return np.where(out.success, costs, np.inf), out
 
     def values(self, x: npt.ArrayLike) -> Array:
         """c at each row of decisions (inf where the maneuver fails)."""
@@ -132,10 +132,8 @@ class Objective:
     def branches(self, x: npt.ArrayLike) -> list[str]:
         """The mode sequence of each row of decisions, as text."""
         _, out = self.batch(x)
-        first = self.compiled.initial_mode(self.problem.maneuver)
-        return [branch_of(self.compiled, first, out["events"][k, :int(out["n_events"][k])],
-                          STATUS_NAMES[int(out["status"][k])])
-                for k in range(len(out["outcome"]))]
+        return [branch_of(self.compiled, out.initial_mode, out.event_rows[k, :n], status)
+                for k, (n, status) in enumerate(zip(out.n_events.tolist(), out.status.tolist()))]
 
     def gradient(self, x: npt.ArrayLike, direction: npt.ArrayLike | None = None) -> Array:
         """The exact gradient of c over the decisions on the branch at x: where x is on a

@@ -40,7 +40,7 @@ from biped_opt.control.theorem1 import cost_gradient, polish_optimum
 from biped_opt.errors import InvalidInputError
 from biped_opt.piecewise import theta_grid
 from biped_opt.progress import bar as _bar
-from biped_opt.simulation.compiled import STATUS_NAMES, CompiledSystem
+from biped_opt.simulation.compiled import CompiledSystem
 
 __all__ = ["find_nonsmooth", "find_nonsmooth_optimal", "s_grid", "bound_slope", "WORDS"]
 
@@ -90,15 +90,14 @@ def find_nonsmooth(system: CompiledSystem | str, maneuver: str, inputs: Any = No
     def sample(x: float) -> Sample:
         tr = compiled.simulate(maneuver, x, u)
         nsim[0] += 1
-        label = branch_of(compiled, first, tr.events[: len(tr.event_times)], tr.status)
+        label = branch_of(compiled, first, tr.event_rows[: tr.n_events], tr.status)
         return Sample(label=label, values={"outcome": tr.outcome}, branch=label)
 
     ev = Evaluator(sample)
     for k, x in enumerate(grid):
-        n = int(batch["n_events"][k])
-        label = branch_of(compiled, first, batch["events"][k, :n],
-                          STATUS_NAMES[int(batch["status"][k])])
-        ev.cache[float(x)] = Sample(label=label, values={"outcome": float(batch["outcome"][k])},
+        n = int(batch.n_events[k])
+        label = branch_of(compiled, first, batch.event_rows[k, :n], int(batch.status[k]))
+        ev.cache[float(x)] = Sample(label=label, values={"outcome": float(batch.outcome[k])},
                                     branch=label)
     bar = _bar(progress, 1, f"{compiled.name} {maneuver} locating")
     points = analyse_switches(ev, grid, ["outcome"], _limit(grid), False, bar,

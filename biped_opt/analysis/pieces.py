@@ -211,14 +211,12 @@ def simultaneous_rounds(n: int, *, t_end: float = 12.0) -> tuple[Round, ...]:
     rounds = []
     # a failed run (a landing foot that the stretched leg pulls up: INCONSISTENT) keeps the
     # rounds before the failing event only
-    rows = tr.events if tr.success else tr.events[:-1]
-    for row in rows:
-        if int(row[1]) != compiled.module.EVENT_CONTACT:
-            continue
-        if int(row[2]) == every:
-            rounds.append(Round(float(row[0]), "touchdown"))
-        elif int(row[3]) == every:
-            rounds.append(Round(float(row[0]), "liftoff"))
+    events = tr.contact_events if tr.success else tr.contact_events[:-1]
+    for e in events:
+        if e.mask_entered == every:
+            rounds.append(Round(e.t, "touchdown"))
+        elif e.mask_left == every:
+            rounds.append(Round(e.t, "liftoff"))
         else:
             break  # not a round of all feet: the rounds end here
     return tuple(rounds)
@@ -245,15 +243,11 @@ def _events(compiled: CompiledSystem, d: Array, radius: float, inputs: list[floa
     are simultaneous to its tolerance)."""
     _set_offsets(compiled, d)
     tr = compiled.simulate("rounds", radius, inputs, options=OPTIONS)
-    contact = tr.events[tr.events[:, 1] == compiled.module.EVENT_CONTACT] \
-        if len(tr.events) else tr.events
-    status = "OK" if tr.status == "OK" else tr.status
-    label = branch_of(compiled, compiled.initial_mode("rounds"), contact, status)
-    flips = (contact[:, 2].astype(int) | contact[:, 3].astype(int)).tolist()
-    if any(f & (f - 1) for f in flips):
+    label = branch_of(compiled, tr.initial_mode, tr.event_rows[: tr.n_events], tr.status)
+    if any(e.simultaneous for e in tr.contact_events):
         return label, 0.0
-    times = contact[:, 0]
-    return label, float(np.min(np.diff(times))) if times.size > 1 else math.inf
+    times = tr.event_times
+    return label, float(np.min(np.diff(times))) if len(times) > 1 else math.inf
 
 
 def _unit_sphere(rng: np.random.Generator, count: int, n: int) -> Array:
@@ -347,11 +341,10 @@ def _touchdown_shifts(compiled: CompiledSystem, d: Array, inputs: list[float], t
     tr = compiled.simulate("offsets", s, inputs, options=OPTIONS)
     n = d.size
     tau = np.full(n, np.nan)
-    for row in tr.events:
-        if int(row[1]) == compiled.module.EVENT_CONTACT:
-            for i in range(n):
-                if int(row[2]) >> i & 1 and math.isnan(tau[i]):
-                    tau[i] = (row[0] - t0) / s
+    for e in tr.contact_events:
+        for i in range(n):
+            if e.mask_entered >> i & 1 and math.isnan(tau[i]):
+                tau[i] = (e.t - t0) / s
     if np.isnan(tau).any():
         raise SimulationError(f"pieces: a foot did not touch down at offsets {d.tolist()}")
     return tau
@@ -364,7 +357,7 @@ def _shift_map(compiled: CompiledSystem, n: int, inputs: list[float]) -> Array:
     is {d : A d in that order}, not {d : d in that order}."""
     _set_offsets(compiled, np.zeros(n))
     tr = compiled.simulate("offsets", 0.0, inputs, options=OPTIONS)
-    t0 = float(tr.events[0, 0])
+    t0 = tr.events[0].t
     return np.column_stack([_touchdown_shifts(compiled, np.eye(n)[j], inputs, t0)
                             for j in range(n)])
 
@@ -395,7 +388,7 @@ def derivative_pieces(n: int, *, seed: int = 0, h0: float = 1e-3,
     def outcome(s: float) -> float:
         tr = compiled.simulate("offsets", s, inputs, options=options)
         if not tr.success:
-            raise SimulationError(f"pieces: offsets maneuver at s = {s} ended {tr.status}")
+            raise SimulationError(f"pieces: offsets maneuver at s = {s} ended {tr.status.name}")
         return tr.outcome
 
     A = _shift_map(compiled, n, inputs)

@@ -17,11 +17,11 @@ from biped_opt.errors import InvalidInputError
 
 if TYPE_CHECKING:
     from biped_opt.analysis.switches import NonsmoothReport
-    from biped_opt.hybrid.trajectory import Trajectory
-    from biped_opt.simulation.compiled import CompiledSystem, SystemTrajectory
+    from biped_opt.simulation.compiled import CompiledSystem
+    from biped_opt.simulation.trajectory import Trajectory
 
 __all__ = ["derivatives_json", "emit_json", "emit_paths", "emit_sweep", "fixed_sweep_table",
-           "mode_names", "optimal_sweep_table", "show_derivatives", "show_optimal",
+           "optimal_sweep_table", "show_derivatives", "show_optimal",
            "show_report", "show_system_trajectory", "show_trajectory",
            "system_trajectory_json", "trajectory_json"]
 
@@ -95,8 +95,29 @@ def show_report(report: NonsmoothReport, as_json: bool) -> int:
 
 # -- trajectories -------------------------------------------------------------------------------
 
+def _legs(mask: int) -> list[int]:
+    """The biped's legs (1 = left, 2 = right) of a mask over its constraints."""
+    from biped_opt.model.modes import ContactMode
+
+    return [j + 1 for j in ContactMode(mask).active]
+
+
+def _mode_name(mask: int) -> str:
+    """The paper's name of a biped contact mode (air, left, right, ground)."""
+    from biped_opt.model.modes import ContactMode
+
+    return ContactMode(mask).name
+
+
+def _names(mask: int, constraints: tuple[str, ...]) -> list[str]:
+    """The constraints of a mode mask, in their declared order."""
+    from biped_opt.simulation.trajectory import constraint_names
+
+    return list(constraint_names(mask, constraints))
+
+
 def trajectory_json(tr: Trajectory) -> dict[str, Any]:
-    """The JSON form of a biped trajectory."""
+    """The JSON form of a biped trajectory, in the paper's words."""
     return {
         "maneuver": tr.maneuver,
         "theta0": tr.theta0,
@@ -105,10 +126,11 @@ def trajectory_json(tr: Trajectory) -> dict[str, Any]:
         "t_final": tr.t_final,
         "status": "ok" if tr.success else tr.status.name.lower(),
         "message": tr.message,
-        "modes": [{"t": t, "mode": m.name} for t, m in tr.modes],
+        "modes": [{"t": seg.t_start, "mode": _mode_name(seg.mask)}
+                  for seg in tr.segments],
         "events": [
-            {"t": e.t, "kind": e.kind, "touchdown": list(e.touchdown),
-             "liftoff": list(e.liftoff), "mode_after": e.mode_after.name}
+            {"t": e.t, "kind": e.kind, "touchdown": _legs(e.mask_entered),
+             "liftoff": _legs(e.mask_left), "mode_after": _mode_name(e.mask_after)}
             for e in tr.contact_events
         ],
         "state": {"q": tr.q_final.tolist(), "qdot": tr.qdot_final.tolist()},
@@ -126,62 +148,48 @@ def show_trajectory(tr: Trajectory, as_json: bool) -> int:
         print(f"status     {tr.status.name}: {tr.message}")
         print(f"outcome    th(t_f) = {tr.outcome:+.15g}")
         print(f"t_final    {tr.t_final:.15g}")
-        print("modes      " + " -> ".join(f"{m.name}@{t:.12g}" for t, m in tr.modes))
+        print("modes      " + " -> ".join(f"{_mode_name(seg.mask)}@{seg.t_start:.12g}"
+                                          for seg in tr.segments))
         print(f"work       nfev = {tr.nfev}, steps = {tr.nsteps}")
     return 0 if tr.success else 1
 
 
-def mode_names(compiled: CompiledSystem, mode: int) -> list[str]:
-    """The constraints active in a contact mode (a bit mask over the system's constraints)."""
-    names = list(compiled.system.constraints)
-    return [names[j] for j in range(len(names)) if mode >> j & 1]
-
-
-def _contact_events(tr: SystemTrajectory) -> list[Any]:
-    """The rows of ``tr.events`` that are contact events (column 1 is 1): columns 0 time,
-    2 touchdown mask, 3 liftoff mask, 5 mode after."""
-    return [r for r in tr.events if r[1] == 1]
-
-
-def system_trajectory_json(compiled: CompiledSystem, tr: SystemTrajectory) -> dict[str, Any]:
+def system_trajectory_json(compiled: CompiledSystem, tr: Trajectory) -> dict[str, Any]:
     """The JSON form of any system's trajectory (coordinates and constraints by name)."""
     names = compiled.system.coordinate_names
     d = len(names)
     return {
         "system": tr.system, "maneuver": tr.maneuver, "s": tr.s,
         "inputs": dict(zip(compiled.inputs, tr.inputs)),
-        "parameters": compiled.parameters, "status": tr.status.lower(),
+        "parameters": compiled.parameters, "status": tr.status.name.lower(),
         "message": tr.message,
         "outcome": tr.outcome, "t_final": tr.t_final,
-        "modes": [mode_names(compiled, m) for m in tr.modes],
+        "modes": [_names(seg.mask, tr.constraints) for seg in tr.segments],
         "event_times": list(tr.event_times),
-        "events": [{"t": float(r[0]), "touchdown": mode_names(compiled, int(r[2])),
-                    "liftoff": mode_names(compiled, int(r[3])),
-                    "mode_after": mode_names(compiled, int(r[5]))}
-                   for r in _contact_events(tr)],
+        "events": [{"t": e.t, "touchdown": list(e.entered), "liftoff": list(e.left),
+                    "mode_after": _names(e.mask_after, tr.constraints)}
+                   for e in tr.contact_events],
         "state": {"q": dict(zip(names, tr.y_final[:d])),
                   "qdot": dict(zip(names, tr.y_final[d:]))},
         "nfev": tr.nfev, "nsteps": tr.nsteps}
 
 
-def show_system_trajectory(compiled: CompiledSystem, tr: SystemTrajectory,
-                           as_json: bool) -> int:
+def show_system_trajectory(compiled: CompiledSystem, tr: Trajectory, as_json: bool) -> int:
     """Any system's trajectory as text or one JSON object; the exit status."""
     if as_json:
         emit_json(system_trajectory_json(compiled, tr))
     else:
         print(f"system     {tr.system}  maneuver {tr.maneuver}  s = {tr.s:+.12g}")
-        print(f"status     {tr.status}: {tr.message}")
+        print(f"status     {tr.status.name}: {tr.message}")
         print(f"outcome    {tr.outcome:+.15g}")
         print(f"t_final    {tr.t_final:.15g}")
-        modes = [mode_names(compiled, m) for m in tr.modes]
-        times = [0.0, *tr.event_times]
         print("modes      " + " -> ".join(
-            f"{{{', '.join(m)}}}@{t:.12g}" for m, t in zip(modes, times)))
-        for r in _contact_events(tr):
-            what = [f"{kind} {{{', '.join(mode_names(compiled, int(r[k])))}}}"
-                    for kind, k in (("touchdown", 2), ("liftoff", 3)) if r[k]]
-            print(f"event      t = {r[0]:.12g}: {'; '.join(what)}")
+            f"{{{', '.join(_names(seg.mask, tr.constraints))}}}@{seg.t_start:.12g}"
+            for seg in tr.segments))
+        for e in tr.contact_events:
+            what = [f"{kind} {{{', '.join(found)}}}"
+                    for kind, found in (("touchdown", e.entered), ("liftoff", e.left)) if found]
+            print(f"event      t = {e.t:.12g}: {'; '.join(what)}")
         print(f"work       nfev = {tr.nfev}, steps = {tr.nsteps}")
     return 0 if tr.success else 1
 

@@ -547,7 +547,7 @@ def outcome_gradient(
     where = f"{compiled.system.where()}: {maneuver} at s = {s!r}"
     traj = compiled.simulate(maneuver, s, u, options=options)
     if not traj.success:
-        raise SimulationError(f"{where}: the simulation ended with status {traj.status}")
+        raise SimulationError(f"{where}: the simulation ended with status {traj.status.name}")
     model = _Model(compiled, maneuver, u)
     n, m = model.n, model.m
     y0 = np.zeros(n)
@@ -559,24 +559,23 @@ def outcome_gradient(
     st = _State(t=0.0, mode=mode0, y=y0, z=z0, touched=False, modes=[mode0])
     branch = _Branch(model, v, variational, options, where)
 
-    rows = list(traj.events)
+    pending = list(traj.events)
     terminal = False
     events = 0
     while not terminal:
-        if rows:  # on the simulated trajectory: its next event
-            row = rows.pop(0)
-            branch.flow(st, float(row[0]))
-            st.y = row[6: 6 + n].copy()
+        if pending:  # on the simulated trajectory: its next event
+            event = pending.pop(0)
+            branch.flow(st, event.t)
+            st.y = event.state_before.copy()
             terminal = branch.resolve(st)
-            after, y_after = int(row[5]), row[6 + n: 6 + 2 * n]
-            if terminal and int(row[1]) == compiled.module.EVENT_TERMINAL:
+            if terminal and event.kind == "terminal":
                 break
-            if not terminal and int(row[1]) == compiled.module.EVENT_CONTACT \
-                    and st.mode == after and _same(st.y, y_after):
-                st.y = y_after.copy()
+            if not terminal and event.kind != "terminal" \
+                    and st.mode == event.mask_after and _same(st.y, event.state_after):
+                st.y = event.state_after.copy()
                 continue
             st.continued = True  # the branch leaves the simulated trajectory here
-            rows = []
+            pending = []
         else:  # on the branch's own limiting trajectory
             events += 1
             if events > options.max_events:

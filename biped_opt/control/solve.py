@@ -42,7 +42,8 @@ from scipy.optimize import minimize, minimize_scalar
 from biped_opt.control.problems import Problem, input_modes
 from biped_opt.errors import InvalidInputError
 from biped_opt.piecewise import locate_switch
-from biped_opt.simulation.compiled import STATUS_NAMES, CompiledSystem, SystemTrajectory
+from biped_opt.simulation.compiled import CompiledSystem
+from biped_opt.simulation.trajectory import Status, Trajectory
 from biped_opt.systems.derive import mode_name
 
 __all__ = ["Candidate", "OptimalResult", "SystemOptimalResult", "optimal_policy",
@@ -205,12 +206,15 @@ def compiled_for(problem: Problem) -> CompiledSystem:
     return found
 
 
-def branch_of(compiled: CompiledSystem, initial: int, events: Array, status: str = "OK") -> str:
+def branch_of(compiled: CompiledSystem, initial: int, events: Array,
+              status: Status | int | str = Status.OK) -> str:
     """The mode sequence as text from the contact-event rows of a trajectory
     (``air->left->left+right``); an impact after which the constraint separated at once
-    (restitution) is named in brackets (``air->air[left]``); failures are labelled."""
-    if status != "OK":
-        return f"FAILED:{status}"
+    (restitution) is named in brackets (``air->air[left]``); failures are labelled (``status``:
+    a :class:`Status`, its code or its name)."""
+    name = status if isinstance(status, str) else Status(status).name
+    if name != "OK":
+        return f"FAILED:{name}"
     names = compiled.derived.constraint_names
     parts = [mode_name(initial, names)]
     for row in events:
@@ -264,7 +268,7 @@ class OptimalResult:
     status: int = 0
     nfev: int = 0
     nit: int = 0
-    trajectory: SystemTrajectory | None = field(repr=False, default=None)
+    trajectory: Trajectory | None = field(repr=False, default=None)
 
     @property
     def theta0(self) -> float:
@@ -319,13 +323,12 @@ class _Runner:
         self.problem, self.compiled, self.s = problem, compiled, s
         self.nsim = self.nfev = self.nit = 0
 
-    def __call__(self, u: Array) -> tuple[float, str, SystemTrajectory]:
+    def __call__(self, u: Array) -> tuple[float, str, Trajectory]:
         tr = self.compiled.simulate(self.problem.maneuver, self.s, u,
                                     options=self.problem.options)
         self.nsim += 1
         self.nfev += tr.nfev
-        label = branch_of(self.compiled, tr.modes[0], tr.events[: len(tr.event_times)],
-                          tr.status)
+        label = branch_of(self.compiled, tr.initial_mode, tr.event_rows[: tr.n_events], tr.status)
         cost = float(self.problem.cost(tr.outcome, tr.y_final, u)) if tr.success else math.inf
         return cost, label, tr
 
@@ -333,14 +336,9 @@ class _Runner:
         out = self.compiled.simulate_batch(self.problem.maneuver, np.full(len(rows), self.s),
                                            rows, options=self.problem.options)
         self.nsim += len(rows)
-        ok = out["status"] == 0
-        costs = np.where(ok, self.problem.cost(out["outcome"], out["y_final"], rows), np.inf)
-        first = self.compiled.initial_mode(self.problem.maneuver)
-        labels = []
-        for k in range(len(rows)):
-            n = int(out["n_events"][k])
-            status = STATUS_NAMES[int(out["status"][k])]
-            labels.append(branch_of(self.compiled, first, out["events"][k, :n], status))
+        costs = np.where(out.success, self.problem.cost(out.outcome, out.y_final, rows), np.inf)
+        labels = [branch_of(self.compiled, out.initial_mode, out.event_rows[k, :n], status)
+                  for k, (n, status) in enumerate(zip(out.n_events.tolist(), out.status.tolist()))]
         return np.asarray(costs, dtype=np.float64), labels
 
 
@@ -386,7 +384,7 @@ def _refine_one(problem: Problem, run: _Runner, decision: str, base: Array,
     """(decision value, cost) refined around grid point k of a single acting decision."""
     j = names.index(decision)
 
-    def at(u: float) -> tuple[float, str, SystemTrajectory]:
+    def at(u: float) -> tuple[float, str, Trajectory]:
         x = base.copy()
         x[j] = u
         return run(x)
@@ -440,7 +438,7 @@ def _refine_joint(problem: Problem, run: _Runner, acting: list[str], start: Arra
 
 
 #: a candidate: (input vector, cost, branch, trajectory)
-_Found = tuple[Array, float, str, SystemTrajectory]
+_Found = tuple[Array, float, str, Trajectory]
 
 
 def _search(problem: Problem, run: _Runner, acting: list[str], base: Array,
@@ -512,7 +510,7 @@ def optimal_policy(problem: Problem, s: float, *, grid_points: int | None = None
     status = 0
     if not ok:
         status = 1 if not math.isfinite(value) else 2
-        message = f"no successful simulation at the optimum ({tr.status})"
+        message = f"no successful simulation at the optimum ({tr.status.name})"
     return OptimalResult(
         problem=problem, s=s, policy=policy, inputs=u, value=value, outcome=tr.outcome,
         t_final=tr.t_final, y_final=tr.y_final, modes=tr.modes, event_times=tr.event_times,

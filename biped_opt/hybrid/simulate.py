@@ -1,8 +1,12 @@
 """Event-driven hybrid simulation of the biped's maneuvers (MODEL.md Sec. 3).
 
-:func:`simulate` runs one maneuver and returns a :class:`~biped_opt.hybrid.trajectory.Trajectory`;
-:func:`simulate_batch` runs many (th0, inputs) in parallel compiled threads and returns flat
-arrays, the path sweeps and optimisation grids take. Both validate their inputs once, up front,
+:func:`simulate` runs one maneuver and returns a
+:class:`~biped_opt.simulation.trajectory.Trajectory`; :func:`simulate_batch` runs many (th0,
+inputs) in parallel compiled threads and returns a
+:class:`~biped_opt.simulation.trajectory.BatchResult` (flat arrays), the path sweeps and
+optimisation grids take. These are every system's result types: contact modes are masks over the
+biped's constraints ``left`` and ``right`` (bit 0 = leg 1, bit 1 = leg 2), which
+``ContactMode(mask)`` names in the paper's words. Both validate their inputs once, up front,
 and call the compiled module that :mod:`biped_opt.systems` generates from the biped's
 description (``systems/library/biped.py``): the biped is simulated by the same kernel as every
 other system (:mod:`biped_opt.codegen.kernel`), reached here through :func:`kernel`.
@@ -20,12 +24,11 @@ import numpy as np
 import numpy.typing as npt
 
 from biped_opt.errors import InvalidInputError, SimulationError
-from biped_opt.hybrid.trajectory import Status, Trajectory
 from biped_opt.maneuvers import Maneuver, check_theta0, parse_maneuver, spec
 from biped_opt.model.biped import NSTATE
-from biped_opt.model.modes import ContactMode
 from biped_opt.model.params import BipedParams
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
+from biped_opt.simulation.trajectory import BatchResult, Trajectory
 
 __all__ = [
     "SimulatorOptions", "BatchResult", "simulate", "simulate_batch", "check_inputs", "warm_up",
@@ -80,7 +83,10 @@ class BipedKernel:
     (looked up without hashing parameters and options: this is on every trajectory's path)."""
 
     module: ModuleType
+    name: str  # the system's name
+    constraints: tuple[str, ...]  # the constraints' names (bit j of a mode is the j-th)
     codes: tuple[int, ...]  # the module's maneuver code of each ManeuverSpec.code
+    initial_modes: tuple[int, ...]  # the initial mode (mask) of each ManeuverSpec.code
     parameter_names: tuple[str, ...]  # BipedParams fields in the module's parameter order
     default_p: Array
     default_cfg: Array
@@ -111,7 +117,9 @@ def kernel() -> BipedKernel:
         raise RuntimeError(f"the biped's description has parameters {names}, BipedParams {known}")
     by_code = sorted((spec(man) for man in Maneuver), key=lambda sp: sp.code)
     codes = tuple(compiled.maneuvers.index(sp.maneuver.value) for sp in by_code)
-    return BipedKernel(m, codes, names, _prepared(m, names, DEFAULT_PARAMS),
+    return BipedKernel(m, compiled.name, compiled.constraints, codes,
+                       tuple(compiled.initial_mode(sp.maneuver.value) for sp in by_code), names,
+                       _prepared(m, names, DEFAULT_PARAMS),
                        generated.kernel_config(m, DEFAULT_OPTIONS),
                        np.empty((0, m.SAMPLE_WIDTH)))
 
@@ -159,48 +167,17 @@ def simulate(
         cfg = kernel_config(options, float(sample_dt))
     events = np.empty((options.max_events + 1, m.EVENT_WIDTH))
     y_out = np.empty(NSTATE)
-    status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej, _ = m.simulate_maneuver(
+    status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej, outcome = m.simulate_maneuver(
         p, k.codes[s.code], th, u, cfg, samples, events, y_out, m.FROM_S, 0
     )
     if n_s > samples.shape[0]:  # cannot happen while capacity covers t_end / sample_dt
         raise SimulationError(f"sample buffer overflow: {n_s} > {samples.shape[0]}")
+    # (no budget: the biped's messages are the statuses' own, as its options are the caller's)
     return Trajectory.from_kernel(
-        s.maneuver.value, th, u, status, t_f, y_out, mode_f,
-        events[: n_ev + 1 if status == Status.OK or status == Status.APEX_IN_CONTACT else n_ev],
-        None if sample_dt is None else samples[:n_s], nfev, nsteps, nrej,
+        k.name, s.maneuver.value, th, tuple(u.tolist()), status, t_f, outcome, y_out, mode_f,
+        k.initial_modes[s.code], n_ev, events, None if sample_dt is None else samples[:n_s],
+        nfev, nsteps, nrej, k.constraints, None,
     )
-
-
-@dataclass(frozen=True, eq=False)
-class BatchResult:
-    """Many trajectories of one maneuver, as flat arrays (index k = k-th (th0, inputs))."""
-
-    maneuver: str
-    theta0: Array  # (N,)
-    inputs: Array  # (N, 3)
-    status: npt.NDArray[np.int64]  # (N,) Status values
-    t_final: Array  # (N,)
-    state_final: Array  # (N, 14)
-    mode_final: npt.NDArray[np.int64]  # (N,)
-    n_events: npt.NDArray[np.int64]  # (N,) contact events
-    event_rows: Array  # (N, max_events + 1, EVENT_WIDTH), valid rows per n_events (+ terminal)
-    nfev: npt.NDArray[np.int64]  # (N,)
-
-    @property
-    def outcome(self) -> Array:
-        return self.state_final[:, 2]
-
-    @property
-    def success(self) -> npt.NDArray[np.bool_]:
-        return self.status == Status.OK
-
-    def event_times(self, k: int) -> Array:
-        return self.event_rows[k, : self.n_events[k], 0].copy()
-
-    def mode_sequence(self, k: int) -> tuple[ContactMode, ...]:
-        rows = self.event_rows[k, : self.n_events[k]]
-        first = int(self.event_rows[k, 0, 4])
-        return (ContactMode(first), *(ContactMode(int(m)) for m in rows[:, 5]))
 
 
 def simulate_batch(
@@ -246,23 +223,14 @@ def simulate_batch(
     k = kernel()
     events = np.zeros((n, options.max_events + 1, k.module.EVENT_WIDTH))
     y_out = np.empty((n, NSTATE))
+    outcome = np.empty(n)
     info = np.empty((n, 8))
     k.module.simulate_batch_kernel(
         k.parameters(params), k.codes[s.code], th, u_arr, kernel_config(options), events, y_out,
-        np.empty(n), info,
+        outcome, info,
     )
-    return BatchResult(
-        maneuver=s.maneuver.value,
-        theta0=th,
-        inputs=u_arr,
-        status=info[:, 0].astype(np.int64),
-        t_final=info[:, 1].copy(),
-        state_final=y_out,
-        mode_final=info[:, 2].astype(np.int64),
-        n_events=info[:, 3].astype(np.int64),
-        event_rows=events,
-        nfev=info[:, 5].astype(np.int64),
-    )
+    return BatchResult.from_kernel(k.name, s.maneuver.value, th, u_arr, info, outcome, y_out,
+                                   events, k.initial_modes[s.code], k.constraints)
 
 
 def kernels_cached() -> bool:

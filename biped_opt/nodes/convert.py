@@ -117,10 +117,11 @@ def contact_mode_messages(tr: Trajectory, start_ns: int) -> list[tuple[float, An
     """(t, ContactMode) for the initial mode and every change; the header stamp is the run's
     start plus the exact event time."""
     out = []
-    for t, mode in tr.modes:
+    for segment in tr.segments:
+        t = segment.t_start
         msg = ros.msgs.ContactMode()
         msg.header = header(start_ns + round(t * NS))
-        msg.mode = int(mode)
+        msg.mode = segment.mask
         out.append((t, msg))
     return out
 

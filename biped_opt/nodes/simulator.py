@@ -232,7 +232,8 @@ class SimulatorNode(ros.Node):
             states = list(self._playback.states) if self._playback else None
         if self.system is not None:
             response.success = tr.success
-            response.message = "" if tr.success else f"simulation ended with status {tr.status}"
+            response.message = "" if tr.success else \
+                f"simulation ended with status {tr.status.name}"
             response.contact_modes = [int(m) for m in tr.modes]
             response.system_states = states if states is not None else \
                 convert.system_state_messages(tr, len(self.system.system.q), 0)

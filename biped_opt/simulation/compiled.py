@@ -30,7 +30,6 @@ import os
 import sys
 import tempfile
 import threading
-from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
@@ -42,18 +41,19 @@ from biped_opt.codegen import precompile
 from biped_opt.codegen.runtime import Status
 from biped_opt.errors import InvalidInputError, InvalidParameterError
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
+from biped_opt.simulation.trajectory import BatchResult, Trajectory
 from biped_opt.version import PACKAGE_DIR
 
 if TYPE_CHECKING:  # (imported where needed: SymPy and the generator are the slow part of a start)
     from biped_opt.systems.derive import DerivedSystem
     from biped_opt.systems.description import System
 
-__all__ = ["CompiledSystem", "SystemTrajectory", "cache_dir", "compile_system", "shared",
-           "simulate", "simulate_batch", "STATUS_NAMES"]
+__all__ = ["BatchResult", "CompiledSystem", "SystemTrajectory", "Trajectory", "cache_dir",
+           "compile_system", "shared", "simulate", "simulate_batch", "STATUS_NAMES"]
 
 Array = npt.NDArray[np.float64]
 
-#: the kernel's status codes (as in :class:`biped_opt.hybrid.trajectory.Status`)
+#: the kernel's status codes by name (as :class:`biped_opt.codegen.runtime.Status`)
 STATUS_NAMES = tuple(status.name for status in Status)
 _LOCK = threading.Lock()
 _LOADED: dict[str, ModuleType] = {}
@@ -195,74 +195,8 @@ def _write_entry(entry: Path, facts: dict[str, Any]) -> None:
     _write(entry.parent, entry, json.dumps(facts))
 
 
-@dataclass(slots=True)
-class SystemTrajectory:
-    """One simulated maneuver of a compiled system (a plain record: a frozen dataclass's
-    construction alone cost 2.5 us, an eighth of a trajectory)."""
-
-    system: str
-    maneuver: str
-    s: float
-    inputs: tuple[float, ...]
-    status: str
-    t_final: float
-    outcome: float
-    y_final: Array
-    events: Array  #: rows [t, kind, touchdown, liftoff, mode_before, mode_after, y-, y+]
-    samples: Array  #: rows [t, y, mode, lambda]
-    nfev: int
-    nsteps: int
-    n_events: int  #: contact events (the first rows of ``events``; a terminal row may follow)
-    initial_mode: int
-    #: (max_events, horizon, constraint names): what :attr:`message` explains an end by
-    budget: tuple[int, float, tuple[str, ...]]
-
-    @property
-    def message(self) -> str:
-        """How the run ended, in words; a budget used up names its limit, where to raise it
-        and the last events."""
-        status = Status[self.status]
-        max_events, horizon, names = self.budget
-        if status is Status.MAX_EVENTS:
-            text = (f"{max_events} contact events, the maneuver's event budget, were used up "
-                    "before the terminal event (raise max_events on the maneuver, or "
-                    "--max-events)")
-        elif status is Status.HORIZON:
-            text = (f"the horizon t = {horizon:g}, the maneuver's, was reached before the "
-                    "terminal event (raise horizon on the maneuver, or --horizon)")
-        else:
-            text = status.message
-        if status is not Status.OK and self.n_events:
-            text += "; last events: " + ", ".join(
-                _describe_event(row, names) for row in self.events[:self.n_events][-3:])
-        return text
-
-    @property
-    def success(self) -> bool:
-        return self.status == "OK"
-
-    # (read from the event rows when asked for: converting them on every simulation cost a
-    # tenth of a trajectory, and an optimiser reads only the outcome)
-    @property
-    def modes(self) -> tuple[int, ...]:
-        """The contact modes in order, from the initial one."""
-        return (self.initial_mode, *map(int, self.events[: self.n_events, 5].tolist()))
-
-    @property
-    def event_times(self) -> tuple[float, ...]:
-        """Times of the contact events."""
-        return tuple(self.events[: self.n_events, 0].tolist())
-
-
-def _describe_event(row: Array, names: tuple[str, ...]) -> str:
-    """One event row in words: ``t = 1.2 touchdown left -> mode right``."""
-    def which(mask: int) -> str:
-        found = [names[j] if j < len(names) else str(j) for j in range(64) if mask >> j & 1]
-        return "+".join(found) if found else "air"
-
-    what = " ".join(f"{kind} {which(int(row[k]))}" for kind, k in (("touchdown", 2),
-                                                                      ("liftoff", 3)) if row[k])
-    return f"t = {row[0]:.10g} {what} -> mode {which(int(row[5]))}"
+#: the one trajectory type under the name this module gave it first
+SystemTrajectory = Trajectory
 
 
 class CompiledSystem:
@@ -333,6 +267,12 @@ class CompiledSystem:
     @property
     def name(self) -> str:
         return self._name
+
+    @property
+    def constraints(self) -> tuple[str, ...]:
+        """The constraints' names in their declared order (bit j of a contact mode is the
+        j-th)."""
+        return self._constraints
 
     def set_parameters(self, **parameters: float) -> None:
         """Parameter values (defaults overridden); runtime data, no recompilation."""
@@ -420,7 +360,7 @@ class CompiledSystem:
 
     def simulate(self, maneuver: str, s: float, inputs: Any = None, *,
                  options: SimulatorOptions = DEFAULT_OPTIONS,
-                 sample_dt: float | None = None) -> SystemTrajectory:
+                 sample_dt: float | None = None) -> Trajectory:
         """One maneuver at s (inputs by name in a dict, or a vector in the declared order).
         ``options`` left at ``DEFAULT_OPTIONS`` means :meth:`maneuver_options` (the
         maneuver's own budget); any other options are taken as given."""
@@ -432,11 +372,9 @@ class CompiledSystem:
             raise InvalidInputError(f"{self._where}: s must be finite, got {s}")
         u = self._inputs(inputs)
         m = self.module
-        capacity = 0
         if sample_dt:
             dt = float(sample_dt)
-            if dt > 0:
-                capacity = int(options.t_end / dt) + 4 * (options.max_events + 2)
+            capacity = int(options.t_end / dt) + 4 * (options.max_events + 2) if dt > 0 else 0
             samples = np.zeros((capacity, m.SAMPLE_WIDTH)) if capacity else self._no_samples
             cfg = self._cfg(options, dt)
         else:
@@ -445,18 +383,17 @@ class CompiledSystem:
                    else self._cfg(options, 0.0))
         events = np.empty((options.max_events + 1, m.EVENT_WIDTH))
         y_out = np.empty(m.NSTATE)
-        status, t_f, _mode_f, n_ev, n_s, nfev, nsteps, _nrej, outcome = m.simulate_maneuver(
+        status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej, outcome = m.simulate_maneuver(
             self._p, code, s, u, cfg, samples, events, y_out, m.FROM_S, 0)
-        return SystemTrajectory(
-            self.name, maneuver, s, tuple(u.tolist()[: self._ninputs]), STATUS_NAMES[status],
-            t_f, outcome, y_out, events[: n_ev + (status == 0)], samples[: min(n_s, capacity)],
-            nfev, nsteps, n_ev, self._initial_modes[code],
-            (options.max_events, options.t_end, self._constraints))
+        return Trajectory.from_kernel(
+            self._name, maneuver, s, tuple(u.tolist()[: self._ninputs]), status, t_f, outcome,
+            y_out, mode_f, self._initial_modes[code], n_ev, events,
+            samples[: min(n_s, len(samples))] if sample_dt else None, nfev, nsteps, nrej,
+            self._constraints, (options.max_events, options.t_end))
 
     def simulate_batch(self, maneuver: str, s: npt.ArrayLike, inputs: npt.ArrayLike | None = None,
-                       *, options: SimulatorOptions = DEFAULT_OPTIONS) -> dict[str, Array]:
-        """Many s (and input vectors, one row each or one for all) in parallel compiled threads:
-        arrays ``outcome``, ``t_final``, ``status``, ``mode_final``, ``n_events``, ``y_final``
+                       *, options: SimulatorOptions = DEFAULT_OPTIONS) -> BatchResult:
+        """Many s (and input vectors, one row each or one for all) in parallel compiled threads
         (``options`` as in :meth:`simulate`)."""
         code = self._code(maneuver)
         if options is DEFAULT_OPTIONS:
@@ -478,9 +415,8 @@ class CompiledSystem:
         info = np.zeros((ss.size, 8))
         m.simulate_batch_kernel(self._p, code, ss, us, self._cfg(options, 0.0), events, y_out,
                                 outcome, info)
-        return {"outcome": outcome, "t_final": info[:, 1], "status": info[:, 0].astype(int),
-                "mode_final": info[:, 2].astype(int), "n_events": info[:, 3].astype(int),
-                "y_final": y_out, "events": events}
+        return BatchResult.from_kernel(self._name, maneuver, ss, us, info, outcome, y_out, events,
+                                       self._initial_modes[code], self._constraints)
 
 
 def compile_system(system: System | str, **parameters: float) -> CompiledSystem:
@@ -508,7 +444,7 @@ def shared(system: System | str) -> CompiledSystem:
 def simulate(system: System | str, maneuver: str, s: float, inputs: Any = None, *,
              parameters: dict[str, float] | None = None,
              options: SimulatorOptions = DEFAULT_OPTIONS,
-             sample_dt: float | None = None) -> SystemTrajectory:
+             sample_dt: float | None = None) -> Trajectory:
     """``maneuver`` of ``system`` (a System, a library name or a system file) at s: the
     compiled system is made once per process and its parameters set for this call."""
     compiled = shared(system)
@@ -519,7 +455,7 @@ def simulate(system: System | str, maneuver: str, s: float, inputs: Any = None, 
 def simulate_batch(system: System | str, maneuver: str, s: npt.ArrayLike,
                    inputs: npt.ArrayLike | None = None, *,
                    parameters: dict[str, float] | None = None,
-                   options: SimulatorOptions = DEFAULT_OPTIONS) -> dict[str, Array]:
+                   options: SimulatorOptions = DEFAULT_OPTIONS) -> BatchResult:
     """:meth:`CompiledSystem.simulate_batch` of ``system`` (see :func:`simulate`)."""
     compiled = shared(system)
     compiled.set_parameters(**(parameters or {}))

@@ -10,6 +10,7 @@ import pytest
 
 from biped_opt.cli.bench_cmd import load_bench
 from biped_opt.hybrid import Status, simulate
+from biped_opt.model.modes import ContactMode
 from biped_opt.model.params import BipedParams
 from tests.conftest import REFERENCE
 
@@ -62,7 +63,7 @@ def test_reference_agrees_with_biped_opt(case: tuple) -> None:
     assert tr.success
     assert r.outcome == pytest.approx(tr.outcome, abs=OUTCOME_TOL)
     assert r.t_final == pytest.approx(tr.t_final, abs=1e-8)
-    assert r.mode_sequence == tuple(m.name for m in tr.mode_sequence)
+    assert r.mode_sequence == tuple(ContactMode(m).name for m in tr.mode_sequence)
 
 
 def test_reference_simultaneous_events_at_zero() -> None:
@@ -96,7 +97,7 @@ def test_relaxation_is_close_but_not_exact(case: tuple) -> None:
     maneuver, theta0, u = case
     exact = simulate(maneuver, theta0, u)
     r = relaxation.simulate(maneuver, theta0, u)
-    assert r.mode_sequence == tuple(m.name for m in exact.mode_sequence)
+    assert r.mode_sequence == tuple(ContactMode(m).name for m in exact.mode_sequence)
     assert r.outcome == pytest.approx(exact.outcome, abs=RELAXATION_TOL)
     assert abs(r.t_final - exact.t_final) <= 2 * relaxation.STRIP * len(r.mode_sequence)
 

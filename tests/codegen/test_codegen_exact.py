@@ -21,6 +21,7 @@ from scipy.integrate import solve_ivp
 from scipy.special import ellipk
 
 from biped_opt.codegen.render import UnsupportedExpressionError, _expand, render
+from biped_opt.codegen.runtime import Status
 from biped_opt.hybrid.simulate import SimulatorOptions
 from biped_opt.simulation.compiled import compile_system
 from biped_opt.systems import System, derive
@@ -135,7 +136,7 @@ def test_offset_pendulum_swings_to_its_mirror_angle(pendulum, s):
     a, length, g, m = 0.5, 0.8, 9.81, 1.3
     pendulum.set_parameters()  # (the defaults: S = 0, the wall out of reach)
     tr = pendulum.simulate("swing", s, sample_dt=0.01)
-    assert tr.status == "OK" and tr.n_events == 0
+    assert tr.status is Status.OK and tr.n_events == 0
     assert tr.outcome == pytest.approx(-s - a, abs=1e-9)
     assert tr.t_final == pytest.approx(2 * math.sqrt(length / g) * ellipk(math.sin(s / 2) ** 2),
                                        abs=1e-9)
@@ -212,7 +213,7 @@ def test_a_system_named_like_every_name_of_the_generated_code_simulates_the_same
         ref.set_parameters(wall=wall, **{f"k{i}": 2.0**-10 for i in range(len(rest))})
         odd.set_parameters(**{_ROLES["wall"]: wall}, **{n: 2.0**-10 for n in rest})
         want, got = ref.simulate(maneuver, s, u), odd.simulate(maneuver, s, u)
-        assert got.status == want.status == "OK"
+        assert got.status is want.status is Status.OK
         assert got.n_events == want.n_events == (maneuver == "bounce")  # (the wall is hit)
         assert got.outcome == pytest.approx(want.outcome, abs=1e-13)
         assert got.t_final == pytest.approx(want.t_final, abs=1e-13)
@@ -345,7 +346,7 @@ def test_chain_of_many_expression_kinds_against_solve_ivp(chain, maneuver, s, c,
     values = dict(_P, c=c, H=10.0 if maneuver == "swing" else 1.5)
     system.set_parameters(**values)
     tr = system.simulate(maneuver, s, (u,), options=TIGHT, sample_dt=0.1)
-    assert tr.status == "OK" and tr.n_events == 0
+    assert tr.status is Status.OK and tr.n_events == 0
     assert tr.t_final == pytest.approx(values["T"], abs=1e-11)
     ts = tr.samples[:, 0]
     ref, lam = _reference(M, f, a, values, u, tr.samples[0, 1:7], maneuver == "slide",

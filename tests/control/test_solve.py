@@ -87,7 +87,7 @@ def test_rocking_bar_branch_names_the_impacts() -> None:
     tr = compiled.simulate("drop", 0.0, [0.0])
     from biped_opt.control.solve import branch_of
 
-    assert branch_of(compiled, tr.modes[0], tr.events[: len(tr.event_times)]) == \
+    assert branch_of(compiled, tr.initial_mode, tr.event_rows[: tr.n_events]) == \
         "air->air[left+right]"
 
 

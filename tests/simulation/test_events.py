@@ -20,6 +20,7 @@ import sympy as sp
 from scipy.optimize import brentq
 
 from biped_opt.cli.main import main
+from biped_opt.codegen.runtime import Status
 from biped_opt.simulation.compiled import compile_system
 from biped_opt.systems import System
 from biped_opt.systems.description import SystemDescriptionError
@@ -81,7 +82,7 @@ def bar_reference(th0: float, *, w: float = 0.5, gamma: float = 0.5, m: float = 
 
 
 def _impacts(tr):
-    return [int(r[2]) for r in tr.events if r[1] == 1]
+    return [e.mask_entered for e in tr.contact_events]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -145,7 +146,7 @@ def test_bounces_much_shorter_than_a_step_are_all_found(ball):
     flights are found however short while their apex (v^2 / 2g, 1e-13 for the 22nd) stays
     above the height's rounding (~1e-16), i.e. down to ~1e-7 time units here."""
     tr = ball.simulate("bounce", 0.0)
-    assert tr.status == "MAX_EVENTS" and tr.n_events == 22
+    assert tr.status is Status.MAX_EVENTS and tr.n_events == 22
     v0 = math.sqrt(2 * 1.5)
     flights = [2 * v0 * 0.5 ** k for k in range(1, 22)]
     expected = v0 + np.concatenate([[0.0], np.cumsum(flights)])
@@ -194,10 +195,10 @@ def test_an_impact_just_before_the_apex_does_not_end_the_run(bar):
     assert tr.success and _impacts(tr) == impacts
     np.testing.assert_allclose(tr.event_times, times, rtol=0, atol=1e-9)
     third = tr.events[2]
-    # rows: [t, kind, touchdown, liftoff, mode before, mode after, y before, y after], y =
-    # (x, z, th, x', z', th'): z' just before the impact (the apex was near), and after it
-    assert 0 < third[6 + 4] < 1e-9
-    assert third[6 + 6 + 4] == pytest.approx(0.452, abs=1e-3)  # (not an apex)
+    # y = (x, z, th, x', z', th'): z' just before the impact (the apex was near), and after it
+    assert third.kind == "touchdown" and third.entered == ("left",)
+    assert 0 < third.state_before[4] < 1e-9
+    assert third.state_after[4] == pytest.approx(0.452, abs=1e-3)  # (not an apex)
     assert tr.outcome == pytest.approx(outcome, abs=1e-9)
     assert tr.outcome == pytest.approx(-0.3007288, abs=1e-7)  # (SYSTEMS.md's number)
     assert tr.t_final == pytest.approx(t_end, abs=1e-9) and t_end - times[-1] > 0.05
@@ -267,7 +268,7 @@ def test_a_landing_that_would_pull_leaves_the_ground_at_once(hopper, v_foot):
     assert tr.modes == (0, 0)  # a touchdown whose next mode is the air
     assert _impacts(tr) == [1]
     assert tr.event_times[0] == pytest.approx(t_land, abs=1e-9)
-    assert abs(tr.events[0][6 + 4 + 3]) < 1e-14  # the foot's velocity after the impact
+    assert abs(tr.events[0].state_after[3]) < 1e-14  # the foot's velocity after the impact
     assert tr.t_final == pytest.approx(t_apex, abs=1e-9)
     assert tr.outcome == pytest.approx(zb_apex, abs=1e-9)
 
@@ -276,7 +277,7 @@ def test_the_budget_is_the_maneuvers_and_named_when_used_up(ball):
     """max_events and horizon are fields of the maneuver; a run that uses one up says which,
     where to raise it and its last events."""
     tr = ball.simulate("bounce", 0.0)
-    assert tr.status == "MAX_EVENTS"
+    assert tr.status is Status.MAX_EVENTS
     assert tr.message.startswith("22 contact events, the maneuver's event budget, were used up")
     assert "max_events" in tr.message and "--max-events" in tr.message
     assert tr.message.count("touchdown floor -> mode air") == 3  # the last three events
@@ -284,7 +285,7 @@ def test_the_budget_is_the_maneuvers_and_named_when_used_up(ball):
     assert ball.maneuver_options("bounce").t_end == 10.0
 
     tr = ball.simulate("fall", 1.0)
-    assert tr.status == "HORIZON" and tr.t_final == pytest.approx(0.5, abs=1e-15)
+    assert tr.status is Status.HORIZON and tr.t_final == pytest.approx(0.5, abs=1e-15)
     assert "the horizon t = 0.5" in tr.message and "--horizon" in tr.message
 
 

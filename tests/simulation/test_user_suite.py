@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from biped_opt.simulation.compiled import STATUS_NAMES
+from biped_opt.codegen.runtime import Status
 from tests.simulation.user import reference_chain, reference_flight
 
 USER = Path(__file__).with_name("user")
@@ -60,9 +60,10 @@ def compiled(name: str):
 def assert_agrees(tr, ref, where: str) -> None:
     """Same status, same impacts (which constraints, in which order), event times and outcome
     within TOL."""
-    assert tr.status == ref.status, f"{where}: status {tr.status}, reference {ref.status}"
-    impacts = [frozenset(j for j in range(8) if int(row[2]) >> j & 1)
-               for row in tr.events[: tr.n_events]]
+    assert tr.status.name == ref.status, f"{where}: status {tr.status.name}, reference " \
+        f"{ref.status}"
+    impacts = [frozenset(j for j in range(8) if e.mask_entered >> j & 1)
+               for e in tr.contact_events]
     assert impacts == [j for _, j in ref.events], f"{where}: impacts {impacts}, reference " \
         f"{[sorted(j) for _, j in ref.events]}"
     np.testing.assert_allclose(tr.event_times, ref.times, rtol=0, atol=TOL, err_msg=where)
@@ -116,7 +117,7 @@ def test_outcomes_and_impacts_over_s(name):
         for k, s in enumerate(grid):
             ref = reference_flight.simulate(make(s))
             where = f"{name} s = {s!r}"
-            assert STATUS_NAMES[batch["status"][k]] == ref.status, where
+            assert Status(batch.status[k]).name == ref.status, where
             assert batch["n_events"][k] == len(ref.events), where
             assert batch["outcome"][k] == pytest.approx(ref.outcome, rel=0, abs=TOL), where
             assert_agrees(system.simulate(maneuver, s), ref, where)
