@@ -15,7 +15,7 @@ it and returns a JSON-ready dict:
   most accurate is biped_opt at its default tolerance (checked against itself at rtol 1e-14 in
   ``reference_self_check``), and biped_opt's own entry is its error against solve_ivp;
 - ``sweep_s``: a 401-point fixed-input sweep per maneuver through the batch path
-  (:func:`biped_opt.optimal.sweep.sweep_fixed`, one batch), median of a few repeats after warm-up;
+  (:func:`biped_opt.paper.sweeps.sweep_fixed`, one batch), median of a few repeats after warm-up;
 - ``compile_s``: a fresh interpreter importing biped_opt and simulating once, with
   ``NUMBA_CACHE_DIR`` an empty directory (cold compile) and then the same directory (cached).
 """
@@ -185,7 +185,7 @@ def run_benchmark(
     """
     import biped_opt
     from biped_opt.model.modes import ContactMode
-    from biped_opt.optimal.sweep import sweep_fixed
+    from biped_opt.paper.sweeps import sweep_fixed
     from biped_opt.piecewise import theta_grid
 
     cases = make_cases(n_cases, seed)

@@ -243,7 +243,8 @@ def run_once(args: argparse.Namespace, domain_id: int) -> dict:
 
 def summarise(outputs: list[dict], wall: float, rss_before: int, rss_after: int,
               args: argparse.Namespace) -> dict:
-    from biped_opt.optimal import get_problem, optimal_policy
+    from biped_opt.paper.problems import get_problem
+    from biped_opt.paper.solve import optimal_policy
 
     problem = get_problem("touchdown")
     rows = [r for out in outputs for r in out["results"]]

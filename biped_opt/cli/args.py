@@ -32,7 +32,7 @@ if TYPE_CHECKING:
 
     from biped_opt.control.problems import Problem
     from biped_opt.maneuvers import Maneuver
-    from biped_opt.optimal.problems import OptimalControlProblem
+    from biped_opt.paper.problems import OptimalControlProblem
     from biped_opt.simulation.compiled import CompiledSystem
 
 __all__ = ["BIPED_ONLY", "GRADIENT_EPS_VALUES", "GRADIENT_SAMPLE_COUNTS", "GRADIENT_SIGMAS",
@@ -417,7 +417,7 @@ def problem_from_args(args: argparse.Namespace) -> OptimalControlProblem:
     """The biped's problem named by --maneuver/--variant with the command line's overrides."""
     from biped_opt.hybrid.simulate import INPUT_NAMES
     from biped_opt.maneuvers import Maneuver
-    from biped_opt.optimal.problems import get_problem
+    from biped_opt.paper.problems import get_problem
 
     maneuver = parse_maneuver_arg(args.maneuver)
     name = maneuver.value
@@ -465,7 +465,7 @@ def add_range_arguments(p: argparse.ArgumentParser, num_help: str) -> None:
 def grid_from_args(args: argparse.Namespace, maneuver: str,
                    default_num: int) -> npt.NDArray[np.float64]:
     """The th0 grid of --theta0-min/--theta0-max/--num (0 included)."""
-    from biped_opt.optimal.sweep import sweep_grid
+    from biped_opt.paper.sweeps import sweep_grid
 
     for option, value in (("--theta0-min", args.theta0_min), ("--theta0-max", args.theta0_max)):
         if value is not None:

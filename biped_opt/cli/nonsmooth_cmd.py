@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         report = find_nonsmooth(compiled, args.maneuver, dict(args.input), s=grid,
                                 progress=progress)
     elif kind == "optimal":
-        from biped_opt.optimal.nonsmooth import find_nonsmooth_optimal as find_biped_optimal
+        from biped_opt.paper.nonsmooth import find_nonsmooth_optimal as find_biped_optimal
 
         maneuver = parse_maneuver_arg(args.maneuver).value
         problem = problem_from_args(args)
@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
         report = find_biped_optimal(problem, grid, progress=progress)
     else:
         from biped_opt.fixed_sweep import FIXED_INPUTS
-        from biped_opt.optimal.nonsmooth import find_nonsmooth_fixed
+        from biped_opt.paper.nonsmooth import find_nonsmooth_fixed
 
         maneuver = parse_maneuver_arg(args.maneuver).value
         grid = grid_from_args(args, maneuver, SWEEP_NUM[kind])

@@ -18,12 +18,12 @@ from biped_opt.cli.args import (
     problem_from_system_args,
     uses_system,
 )
-from biped_opt.cli.output import derivatives_json, show_optimal
+from biped_opt.cli.output import derivatives_json, optimal_json, show_optimal
 from biped_opt.errors import InvalidInputError
 
 if TYPE_CHECKING:
-    from biped_opt.optimal.problems import OptimalControlProblem
-    from biped_opt.optimal.solve import OptimalResult
+    from biped_opt.control.solve import OptimalResult
+    from biped_opt.paper.problems import OptimalControlProblem
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
 
 def run_biped(args: argparse.Namespace) -> int:
     """The biped's problem at --theta0: the derivatives from its variational equations."""
-    from biped_opt.optimal.solve import optimal_policy
+    from biped_opt.paper.solve import optimal_policy
 
     if args.theta0 is None:
         raise InvalidInputError("--theta0 is required (or --system with --s)")
@@ -50,7 +50,7 @@ def run_biped(args: argparse.Namespace) -> int:
     r = optimal_policy(problem, theta0)
     derivatives = _biped_derivatives(problem, theta0) if r.success else None
     return show_optimal(
-        args.json, {**r.as_dict(), "problem": r.problem.describe()},
+        args.json, optimal_json(r, problem.describe()),
         problem=f"{problem.name}  theta0 = {r.theta0:+.12g}", status=f"{r.status}: {r.message}",
         policy=r.policy, bound=f"{r.active} at its {r.bound} bound" if r.bound else "",
         value=r.value, outcome=f"th(t_f) = {r.outcome:+.15g}", branch=r.branch,
@@ -77,7 +77,7 @@ def run_system(args: argparse.Namespace) -> int:
         else:
             derivatives = derivatives_json(d, "variational (Theorem 1)")
     return show_optimal(
-        args.json, {**r.as_dict(), "problem": problem.as_dict()},
+        args.json, optimal_json(r, problem.as_dict()),
         problem=f"{problem.name}  ({problem.description.name}, maneuver {problem.maneuver})  "
                 f"s = {r.s:+.12g}",
         status=f"{'ok' if r.success else 'failed'}: {r.message}", policy=r.policy,
@@ -89,10 +89,10 @@ def run_system(args: argparse.Namespace) -> int:
 def _biped_derivatives(problem: OptimalControlProblem, theta0: float) -> dict[str, Any]:
     """One-sided derivatives (left, right) of the biped's optimal outcome, value and policy at
     theta0: from the variational equations (Theorem 1, Eqs. (12)-(13)) when
-    :mod:`biped_opt.optimal.derivatives` imports, else from extrapolated one-sided finite
+    :mod:`biped_opt.paper.derivatives` imports, else from extrapolated one-sided finite
     differences of the optimal solution."""
     try:
-        from biped_opt.optimal.derivatives import one_sided_derivatives
+        from biped_opt.paper.derivatives import one_sided_derivatives
     except ImportError:
         return _finite_difference_derivatives(problem, theta0)
     return derivatives_json(one_sided_derivatives(problem, theta0), "variational")
@@ -101,7 +101,7 @@ def _biped_derivatives(problem: OptimalControlProblem, theta0: float) -> dict[st
 def _finite_difference_derivatives(problem: OptimalControlProblem,
                                    theta0: float) -> dict[str, Any]:
     from biped_opt.maneuvers import spec
-    from biped_opt.optimal.solve import optimal_policy
+    from biped_opt.paper.solve import optimal_policy
     from biped_opt.piecewise import one_sided
 
     cache: dict[float, OptimalResult] = {}

@@ -17,11 +17,12 @@ from biped_opt.errors import InvalidInputError
 
 if TYPE_CHECKING:
     from biped_opt.analysis.switches import NonsmoothReport
+    from biped_opt.control.solve import OptimalResult
     from biped_opt.simulation.compiled import CompiledSystem
     from biped_opt.simulation.trajectory import Trajectory
 
 __all__ = ["derivatives_json", "emit_json", "emit_paths", "emit_sweep", "fixed_sweep_table",
-           "optimal_sweep_table", "show_derivatives", "show_optimal",
+           "optimal_json", "optimal_sweep_table", "show_derivatives", "show_optimal",
            "show_report", "show_system_trajectory", "show_trajectory",
            "system_trajectory_json", "trajectory_json"]
 
@@ -209,6 +210,18 @@ def show_derivatives(parameter: str, derivatives: Mapping[str, Any]) -> None:
     print(f"  value    {derivatives['value'][0]:+.10g}  {derivatives['value'][1]:+.10g}")
     for k, (lft, rgt) in derivatives["policy"].items():
         print(f"  {k:<8} {lft:+.10g}  {rgt:+.10g}")
+
+
+def optimal_json(result: OptimalResult, problem: Mapping[str, Any]) -> dict[str, Any]:
+    """The JSON form of an optimal solution: the result's plain data with ``problem`` (its
+    description) in place of its name. Each candidate keeps, beside its policy, ``decision``: its
+    value of the acting decision (null when none or several act), the form the biped's candidates
+    had before every problem ran on one solver."""
+    out = {**result.as_dict(), "problem": dict(problem)}
+    acting = result.active if result.active in result.policy else None
+    out["candidates"] = [{**c, "decision": c["policy"][acting] if acting else None}
+                         for c in out["candidates"]]
+    return out
 
 
 def show_optimal(as_json: bool, data: Mapping[str, Any], *, problem: str, status: str,

@@ -24,7 +24,7 @@ from biped_opt.cli.args import (
 )
 from biped_opt.cli.output import emit_sweep, fixed_sweep_table, optimal_sweep_table
 from biped_opt.fixed_sweep import FIXED_INPUTS
-from biped_opt.optimal.sweep import sweep_fixed, sweep_optimal
+from biped_opt.paper.sweeps import sweep_fixed, sweep_optimal
 
 
 def register(sub: argparse._SubParsersAction) -> None:

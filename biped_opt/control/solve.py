@@ -1,6 +1,6 @@
 """Optimal policies and values of any system's problems (Eqs. (4)-(6) of [1]_, SYSTEMS.md): the
-one solver, the paper's biped included (:mod:`biped_opt.optimal.solve` names its results in the
-paper's words).
+one solver, the paper's biped included (its preset, :mod:`biped_opt.paper.solve`, names the
+results in the paper's words).
 
 For a :class:`~biped_opt.control.problems.Problem` and a value of the maneuver's parameter s,
 minimise c(s, u) over the decision box. The cost is piecewise smooth in u (smooth while the mode

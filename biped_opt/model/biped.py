@@ -14,7 +14,8 @@ The physics is written here by hand, as compiled functions on flat float arrays,
 reference model. The simulator runs the module generated from the biped's description
 (``systems/library/biped.py``); the tests check that description's Eq. (1) against this model,
 and this model's constraint handling against Eq. (1) computed with general linear algebra. The
-biped's variational equations (:mod:`biped_opt.optimal.derivatives`) evaluate it directly.
+tests' oracle of the biped's variational equations (``tests/paper/oracle_biped.py``) evaluates it
+directly.
 
 .. [1] B. Banjanin and S. A. Burden, "Nonsmooth optimal value and policy functions in mechanical
    systems subject to unilateral constraints", IEEE Control Systems Letters 4(2), 2020.

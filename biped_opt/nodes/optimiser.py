@@ -1,10 +1,12 @@
 """``optimiser`` node: serves optimal-policy queries on ``/biped/optimal_policy``.
 
 For a request (maneuver, theta0) it solves the maneuver's optimal-control problem (paper Eqs. (4),
-(14), (15); :func:`biped_opt.optimal.optimal_policy`) and replies with the policy (touchdown
-[u1, u2], liftoff [u12]), value, outcome, final time, mode sequence, event times and the one-sided
+(14), (15); the preset :mod:`biped_opt.paper.problems`' one-lane problem, by
+:func:`biped_opt.control.solve.optimal_policy`) and replies with the policy (touchdown [u1, u2],
+liftoff [u12]), value, outcome, final time, mode sequence, event times and the one-sided
 derivatives [left, right] of the value (envelope theorem: dV/dth0 = dc/dth0 at the optimum, with the
-outcome's one-sided sensitivities through the events).
+outcome's one-sided sensitivities through the events; :func:`biped_opt.control.theorem1.
+value_slopes`).
 
 The problems' parameters are node parameters (``config/biped.yaml``): for each maneuver M,
 ``M.theta_star``, ``M.alphas``, ``M.bounds`` (flattened [lo, hi] per decision) and
@@ -18,8 +20,9 @@ callback group, multi-threaded executor).
 names the decisions (``decision_names``), gives the full input vector in the system's order
 (``system_inputs``) and the contact modes as bit masks (``contact_modes``). Its
 ``value_derivative`` is the envelope theorem's dc/ds at the optimal inputs with the outcome's and
-final state's one-sided sensitivities (:func:`biped_opt.control.derivatives.outcome_gradient`),
-NaN on a side where they are not defined.
+final state's one-sided sensitivities (the same :func:`~biped_opt.control.theorem1.value_slopes`),
+NaN on a side where they are not defined. Both replies are one conversion of the one
+:class:`~biped_opt.control.solve.OptimalResult` (:meth:`Answer.of`).
 
 **What a request may name** (:mod:`biped_opt.nodes.sources`): ``system`` a library system
 (``rocking_bar``, ``walker3_coupled``...) or the name of ``<dir>/<name>.py`` in a directory of
@@ -69,9 +72,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numba
-import numpy as np
 
 from biped_opt import ros
+from biped_opt.control.solve import optimal_policy
+from biped_opt.control.theorem1 import value_slopes
 from biped_opt.errors import (
     BipedOptError,
     InvalidInputError,
@@ -92,34 +96,19 @@ from biped_opt.nodes.sources import (
     name_of,
     request_study,
 )
-from biped_opt.optimal import OptimalControlProblem, OptimalResult, get_problem, optimal_policy
-from biped_opt.optimal.derivatives import outcome_sensitivity
+from biped_opt.paper.problems import OptimalControlProblem, get_problem
 
-if TYPE_CHECKING:  # the systems' modules (SymPy) load only where a system is used
+if TYPE_CHECKING:
     from biped_opt.control.problems import Problem
-    from biped_opt.control.solve import SystemOptimalResult
+    from biped_opt.control.solve import OptimalResult
 
-__all__ = ["Answer", "OptimiserNode", "main", "value_derivative"]
+__all__ = ["Answer", "OptimiserNode", "main"]
 
 #: default of the ``cache_size`` parameter [entries]
 CACHE_SIZE = 4096
 #: default of the parameter compile_queue [systems]; the most points in one work item
 COMPILE_QUEUE, MAX_INDICES = 4, 256
 NAN = float("nan")
-
-
-def value_derivative(problem: OptimalControlProblem, result: OptimalResult) -> tuple[float, float]:
-    """[left, right] dV/dth0 by the envelope theorem (Theorem 1, Eq. (13)): the partial of the
-    cost c = (th_f - th*)^2 + sum alpha u^2 in th0 at the optimal inputs, with the outcome's
-    one-sided sensitivity through the events on each side."""
-    out = []
-    for side in (-1, +1):
-        s = outcome_sensitivity(
-            problem.maneuver.value, result.theta0, result.inputs,
-            direction=(side, 0.0, 0.0, 0.0), params=problem.params,
-        )
-        out.append(problem.outcome_slope(s.outcome) * s.gradient[0])
-    return out[0], out[1]
 
 
 class OptimiserNode(ros.Node):
@@ -235,10 +224,11 @@ class OptimiserNode(ros.Node):
         """Validated, cached answer to one request."""
         if system in BIPED and not problem:
             maneuver = convert.request_maneuver(maneuver_text)
-            th = convert.request_theta0(maneuver, theta0)
-            biped = self._problems[maneuver]
-            return self._cached((maneuver, th, biped),
-                                lambda: Answer.of(biped, optimal_policy(biped, th)))
+            th = convert.request_theta0(maneuver, theta0)  # (in the maneuver's range)
+            preset = self._problems[maneuver]
+            biped = preset.problem
+            return self._cached((maneuver, th, preset),
+                                lambda: Answer.of(biped, optimal_policy(biped, th), paper=True))
         # names only, checked before anything is compiled (see biped_opt.nodes.sources); the
         # compiler then checks only what needs the system built (Sources.problem)
         names = self._sources.check_request(system, problem, maneuver_text)
@@ -249,13 +239,7 @@ class OptimiserNode(ros.Node):
             f"system {system or 'biped'} (problem {name})",
             self._job("policy", system, problem, names))
         key = ("system", id(on.description), json.dumps(on.as_dict(), sort_keys=True), s)
-
-        def answer() -> Answer:
-            from biped_opt.control.solve import optimal_policy as system_optimal_policy
-
-            return Answer.of_system(on, system_optimal_policy(on, s))
-
-        return self._cached(key, answer)
+        return self._cached(key, lambda: Answer.of(on, optimal_policy(on, s)))
 
     def _cached(self, key: tuple, compute: Any) -> Answer:
         with self._lock:
@@ -368,37 +352,25 @@ class Answer:
     system_inputs: tuple[float, ...]
 
     @classmethod
-    def of(cls, problem: OptimalControlProblem, result: OptimalResult) -> Answer:
-        dv = value_derivative(problem, result)
+    def of(cls, problem: Problem, result: OptimalResult, *, paper: bool = False) -> Answer:
+        """The reply to ``result``, the optimum of ``problem``: the value's one-sided slopes by
+        Theorem 1 (NaN when the optimum failed). A request of the paper's (``paper``: the
+        biped's problems of the node's parameters) also gets the fields the reply had before
+        any system could be asked: its contact modes as ``mode_sequence`` (ContactMode values)
+        and its inputs (u1, u2, u12) as ``inputs``; any other gets an empty mode_sequence and
+        NaN inputs (its inputs are ``system_inputs``)."""
+        dv = value_slopes(problem, result) if result.success else (NAN, NAN)
         modes = tuple(int(m) for m in result.modes)
         inputs = tuple(float(v) for v in result.inputs)
         return cls(
             success=bool(result.success), message=result.message,
-            policy=tuple(float(v) for v in result.x), value=float(result.value),
-            outcome=float(result.outcome),
-            t_final=float(result.trajectory.t_final) if result.trajectory else NAN,
-            mode_sequence=modes,
-            event_times=tuple(float(t) for t in np.asarray(result.event_times)),
-            value_derivative=(float(dv[0]), float(dv[1])),
-            inputs=inputs, contact_modes=modes, decision_names=tuple(problem.decisions),
-            system_inputs=inputs,
-        )
-
-    @classmethod
-    def of_system(cls, problem: Problem, result: SystemOptimalResult) -> Answer:
-        from biped_opt.control.theorem1 import value_slopes
-
-        dv = value_slopes(problem, result) if result.success else (NAN, NAN)
-        return cls(
-            success=bool(result.success), message=result.message,
             policy=tuple(float(result.policy[d]) for d in problem.decision_names),
             value=float(result.value), outcome=float(result.outcome),
-            t_final=float(result.t_final), mode_sequence=(),
+            t_final=float(result.t_final), mode_sequence=modes if paper else (),
             event_times=tuple(float(t) for t in result.event_times),
-            value_derivative=(float(dv[0]), float(dv[1])), inputs=(NAN, NAN, NAN),
-            contact_modes=tuple(int(m) for m in result.modes),
-            decision_names=problem.decision_names,
-            system_inputs=tuple(float(v) for v in result.inputs),
+            value_derivative=(float(dv[0]), float(dv[1])),
+            inputs=inputs if paper else (NAN, NAN, NAN), contact_modes=modes,
+            decision_names=tuple(problem.decision_names), system_inputs=inputs,
         )
 
     def fill(self, response: Any) -> None:

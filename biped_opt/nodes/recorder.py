@@ -60,7 +60,7 @@ from biped_opt.nodes.compiler import BUSY, COMPILE_TIMEOUT_S
 from biped_opt.nodes.run import announce_ready, run_node
 from biped_opt.nodes.simulator import BIPED, SYSTEM_INFO_QOS
 from biped_opt.nodes.sources import name_of
-from biped_opt.optimal import OptimalControlProblem, get_problem
+from biped_opt.paper.problems import OptimalControlProblem, get_problem
 from biped_opt.record import SweepWriter
 
 if TYPE_CHECKING:  # the systems' modules (SymPy) load only where a system is used

@@ -6,7 +6,7 @@ it straddles 0, because that is where the mode order changes (MODEL.md Sec. 3). 
 frozen values of arrays with :meth:`to_json`; a small progress bar on stderr is optional. Both
 run on the one lane: the library biped's compiled kernel in parallel batches
 (:meth:`~biped_opt.simulation.compiled.CompiledSystem.simulate_batch`) and the one solver
-(:func:`biped_opt.control.solve.optimal_sweep`, through :func:`biped_opt.optimal.solve.
+(:func:`biped_opt.control.solve.optimal_sweep`, through :func:`biped_opt.paper.solve.
 optimal_sweep`); branches are named in the paper's words (``AIR->LEFT->GROUND``).
 
 .. [1] B. Banjanin and S. A. Burden, "Nonsmooth optimal value and policy functions in mechanical
@@ -26,13 +26,13 @@ from biped_opt.errors import InvalidInputError
 from biped_opt.fixed_sweep import FIXED_INPUTS, theta_grid
 from biped_opt.maneuvers import check_theta0, spec
 from biped_opt.model.params import BipedParams
-from biped_opt.optimal.solve import optimal_sweep
 from biped_opt.paper.problems import (
     INPUT_NAMES,
     OptimalControlProblem,
     compiled_biped,
     paper_branch,
 )
+from biped_opt.paper.solve import optimal_sweep
 from biped_opt.progress import Progress
 from biped_opt.progress import bar as _bar
 from biped_opt.simulation.compiled import STATUS_NAMES
@@ -220,7 +220,7 @@ def sweep_optimal(
 ) -> OptimalSweep:
     """Optimal policy and value over ``theta0`` (0 inserted when straddled); see optimal_sweep.
 
-    ``solver`` keywords (grid_points, xatol) go to :func:`~biped_opt.optimal.solve.optimal_sweep`.
+    ``solver`` keywords (grid_points, xatol) go to :func:`~biped_opt.paper.solve.optimal_sweep`.
     """
     th = _as_grid(problem.maneuver, theta0)
     bar = _bar(progress, th.size, f"{problem.name} optimal sweep")

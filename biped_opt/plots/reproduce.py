@@ -19,7 +19,6 @@ from pathlib import Path
 
 from biped_opt.analysis.switches import NonsmoothReport
 from biped_opt.model.params import BipedParams
-from biped_opt.optimal.problems import OptimalControlProblem
 from biped_opt.paper.figures import (
     MANEUVERS,
     ReproductionData,
@@ -28,6 +27,7 @@ from biped_opt.paper.figures import (
     optimal_data,
     reproduction_data,
 )
+from biped_opt.paper.problems import OptimalControlProblem
 from biped_opt.plots.figures import figure2, figure3, figure4
 
 __all__ = ["Reproduction", "reproduce", "draw_reproduction", "fixed_data", "optimal_data",

@@ -27,7 +27,7 @@ one-sided limits and slopes, the quadratics through 3 their error estimates, and
 beyond 3x the errors are a **jump** or a **kink**. These are estimates from the recording, as good
 as its grid: the bracket width (the recorded spacing) bounds the location error, and the table
 says so. ``refine=True`` re-locates every point to 1e-10 with the core's engine
-(:mod:`biped_opt.optimal.nonsmooth`, which simulates and optimises again) and prints both.
+(:mod:`biped_opt.paper.nonsmooth`, which simulates and optimises again) and prints both.
 
 Nothing is drawn here either: the figures are :mod:`biped_opt.plots`' (Figs. 2-4 from
 :mod:`biped_opt.paper.figures`' data, another system's sweep by
@@ -50,12 +50,12 @@ import numpy.typing as npt
 
 from biped_opt.analysis.sampled import GridPoint, Samples, labels
 from biped_opt.analysis.sampled import grid_nonsmooth as _grid_nonsmooth
+from biped_opt.analysis.switches import NonsmoothReport
 from biped_opt.errors import BipedOptError
 from biped_opt.hybrid.simulate import INPUT_NAMES
 from biped_opt.model.modes import ContactMode
-from biped_opt.optimal import OptimalControlProblem, get_problem
-from biped_opt.optimal.nonsmooth import NonsmoothReport
-from biped_opt.optimal.sweep import FixedSweep, OptimalSweep
+from biped_opt.paper.problems import OptimalControlProblem, get_problem
+from biped_opt.paper.sweeps import FixedSweep, OptimalSweep
 from biped_opt.record.reader import read_raw, recorded_system
 from biped_opt.ros.interfaces import load_interfaces
 from biped_opt.systems.derive import mode_name
@@ -356,7 +356,7 @@ def report(paths: Sequence[str | Path], out_dir: str | Path, *, refine: bool = F
     refined: list[NonsmoothReport] = []
     biped = [s for s in by_key.values() if s.system == "biped"]
     if refine and biped:
-        from biped_opt.optimal.nonsmooth import find_nonsmooth_fixed, find_nonsmooth_optimal
+        from biped_opt.paper.nonsmooth import find_nonsmooth_fixed, find_nonsmooth_optimal
 
         for s in biped:
             if s.kind == "fixed":

@@ -20,9 +20,9 @@ from biped_opt.analysis.switches import (
 )
 from biped_opt.control.problems import Problem, get_problem
 from biped_opt.control.solve import compiled_for, optimal_policy
-from biped_opt.optimal.nonsmooth import find_nonsmooth_fixed
-from biped_opt.optimal.nonsmooth import find_nonsmooth_optimal as biped_find_optimal
-from biped_opt.optimal.problems import get_problem as biped_problem
+from biped_opt.paper.nonsmooth import find_nonsmooth_fixed
+from biped_opt.paper.nonsmooth import find_nonsmooth_optimal as biped_find_optimal
+from biped_opt.paper.problems import get_problem as biped_problem
 
 
 def test_rocking_bar_has_its_five_jumps_each_with_its_impact_orders() -> None:

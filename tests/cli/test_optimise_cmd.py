@@ -23,6 +23,11 @@ def test_json_as_a_user_runs_it():
     assert set(out["policy"]) == {"u1", "u2"}
     assert out["policy"]["u1"] == pytest.approx(1.2776719, abs=1e-6)
     assert out["modes"] == ["AIR", "LEFT", "GROUND"] and isinstance(out["outcome"], float)
+    # each candidate keeps its "decision" (the acting u1's value) beside its full policy
+    assert out["active"] == "u1" and out["candidates"]
+    assert all(c["decision"] == c["policy"]["u1"] for c in out["candidates"])
+    best = min(out["candidates"], key=lambda c: c["value"])
+    assert best["decision"] == out["policy"]["u1"] and best["value"] == out["value"]
     d = out["derivatives"]
     assert set(d) >= {"outcome", "value", "policy"} and set(d["policy"]) == {"u1", "u2"}
     # smooth point: both sides agree; dV/dth0 = dc/dth0 (envelope theorem)
@@ -50,7 +55,7 @@ def test_variant_text_output(capsys):
 
 
 def test_finite_difference_fallback_without_the_derivatives_module(monkeypatch, capsys):
-    monkeypatch.setitem(sys.modules, "biped_opt.optimal.derivatives", None)  # import fails
+    monkeypatch.setitem(sys.modules, "biped_opt.paper.derivatives", None)  # import fails
     assert main(["optimise", "--maneuver", "touchdown", "--theta0", "0", "--json"]) == 0
     d = json.loads(capsys.readouterr().out)["derivatives"]
     assert d["method"] == "finite-difference"

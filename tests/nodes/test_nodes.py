@@ -21,7 +21,8 @@ from biped_opt import ros
 from biped_opt.hybrid import simulate
 from biped_opt.nodes.graph import Graph
 from biped_opt.nodes.recorder import SweepRequest
-from biped_opt.optimal import get_problem, optimal_policy
+from biped_opt.paper.problems import get_problem
+from biped_opt.paper.solve import optimal_policy
 from biped_opt.piecewise import theta_grid
 from biped_opt.record import read_recording
 

@@ -20,8 +20,8 @@ from biped_opt.errors import BipedOptError
 from biped_opt.nodes.compiler import BUSY
 from biped_opt.nodes.graph import Graph
 from biped_opt.nodes.recorder import SweepRequest
-from biped_opt.optimal import get_problem as biped_problem
-from biped_opt.optimal import optimal_policy as biped_optimal_policy
+from biped_opt.paper.problems import get_problem as biped_problem
+from biped_opt.paper.solve import optimal_policy as biped_optimal_policy
 from biped_opt.piecewise import theta_grid
 from biped_opt.record.report import load_sweep
 from biped_opt.simulation.compiled import CompiledSystem

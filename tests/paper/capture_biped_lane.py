@@ -8,8 +8,9 @@ It writes ``tests/paper/biped_lane.json``: the numbers the biped-only lane (``bi
 ``biped_opt.maneuvers``, ``biped_opt.optimal``) gives before that lane is retired, which
 ``tests/paper/test_same_numbers.py`` compares with the any-system lane. It uses the biped-only
 lane alone, so it can run only while that lane exists: the file is the record afterwards.
-(``biped_opt.optimal``'s solver, sweeps and derivatives now run the one lane under the same
-names: run again, this would record the one lane's own numbers. Do not.)
+(``biped_opt.optimal``'s solver, sweeps and derivatives became the presets of
+``biped_opt.paper``, which run the one lane under the same names: run again, this would record
+the one lane's own numbers. Do not.)
 
 - ``trajectories``: both maneuvers at th0 on the ends of their ranges, at 0, within 1e-9 of 0
   and a few ordinary angles, with the paper's fixed inputs, zero, one more input vector each and
@@ -39,10 +40,10 @@ import numpy as np
 from biped_opt.fixed_sweep import FIXED_INPUTS
 from biped_opt.hybrid import simulate
 from biped_opt.maneuvers import spec
-from biped_opt.optimal.derivatives import one_sided_derivatives, outcome_sensitivity
-from biped_opt.optimal.nonsmooth import find_nonsmooth_fixed, find_nonsmooth_optimal
-from biped_opt.optimal.problems import PROBLEMS, get_problem
-from biped_opt.optimal.solve import optimal_policy
+from biped_opt.paper.derivatives import one_sided_derivatives, outcome_sensitivity
+from biped_opt.paper.nonsmooth import find_nonsmooth_fixed, find_nonsmooth_optimal
+from biped_opt.paper.problems import PROBLEMS, get_problem
+from biped_opt.paper.solve import optimal_policy
 
 OUT = Path(__file__).with_name("biped_lane.json")
 

@@ -1,12 +1,12 @@
 """A test oracle: the biped's own variational equations, on its hand-written physics.
 
-This was the biped-only lane's derivative engine (``biped_opt.optimal.derivatives``); the package
-now differentiates every system, the biped included, with :mod:`biped_opt.control.derivatives`
-and :mod:`biped_opt.control.theorem1` on generated code. Kept here as an independent
-implementation to compare those with: other physics code (:mod:`biped_opt.model.biped`, numba
-Jacobians by differences of the hand-written vector field), other event bookkeeping, and for
-Theorem 1 another polish and another differencing of the second derivatives (only the starting
-optimum comes from the one solver).
+This was the biped-only lane's derivative engine (``biped_opt.optimal.derivatives``, since
+retired); the package now differentiates every system, the biped included, with
+:mod:`biped_opt.control.derivatives` and :mod:`biped_opt.control.theorem1` on generated code.
+Kept here as an independent implementation to compare those with: other physics code
+(:mod:`biped_opt.model.biped`, numba Jacobians by differences of the hand-written vector field),
+other event bookkeeping, and for Theorem 1 another polish and another differencing of the second
+derivatives (only the starting optimum comes from the one solver).
 
 One-sided (Bouligand) derivatives of outcomes, optimal policies and values (Theorem 1 of [1]_).
 
@@ -75,8 +75,8 @@ from biped_opt.maneuvers import initial_state, parse_maneuver, spec
 from biped_opt.model.biped import BODY_DZ, NSTATE, dynamics, generalised_forces
 from biped_opt.model.modes import ContactMode
 from biped_opt.model.params import BipedParams
-from biped_opt.optimal.problems import OptimalControlProblem
-from biped_opt.optimal.solve import optimal_policy
+from biped_opt.paper.problems import OptimalControlProblem
+from biped_opt.paper.solve import optimal_policy
 
 __all__ = [
     "PARAMETER_NAMES",
@@ -741,9 +741,9 @@ def one_sided_derivatives(
 ) -> Derivatives:
     """One-sided derivatives of the optimal outcome, value and policy (Theorem 1, (12)-(13)).
 
-    ``problem`` is an :class:`~biped_opt.optimal.problems.OptimalControlProblem`; ``params``
+    ``problem`` is an :class:`~biped_opt.paper.problems.OptimalControlProblem`; ``params``
     overrides its biped parameters. For each side the optimum is taken from
-    :func:`~biped_opt.optimal.solve.optimal_policy` at theta0 + side * ``probe`` (which tells
+    :func:`~biped_opt.paper.solve.optimal_policy` at theta0 + side * ``probe`` (which tells
     the branch the side follows, also where the policy jumps), then polished by Newton's method
     on that branch *at* theta0 (exact first derivatives, differenced second derivatives).
     With c(th0, u) = (th_f - th*)^2 + sum alpha u^2 and u* that optimum:

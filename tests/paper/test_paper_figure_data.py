@@ -9,8 +9,6 @@ import pytest
 
 from biped_opt.analysis.figure_data import Mark
 from biped_opt.model.modes import ContactMode
-from biped_opt.optimal import get_problem
-from biped_opt.optimal.sweep import sweep_fixed, sweep_grid
 from biped_opt.paper.figures import (
     NonsmoothMark,
     at_zero,
@@ -18,6 +16,8 @@ from biped_opt.paper.figures import (
     cost_mark,
     fixed_data,
 )
+from biped_opt.paper.problems import get_problem
+from biped_opt.paper.sweeps import sweep_fixed, sweep_grid
 
 
 def test_cost_mark_maps_limits_through_the_cost_and_slopes_through_its_gradient():

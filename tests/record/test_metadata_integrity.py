@@ -23,7 +23,7 @@ from biped_opt import simulate
 from biped_opt.cli.info_cmd import describe
 from biped_opt.cli.main import main
 from biped_opt.nodes import convert
-from biped_opt.optimal import get_problem
+from biped_opt.paper.problems import get_problem
 from biped_opt.piecewise import theta_grid
 from biped_opt.record import SweepWriter, writer
 from biped_opt.record.reader import read_raw

@@ -9,7 +9,7 @@ import pytest
 
 from biped_opt import simulate
 from biped_opt.cli.main import main
-from biped_opt.optimal import get_problem
+from biped_opt.paper.problems import get_problem
 from biped_opt.piecewise import theta_grid
 from biped_opt.record import SweepWriter
 from biped_opt.record.report import ReportError, grid_nonsmooth, load_sweep, report

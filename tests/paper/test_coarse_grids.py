@@ -28,16 +28,13 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
+from biped_opt.analysis.switches import LOCATE_TOL
 from biped_opt.maneuvers import spec
 from biped_opt.model.params import BipedParams
-from biped_opt.optimal import (
-    liftoff_problem,
-    liftoff_variant_problem,
-    optimal_policy,
-    touchdown_problem,
-)
-from biped_opt.optimal.nonsmooth import LOCATE_TOL, find_nonsmooth_fixed, find_nonsmooth_optimal
-from biped_opt.optimal.sweep import sweep_grid
+from biped_opt.paper.nonsmooth import find_nonsmooth_fixed, find_nonsmooth_optimal
+from biped_opt.paper.problems import liftoff_problem, liftoff_variant_problem, touchdown_problem
+from biped_opt.paper.solve import optimal_policy
+from biped_opt.paper.sweeps import sweep_grid
 from biped_opt.piecewise import theta_grid
 
 # --- grids ---------------------------------------------------------------------------------------

@@ -18,19 +18,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from biped_opt.control.derivatives import DEFAULT_VARIATIONAL, saltation_matrix
 from biped_opt.errors import InvalidInputError, SimulationError
 from biped_opt.hybrid import simulate
 from biped_opt.hybrid.simulate import DEFAULT_OPTIONS
 from biped_opt.model.modes import ContactMode
-from biped_opt.optimal import get_problem, optimal_policy
-from biped_opt.optimal.derivatives import (
-    DEFAULT_VARIATIONAL,
+from biped_opt.paper.derivatives import (
     PARAMETER_NAMES,
     one_sided_derivatives,
     outcome_derivative,
     outcome_sensitivity,
-    saltation_matrix,
 )
+from biped_opt.paper.problems import get_problem
+from biped_opt.paper.solve import optimal_policy
 from biped_opt.piecewise import locate_switch
 from tests.extrapolated import SAFETY, extrapolated, relative_noise
 

@@ -16,13 +16,8 @@ from scipy.optimize import minimize_scalar
 from biped_opt.errors import InvalidInputError
 from biped_opt.hybrid import simulate, simulate_batch
 from biped_opt.model.modes import ContactMode
-from biped_opt.optimal import (
-    liftoff_problem,
-    liftoff_variant_problem,
-    optimal_policy,
-    optimal_sweep,
-    touchdown_problem,
-)
+from biped_opt.paper.problems import liftoff_problem, liftoff_variant_problem, touchdown_problem
+from biped_opt.paper.solve import optimal_policy, optimal_sweep
 
 TD = touchdown_problem()
 LO = liftoff_problem()

@@ -1,5 +1,6 @@
 """The biped's nonsmooth tables (MODEL.md Sec. 6) on the engine of
-:mod:`biped_opt.analysis.switches`."""
+:mod:`biped_opt.analysis.switches`: the paper's problems and fixed inputs, branches in its mode
+names (``AIR->LEFT->GROUND``)."""
 
 from __future__ import annotations
 
@@ -7,29 +8,28 @@ import numpy as np
 import numpy.typing as npt
 
 from biped_opt.analysis.switches import (
-    LOCATE_TOL,
     BoundSlope,
     Evaluator,
-    NonsmoothPoint,
     NonsmoothReport,
     Sample,
     analyse_switches,
     bound_relocation,
 )
+from biped_opt.control.solve import OptimalResult
 from biped_opt.errors import InvalidInputError
 from biped_opt.fixed_sweep import FIXED_INPUTS
 from biped_opt.hybrid import SimulatorOptions, simulate
 from biped_opt.hybrid.simulate import DEFAULT_OPTIONS, check_inputs
 from biped_opt.maneuvers import spec
+from biped_opt.model.modes import ContactMode
 from biped_opt.model.params import BipedParams
-from biped_opt.optimal.derivatives import outcome_sensitivity
-from biped_opt.optimal.problems import OptimalControlProblem
-from biped_opt.optimal.solve import OptimalResult, branch_label, optimal_policy
-from biped_opt.optimal.sweep import sweep_fixed, sweep_grid, sweep_optimal
+from biped_opt.paper.derivatives import outcome_sensitivity
+from biped_opt.paper.problems import OptimalControlProblem
+from biped_opt.paper.solve import optimal_policy
+from biped_opt.paper.sweeps import sweep_fixed, sweep_grid, sweep_optimal
 from biped_opt.progress import bar as _bar
 
-__all__ = ["find_nonsmooth_fixed", "find_nonsmooth_optimal", "NonsmoothPoint", "NonsmoothReport",
-           "LOCATE_TOL"]
+__all__ = ["find_nonsmooth_fixed", "find_nonsmooth_optimal"]
 
 
 def _optimal_sample(r: OptimalResult) -> Sample:
@@ -78,7 +78,8 @@ def find_nonsmooth_fixed(
     def sample(th: float) -> Sample:
         tr = simulate(name, th, u, params=params, options=options)
         nsim[0] += 1
-        label = branch_label(tr.mode_sequence, tr.success, tr.status.name)
+        label = ("->".join(ContactMode(m).name for m in tr.mode_sequence) if tr.success
+                 else f"FAILED:{tr.status.name}")
         return Sample(label=label, values={"outcome": tr.outcome}, branch=label)
 
     ev = Evaluator(sample)

@@ -9,6 +9,9 @@
   :func:`biped_opt.control.theorem1.optimal_derivatives` on its one-lane problem, branches in
   the paper's mode names.
 
+The variational options, the saltation matrix and the sensitivities' type are the one lane's
+(:mod:`biped_opt.control.derivatives`).
+
 .. [1] B. Banjanin and S. A. Burden, "Nonsmooth optimal value and policy functions in mechanical
    systems subject to unilateral constraints", IEEE Control Systems Letters 4(2), 2020.
 """
@@ -26,7 +29,6 @@ from biped_opt.control.derivatives import (
     OutcomeGradient,
     VariationalOptions,
     outcome_gradient,
-    saltation_matrix,
 )
 from biped_opt.control.theorem1 import Derivatives, optimal_derivatives
 from biped_opt.errors import InvalidInputError
@@ -40,23 +42,13 @@ from biped_opt.paper.problems import (
 )
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
 
-__all__ = [
-    "PARAMETER_NAMES",
-    "DEFAULT_VARIATIONAL",
-    "VariationalOptions",
-    "OutcomeSensitivity",
-    "Derivatives",
-    "outcome_sensitivity",
-    "outcome_derivative",
-    "saltation_matrix",
-    "one_sided_derivatives",
-]
+__all__ = ["PARAMETER_NAMES", "outcome_sensitivity", "outcome_derivative",
+           "one_sided_derivatives"]
 
-#: the parameters the outcome is differentiated with respect to, in gradient order
+#: the parameters the outcome is differentiated with respect to, in gradient order (the
+#: gradient is the one lane's :class:`~biped_opt.control.derivatives.OutcomeGradient`, whose
+#: ``theta0``, ``d_theta0``, ``d_input`` and ``mode_sequence`` are the biped's names on it)
 PARAMETER_NAMES = ("theta0", *INPUT_NAMES)
-#: the sensitivities' type (the one lane's; ``theta0``, ``d_theta0``, ``d_input`` and
-#: ``mode_sequence`` are the biped's names on it)
-OutcomeSensitivity = OutcomeGradient
 
 
 def _direction(direction: npt.ArrayLike | None) -> npt.NDArray[np.float64]:

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from biped_opt.errors import InvalidInputError
-from biped_opt.optimal import liftoff_problem, optimal_policy
-from biped_opt.optimal.sweep import sweep_fixed, sweep_grid, sweep_optimal
+from biped_opt.paper.problems import liftoff_problem
+from biped_opt.paper.solve import optimal_policy
+from biped_opt.paper.sweeps import sweep_fixed, sweep_grid, sweep_optimal
 from biped_opt.progress import Progress
 from tests.conftest import REFERENCE
 

@@ -4,7 +4,7 @@
 ranges, solve the problem's one-lane :class:`~biped_opt.control.problems.Problem` with
 :func:`biped_opt.control.solve.optimal_policy` (global bracketing on a grid of 65, bounded Brent,
 Newton polish, the bound test) and return its :class:`~biped_opt.control.solve.OptimalResult`
-in the paper's words: ``problem`` the paper's problem, ``modes`` as
+in the paper's words (:func:`in_paper_words`): ``problem`` the paper's problem, ``modes`` as
 :class:`~biped_opt.model.modes.ContactMode` and branches as ``AIR->LEFT->GROUND``.
 
 .. [1] B. Banjanin and S. A. Burden, "Nonsmooth optimal value and policy functions in mechanical
@@ -14,45 +14,20 @@ in the paper's words: ``problem`` the paper's problem, ``modes`` as
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 
 import numpy as np
 import numpy.typing as npt
 
 from biped_opt.control import solve as one_lane
-from biped_opt.control.solve import GRID_POINTS, XATOL, Candidate, OptimalResult
+from biped_opt.control.solve import XATOL, OptimalResult
 from biped_opt.errors import InvalidInputError
 from biped_opt.maneuvers import check_theta0
 from biped_opt.model.modes import ContactMode
 from biped_opt.model.params import BipedParams
-from biped_opt.optimal.problems import INPUT_MODES, OptimalControlProblem
-from biped_opt.paper.problems import paper_branch
+from biped_opt.paper.problems import OptimalControlProblem, paper_branch
 
-__all__ = [
-    "Candidate",
-    "OptimalResult",
-    "optimal_policy",
-    "optimal_sweep",
-    "active_decisions",
-    "branch_label",
-    "GRID_POINTS",
-    "XATOL",
-]
-
-
-def branch_label(modes: Sequence[ContactMode] | None, ok: bool = True, status: str = "") -> str:
-    """The mode order as text, e.g. ``"AIR->LEFT->GROUND"``; failed simulations are labelled."""
-    if not ok or modes is None:
-        return f"FAILED:{status}"
-    return "->".join(ContactMode(m).name for m in modes)
-
-
-def active_decisions(
-    problem: OptimalControlProblem, modes: Sequence[ContactMode]
-) -> tuple[str, ...]:
-    """Decisions whose contact mode occurs in ``modes`` (the only ones that can move th_f)."""
-    present = {ContactMode(m) for m in modes}
-    return tuple(d for d in problem.decisions if INPUT_MODES[d] in present)
+__all__ = ["in_paper_words", "optimal_policy", "optimal_sweep"]
 
 
 def in_paper_words(problem: OptimalControlProblem, result: OptimalResult) -> OptimalResult:

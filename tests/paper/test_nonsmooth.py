@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import pytest
 
-from biped_opt.optimal import liftoff_problem, liftoff_variant_problem, touchdown_problem
-from biped_opt.optimal.nonsmooth import find_nonsmooth_fixed, find_nonsmooth_optimal
-from biped_opt.optimal.sweep import sweep_grid
+from biped_opt.paper.nonsmooth import find_nonsmooth_fixed, find_nonsmooth_optimal
+from biped_opt.paper.problems import liftoff_problem, liftoff_variant_problem, touchdown_problem
+from biped_opt.paper.sweeps import sweep_grid
 
 
 def _only(report, quantity, input_=None, near=None):

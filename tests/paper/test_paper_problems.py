@@ -10,7 +10,7 @@ import pytest
 
 from biped_opt.errors import BipedOptError, InvalidInputError, InvalidParameterError
 from biped_opt.maneuvers import Maneuver
-from biped_opt.optimal.problems import (
+from biped_opt.paper.problems import (
     OptimalControlProblem,
     get_problem,
     liftoff_problem,
