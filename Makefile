@@ -20,8 +20,12 @@ $(STAMP): requirements.txt requirements-dev.txt constraints.txt setup.py
 demo: $(STAMP)
 	$(VENV)/bin/biped-opt demo
 
+# Two test workers (pytest-xdist; `make test TEST_WORKERS=0` runs in one process): a test marked
+# alone runs while no other does, and tests sharing a module's fixture go to one worker.
+TEST_WORKERS ?= 2
+
 test: $(STAMP) lint typecheck
-	$(PY) -m pytest
+	$(PY) -m pytest -n $(TEST_WORKERS) --dist loadgroup
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check biped_opt tests bench launch

@@ -221,6 +221,7 @@ def test_a_huge_grid_is_refused_before_it_is_built(optimiser):
     assert node.rss_kib() - before < 20_000
 
 
+@pytest.mark.alone  # (5 s bounds on replies while the node's own compile takes a core)
 def test_large_systems_do_not_hold_up_a_valid_request_and_sigint_stops_the_node():
     """Five requests for systems the node has not compiled (one beyond its limits, four that
     start or queue a compile of minutes) are answered at once; a biped request right after is

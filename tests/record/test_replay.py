@@ -122,6 +122,7 @@ def _timed_replay(path, samples, domain_id):
         (arrival[-1] - arrival[0]) - (recorded[-1] - recorded[0]))
 
 
+@pytest.mark.alone  # (millisecond bounds on arrival times)
 def test_replay_order_and_timing_at_rate_1(tmp_path, domain_id):
     """Every message arrives, in log-time order, and the inter-arrival times of the states equal
     the recorded log-time deltas within 5 ms (the acceptance bound; a sleep wakes ~0.1-1 ms late
@@ -138,6 +139,7 @@ def test_replay_order_and_timing_at_rate_1(tmp_path, domain_id):
     assert total < 5e-3  # the last state arrives when the recording says, relative to the first
 
 
+@pytest.mark.alone  # (millisecond bounds on arrival times)
 def test_rate_topics_and_errors(tmp_path, domain_id):
     path = tmp_path / "short.mcap"
     samples = _record(path)

@@ -58,10 +58,10 @@ def _have_rclpy() -> bool:
 
 
 @pytest.mark.skipif(not _have_rclpy(), reason="rclpy / built biped_opt_interfaces not importable")
-def test_rclpy_service_round_trip():
+def test_rclpy_service_round_trip(domain_id):
     """The same node code on real rclpy: the echo node served and called in one process."""
     env = dict(os.environ, BIPED_OPT_BACKEND="rclpy", PYTHONPATH=str(ROOT),
-               ROS_DOMAIN_ID=str(1 + os.getpid() % 200))
+               ROS_DOMAIN_ID=str(domain_id))
     code = """
 from biped_opt import ros
 from tests.ros._echo_node import EchoNode
