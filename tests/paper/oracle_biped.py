@@ -363,9 +363,11 @@ def _continue(
     rows = events[:n_rows].copy()
     rows[:, 0] += t0
     return Trajectory(
-        maneuver=s.maneuver.value, theta0=theta0, inputs=u, status=Status(status),
-        t_final=t_f + t0, state_final=y_out, mode_final=ContactMode(mode_f), event_rows=rows,
-        samples=None, nfev=nfev, nsteps=nsteps, nrejected=nrej,
+        system="biped", maneuver=s.maneuver.value, s=theta0, inputs=tuple(u.tolist()),
+        status=Status(status), t_final=t_f + t0, outcome=float(y_out[2]), y_final=y_out,
+        mode_final=int(mode_f), initial_mode=int(mode0), n_events=int(n_ev), event_rows=rows,
+        samples=None, nfev=nfev, nsteps=nsteps, nrejected=nrej, constraints=("left", "right"),
+        budget=None,
     )
 
 
@@ -458,8 +460,9 @@ def outcome_sensitivity(
     while pending:
         e = pending.pop(0)
         _, z = walker.flow(mode, t, e.t, y, z)
-        feet = [j - 1 for j in (*e.touchdown, *e.liftoff)]
-        touched_down = touched_down or bool(e.touchdown)
+        # the feet that switched (bit j = foot j + 1): touchdowns first, then liftoffs
+        feet = [j for mask in (e.mask_entered, e.mask_left) for j in range(2) if mask >> j & 1]
+        touched_down = touched_down or bool(e.mask_entered)
         y_cur = e.state_before
         if len(feet) == 1:
             mode, y_cur, z = walker.flip(mode, y_cur, z, feet[0])
