@@ -82,7 +82,7 @@ def find_nonsmooth(system: CompiledSystem | str, maneuver: str, inputs: Any = No
         np.unique(np.asarray(s, dtype=np.float64))
     if grid.size < 2 or not np.all(np.isfinite(grid)):
         raise InvalidInputError("s must hold at least two finite values")
-    u = compiled._inputs(inputs)
+    u = compiled.input_vector(inputs)
     first = compiled.initial_mode(maneuver)
     batch = compiled.simulate_batch(maneuver, grid, u)
     nsim = [int(grid.size)]

@@ -99,7 +99,7 @@ def run_system(args: argparse.Namespace) -> int:
         compiled, maneuver, kind = CompiledSystem(args.system, **dict(args.param)), \
             args.maneuver, "fixed"
         compiled.initial_mode(maneuver)  # an unknown maneuver: the system's message
-        compiled._inputs(dict(args.input))  # an unknown input: the system's message
+        compiled.input_vector(dict(args.input))  # an unknown input: the system's message
     grid = s_grid_from_args(args, compiled, maneuver, SYSTEM_NUM[kind])
     output_directory("--out", args.out)
     # matplotlib only when drawing

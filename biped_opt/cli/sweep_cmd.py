@@ -93,16 +93,15 @@ def _optimal_system(args: argparse.Namespace) -> int:
 
 def _fixed_system(args: argparse.Namespace) -> int:
     from biped_opt.control.solve import branch_of
-    from biped_opt.simulation.compiled import STATUS_NAMES
 
     compiled = compiled_from_args(args)
     maneuver = args.maneuver
     first = compiled.initial_mode(maneuver)
     grid = s_grid_from_args(args, compiled, maneuver, SWEEP_NUM["fixed"])
-    u = compiled._inputs(dict(args.input))
+    u = compiled.input_vector(dict(args.input))
     out = compiled.simulate_batch(maneuver, grid, u)
-    branches = [branch_of(compiled, first, out["events"][k, : int(out["n_events"][k])],
-                          STATUS_NAMES[int(out["status"][k])]) for k in range(grid.size)]
+    branches = [branch_of(compiled, first, out["events"][k, : int(out["n_events"][k])], status)
+                for k, status in enumerate(out.statuses())]
     header, lines = fixed_sweep_table("s", grid, out["outcome"], branches)
     data = {"system": compiled.name, "maneuver": maneuver,
             "inputs": dict(zip(compiled.inputs, u.tolist())),

@@ -540,7 +540,7 @@ def outcome_gradient(
     if not isinstance(compiled, CompiledSystem):
         raise InvalidInputError(f"compiled must be a CompiledSystem, got {compiled!r}")
     code = compiled._code(maneuver)
-    u = compiled._inputs(inputs)
+    u = compiled.input_vector(inputs)
     names = ("s", *compiled.inputs)
     v = _direction(direction, len(names), names)
     s = float(s)

@@ -35,7 +35,6 @@ from biped_opt.paper.problems import (
 from biped_opt.paper.solve import optimal_sweep
 from biped_opt.progress import Progress
 from biped_opt.progress import bar as _bar
-from biped_opt.simulation.compiled import STATUS_NAMES
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
 
 __all__ = [
@@ -184,7 +183,7 @@ def sweep_fixed(
     name = spec(maneuver).maneuver.value
     th = _as_grid(name, theta0)
     compiled = compiled_biped(params)
-    u = compiled._inputs(FIXED_INPUTS[name] if inputs is None else inputs)
+    u = compiled.input_vector(FIXED_INPUTS[name] if inputs is None else inputs)
     first = compiled.initial_mode(name)
     bar = _bar(progress, th.size, f"{name} fixed sweep")
     outcome, t_final, status, branch, events = [], [], [], [], []
@@ -192,9 +191,9 @@ def sweep_fixed(
         b = compiled.simulate_batch(name, th[idx], u, options=options)
         outcome.append(b["outcome"])
         t_final.append(b["t_final"])
-        for k in range(idx.size):
+        for k, st_k in enumerate(b.statuses()):
             rows = b["events"][k, : int(b["n_events"][k])]
-            st = STATUS_NAMES[int(b["status"][k])]
+            st = st_k.name
             status.append(st)
             branch.append(paper_branch(branch_of(compiled, first, rows, st)))
             events.append(tuple(float(t) for t in rows[:, 0]))

@@ -38,7 +38,6 @@ import numpy as np
 import numpy.typing as npt
 
 from biped_opt.codegen import precompile
-from biped_opt.codegen.runtime import Status
 from biped_opt.errors import InvalidInputError, InvalidParameterError
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
 from biped_opt.simulation.trajectory import BatchResult, Trajectory
@@ -49,12 +48,10 @@ if TYPE_CHECKING:  # (imported where needed: SymPy and the generator are the slo
     from biped_opt.systems.description import System
 
 __all__ = ["BatchResult", "CompiledSystem", "SystemTrajectory", "Trajectory", "cache_dir",
-           "compile_system", "shared", "simulate", "simulate_batch", "STATUS_NAMES"]
+           "compile_system", "shared", "simulate", "simulate_batch"]
 
 Array = npt.NDArray[np.float64]
 
-#: the kernel's status codes by name (as :class:`biped_opt.codegen.runtime.Status`)
-STATUS_NAMES = tuple(status.name for status in Status)
 _LOCK = threading.Lock()
 _LOADED: dict[str, ModuleType] = {}
 
@@ -319,7 +316,9 @@ class CompiledSystem:
                 f"{self._where}: unknown maneuver {maneuver!r} "
                 f"(maneuvers: {', '.join(self.maneuvers) or 'none'})") from None
 
-    def _inputs(self, inputs: Any) -> Array:
+    def input_vector(self, inputs: Any) -> Array:
+        """The system's input vector from a vector, a mapping of input names or None (zeros);
+        an unknown name or a non-finite value is an InvalidInputError naming it."""
         if type(inputs) is tuple and len(inputs) == self._ninputs > 0:
             # the common case, a full vector of numbers, checked in one call (per-element
             # checks and NumPy's would cost as much as a quarter of a trajectory): fsum
@@ -370,7 +369,7 @@ class CompiledSystem:
         s = float(s)
         if not math.isfinite(s):
             raise InvalidInputError(f"{self._where}: s must be finite, got {s}")
-        u = self._inputs(inputs)
+        u = self.input_vector(inputs)
         m = self.module
         if sample_dt:
             dt = float(sample_dt)
