@@ -45,6 +45,7 @@ def _record(index: int, tmp_path) -> str | None:
     return None
 
 
+@pytest.mark.alone  # (a 20 s bound per record run, 30 runs)
 def test_record_exits_cleanly_every_time(tmp_path):
     # two at a time: the machine has two cores, and shutdown races show up under load
     with ThreadPoolExecutor(max_workers=2) as pool:
@@ -52,6 +53,8 @@ def test_record_exits_cleanly_every_time(tmp_path):
     assert problems == []
 
 
+@pytest.mark.alone  # (a 20 s bound on a three-node launch stopping; the other worker's load
+# stretched it past 20 s once in CI)
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_launch_stops_cleanly_on_a_signal(sig):
     proc = subprocess.Popen([sys.executable, "-m", "biped_opt.cli.main", "launch"],
