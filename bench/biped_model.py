@@ -1,6 +1,6 @@
 """The sagittal-plane biped of [1]_ Fig. 1, re-implemented from MODEL.md for the comparators.
 
-Deliberately independent of :mod:`biped_opt.model` and :mod:`biped_opt.hybrid`: the benchmark's
+Deliberately independent of biped_opt: the benchmark's
 accuracy figures compare two implementations, not one with itself. Scalar ``math`` on Python
 floats (the state has 14 entries; numpy's per-call overhead would dominate).
 

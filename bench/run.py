@@ -184,7 +184,7 @@ def run_benchmark(
     interpreters and reports their entries as None.
     """
     import biped_opt
-    from biped_opt.model.modes import ContactMode
+    from biped_opt.paper.biped import ContactMode
     from biped_opt.paper.sweeps import sweep_fixed
     from biped_opt.piecewise import theta_grid
 

@@ -17,9 +17,7 @@ from biped_opt.errors import (
     InvalidParameterError,
     SimulationError,
 )
-from biped_opt.hybrid import simulate, simulate_batch
-from biped_opt.maneuvers import Maneuver
-from biped_opt.model import BipedParams, ContactMode
+from biped_opt.paper.biped import BipedParams, ContactMode, Maneuver, simulate, simulate_batch
 from biped_opt.simulation.compiled import CompiledSystem, compile_system
 from biped_opt.simulation.compiled import simulate as simulate_system
 from biped_opt.simulation.compiled import simulate_batch as simulate_system_batch

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from biped_opt.model.params import BipedParams
+from biped_opt.paper.biped import BipedParams
 
 #: MODEL.md Sec. 7: outcomes th(t_f) at default parameters (12 significant digits)
 REFERENCE = {

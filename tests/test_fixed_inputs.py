@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from biped_opt.hybrid import simulate
+from biped_opt.paper.biped import simulate
 from biped_opt.piecewise import one_sided, theta_grid
 
 

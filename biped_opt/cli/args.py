@@ -31,7 +31,7 @@ if TYPE_CHECKING:
     import numpy.typing as npt
 
     from biped_opt.control.problems import Problem
-    from biped_opt.maneuvers import Maneuver
+    from biped_opt.paper.biped import Maneuver
     from biped_opt.paper.problems import OptimalControlProblem
     from biped_opt.simulation.compiled import CompiledSystem
 
@@ -326,7 +326,7 @@ def progress_from_args(args: argparse.Namespace) -> bool:
 
 def add_maneuver_argument(parser: argparse.ArgumentParser) -> None:
     """--maneuver: the paper's maneuver, or a maneuver of --system."""
-    from biped_opt.maneuvers import Maneuver
+    from biped_opt.paper.biped import Maneuver
 
     parser.add_argument(
         "--maneuver",
@@ -338,7 +338,7 @@ def add_maneuver_argument(parser: argparse.ArgumentParser) -> None:
 
 def parse_maneuver_arg(text: str | None) -> Maneuver:
     """--maneuver as one of the paper's maneuvers; the error names the argument."""
-    from biped_opt.maneuvers import parse_maneuver
+    from biped_opt.paper.biped import parse_maneuver
 
     if text is None:
         raise InvalidInputError("--maneuver is required")
@@ -350,7 +350,7 @@ def parse_maneuver_arg(text: str | None) -> Maneuver:
 
 def checked_theta0(maneuver: Maneuver | str, value: float, option: str = "--theta0") -> float:
     """An initial pitch inside the maneuver's range; the error names ``option``."""
-    from biped_opt.maneuvers import check_theta0
+    from biped_opt.paper.biped import check_theta0
 
     try:
         return check_theta0(maneuver, value)
@@ -361,7 +361,7 @@ def checked_theta0(maneuver: Maneuver | str, value: float, option: str = "--thet
 def _input_assignment(name: str, pairs: bool) -> Callable[[str], tuple[str, tuple[float, ...]]]:
     """NAME=VALUE (NAME=LO,HI when ``pairs``) with NAME one of the biped's inputs; errors name
     the option."""
-    from biped_opt.hybrid.simulate import INPUT_NAMES
+    from biped_opt.paper.biped import INPUT_NAMES
 
     def convert(text: str) -> tuple[str, tuple[float, ...]]:
         key, sep, rest = text.partition("=")
@@ -415,8 +415,7 @@ def add_problem_arguments(p: argparse.ArgumentParser, *, variant: bool = True) -
 
 def problem_from_args(args: argparse.Namespace) -> OptimalControlProblem:
     """The biped's problem named by --maneuver/--variant with the command line's overrides."""
-    from biped_opt.hybrid.simulate import INPUT_NAMES
-    from biped_opt.maneuvers import Maneuver
+    from biped_opt.paper.biped import INPUT_NAMES, Maneuver
     from biped_opt.paper.problems import get_problem
 
     maneuver = parse_maneuver_arg(args.maneuver)

@@ -34,9 +34,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from biped_opt import ros
     from biped_opt.cli.signals import stop_requested
-    from biped_opt.maneuvers import spec
     from biped_opt.nodes.graph import Graph
     from biped_opt.nodes.recorder import SweepRequest
+    from biped_opt.paper.biped import theta0_limit
     from biped_opt.plots.reproduce import reproduce
     from biped_opt.record.report import report
 
@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         with graph:
             stop.defer(graph.recorder.stop)
             for maneuver, optimal, num in SWEEPS:
-                limit = spec(maneuver).theta0_limit
+                limit = theta0_limit(maneuver)
                 kind = "optimal" if optimal else "fixed"
                 t0 = time.perf_counter()
                 summary = graph.recorder.record(SweepRequest(

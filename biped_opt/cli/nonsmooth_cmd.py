@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
         grid = grid_from_args(args, maneuver, SWEEP_NUM[kind])
         report = find_biped_optimal(problem, grid, progress=progress)
     else:
-        from biped_opt.fixed_sweep import FIXED_INPUTS
+        from biped_opt.paper.biped import FIXED_INPUTS
         from biped_opt.paper.nonsmooth import find_nonsmooth_fixed
 
         maneuver = parse_maneuver_arg(args.maneuver).value

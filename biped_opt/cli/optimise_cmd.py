@@ -100,7 +100,7 @@ def _biped_derivatives(problem: OptimalControlProblem, theta0: float) -> dict[st
 
 def _finite_difference_derivatives(problem: OptimalControlProblem,
                                    theta0: float) -> dict[str, Any]:
-    from biped_opt.maneuvers import spec
+    from biped_opt.paper.biped import theta0_limit
     from biped_opt.paper.solve import optimal_policy
     from biped_opt.piecewise import one_sided
 
@@ -111,7 +111,7 @@ def _finite_difference_derivatives(problem: OptimalControlProblem,
             cache[th] = optimal_policy(problem, th)
         return cache[th]
 
-    limit = spec(problem.maneuver).theta0_limit
+    limit = theta0_limit(problem.maneuver)
     out: dict[str, Any] = {"policy": {}, "method": "finite-difference"}
     quantities = [("outcome", lambda r: r.outcome), ("value", lambda r: r.value)]
     quantities += [(f"policy:{d}", (lambda name: lambda r: r.policy[name])(d))

@@ -98,14 +98,14 @@ def show_report(report: NonsmoothReport, as_json: bool) -> int:
 
 def _legs(mask: int) -> list[int]:
     """The biped's legs (1 = left, 2 = right) of a mask over its constraints."""
-    from biped_opt.model.modes import ContactMode
+    from biped_opt.paper.biped import ContactMode
 
     return [j + 1 for j in ContactMode(mask).active]
 
 
 def _mode_name(mask: int) -> str:
     """The paper's name of a biped contact mode (air, left, right, ground)."""
-    from biped_opt.model.modes import ContactMode
+    from biped_opt.paper.biped import ContactMode
 
     return ContactMode(mask).name
 

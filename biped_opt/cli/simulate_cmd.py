@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
         tr = compiled.simulate(args.maneuver, args.s, dict(args.input),
                                options=budget(args, compiled.maneuver_options(args.maneuver)))
         return show_system_trajectory(compiled, tr, args.json)
-    from biped_opt.hybrid import simulate
+    from biped_opt.paper.biped import simulate
     from biped_opt.simulation.options import DEFAULT_OPTIONS
 
     maneuver = parse_maneuver_arg(args.maneuver)

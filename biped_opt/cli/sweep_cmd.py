@@ -23,7 +23,7 @@ from biped_opt.cli.args import (
     uses_system,
 )
 from biped_opt.cli.output import emit_sweep, fixed_sweep_table, optimal_sweep_table
-from biped_opt.fixed_sweep import FIXED_INPUTS
+from biped_opt.paper.biped import FIXED_INPUTS
 from biped_opt.paper.sweeps import sweep_fixed, sweep_optimal
 
 

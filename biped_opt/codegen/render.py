@@ -210,7 +210,7 @@ class _Emitter:
     def _sincos(self, values: list[sp.Expr]) -> list[sp.Expr]:
         """``values`` with sin(a) and cos(a) replaced by the names of one ``sincos(a)`` call
         per angle and function body (polynomials for |a| <= pi/4 where libm's sin and cos
-        would sit on the evaluation's critical path: see model/biped.py). Only the vector
+        would sit on the evaluation's critical path: see runtime.sincos). Only the vector
         field uses them: elsewhere the ~30 inlined operations would cost more compile time
         than they save at run time, and the guards keep one definition of sin and cos."""
         found = set().union(*(sp.sympify(v).atoms(sp.sin, sp.cos) for v in values))
@@ -467,8 +467,8 @@ def _vector_field(derived: DerivedSystem) -> tuple[list[str], list[str]]:
     """Eq. (1a) for the current mode, branch-free: the forces mixed by 0/1 mode factors, and
     the reactions from the Schur complement of *all* constraints with the inactive ones' rows
     and columns replaced by the identity (their reactions come out 0). Without branches Numba
-    can drop the reference counting around an inlined call (see model/biped.py). Also returns
-    ``prepare_parameters`` (see :class:`_Hoisted`)."""
+    can drop the reference counting around an inlined call (tests/codegen/test_dop853.py checks
+    that none is left). Also returns ``prepare_parameters`` (see :class:`_Hoisted`)."""
     d, n = derived.ndof, derived.nconstraints
     out = ["@nb.njit(**HOT_PATH, inline=\"always\")",
            "def vector_field(p, mode, y, yo, u, out, off, lam, lo):",

@@ -229,9 +229,9 @@ class _Model:
         mod = compiled.module
         self.compiled = compiled
         self.mod = mod
-        self.code = compiled._code(maneuver)
+        self.code = compiled.code(maneuver)
         self.sym = _symbolic(compiled, maneuver)
-        self.p = compiled._p
+        self.p = compiled.prepared
         self.u = u  # width max(m, 1), as the compiled functions expect
         self.d = int(mod.NDOF)
         self.n = int(mod.NSTATE)
@@ -539,7 +539,7 @@ def outcome_gradient(
     """
     if not isinstance(compiled, CompiledSystem):
         raise InvalidInputError(f"compiled must be a CompiledSystem, got {compiled!r}")
-    code = compiled._code(maneuver)
+    code = compiled.code(maneuver)
     u = compiled.input_vector(inputs)
     names = ("s", *compiled.inputs)
     v = _direction(direction, len(names), names)

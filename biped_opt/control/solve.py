@@ -30,7 +30,6 @@ from __future__ import annotations
 import enum
 import itertools
 import math
-import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -42,7 +41,7 @@ from scipy.optimize import minimize, minimize_scalar
 from biped_opt.control.problems import Problem, input_modes
 from biped_opt.errors import InvalidInputError
 from biped_opt.piecewise import locate_switch
-from biped_opt.simulation.compiled import CompiledSystem
+from biped_opt.simulation.compiled import CompiledSystem, compiled_with
 from biped_opt.simulation.trajectory import Status, Trajectory
 from biped_opt.systems.derive import mode_name
 
@@ -58,8 +57,6 @@ MAX_CANDIDATES = 8
 #: central-difference step of the joint (L-BFGS-B) refinement, relative to each bound interval
 GRAD_STEP = 1e-6
 
-_LOCK = threading.Lock()
-_COMPILED: dict[tuple[Any, tuple[tuple[str, float], ...]], CompiledSystem] = {}
 
 #: grid points of the global bracketing stage (spacing 1/64 of the bound interval)
 GRID_POINTS = 65
@@ -194,16 +191,9 @@ def refine_minimum(
 
 
 def compiled_for(problem: Problem) -> CompiledSystem:
-    """The compiled system of ``problem`` with its parameters (one per process and set)."""
-    key = (problem.system if isinstance(problem.system, str) else id(problem.description),
-           problem.parameters)
-    with _LOCK:
-        found = _COMPILED.get(key)
-    if found is None:
-        found = CompiledSystem(problem.description, **dict(problem.parameters))
-        with _LOCK:
-            _COMPILED[key] = found
-    return found
+    """The compiled system of ``problem`` with its parameters (one per process and parameter
+    set: :func:`~biped_opt.simulation.compiled.compiled_with`)."""
+    return compiled_with(problem.system, dict(problem.parameters))
 
 
 def branch_of(compiled: CompiledSystem, initial: int, events: Array,

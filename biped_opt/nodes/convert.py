@@ -15,9 +15,9 @@ import numpy.typing as npt
 
 from biped_opt import ros
 from biped_opt.errors import BipedOptError, InvalidInputError, quoted
-from biped_opt.hybrid.trajectory import Trajectory
-from biped_opt.maneuvers import Maneuver, check_theta0, parse_maneuver
 from biped_opt.nodes.sources import PROBLEM_SUFFIXES, check_maneuver_of, check_problem_on
+from biped_opt.paper.biped import Maneuver, check_theta0, parse_maneuver
+from biped_opt.simulation.trajectory import Trajectory
 
 if TYPE_CHECKING:  # the systems' modules (SymPy) load only where a system is used
     from biped_opt.control.problems import Problem
@@ -137,7 +137,7 @@ def system_info_fields(compiled: CompiledSystem, source: str) -> dict[str, Any]:
     """SystemInfo's fields (plain str, list and float values) for ``compiled``, loaded from
     ``source`` (a library name or a file path)."""
     system = compiled.system
-    ranges = [system.maneuvers[m].s_range for m in compiled.maneuvers]
+    ranges = [compiled.s_range(m) for m in compiled.maneuvers]
     return {
         "system": compiled.name, "source": source,
         "coordinates": list(system.coordinate_names), "constraints": list(system.constraints),

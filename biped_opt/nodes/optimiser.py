@@ -81,7 +81,6 @@ from biped_opt.errors import (
     InvalidInputError,
     InvalidParameterError,
 )
-from biped_opt.maneuvers import Maneuver
 from biped_opt.nodes import convert
 from biped_opt.nodes.compiler import COMPILE_TIMEOUT_S, Compiler
 from biped_opt.nodes.parameters import float_parameter, int_parameter, string_list_parameter
@@ -96,6 +95,7 @@ from biped_opt.nodes.sources import (
     name_of,
     request_study,
 )
+from biped_opt.paper.biped import Maneuver
 from biped_opt.paper.problems import OptimalControlProblem, get_problem
 
 if TYPE_CHECKING:

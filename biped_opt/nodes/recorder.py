@@ -53,14 +53,14 @@ from biped_opt.errors import (
     InvalidParameterError,
     SimulationError,
 )
-from biped_opt.fixed_sweep import FIXED_INPUTS, theta_grid
-from biped_opt.maneuvers import spec
 from biped_opt.nodes import convert
 from biped_opt.nodes.compiler import BUSY, COMPILE_TIMEOUT_S
 from biped_opt.nodes.run import announce_ready, run_node
 from biped_opt.nodes.simulator import BIPED, SYSTEM_INFO_QOS
 from biped_opt.nodes.sources import name_of
+from biped_opt.paper.biped import FIXED_INPUTS, parse_maneuver
 from biped_opt.paper.problems import OptimalControlProblem, get_problem
+from biped_opt.piecewise import theta_grid
 from biped_opt.record import SweepWriter
 
 if TYPE_CHECKING:  # the systems' modules (SymPy) load only where a system is used
@@ -98,9 +98,9 @@ class SweepRequest:
         """Checks what can be checked without the system's description (all of it for the
         biped; :meth:`validated_for` checks the rest for another system)."""
         if self.biped:
-            s = spec(convert.request_maneuver(self.maneuver))
+            maneuver = convert.request_maneuver(self.maneuver)
             for name in ("theta0_min", "theta0_max"):
-                convert.request_theta0(s.maneuver, getattr(self, name))
+                convert.request_theta0(maneuver, getattr(self, name))
             if len(self.fixed_inputs) > 3:
                 raise InvalidInputError(
                     f"fixed_inputs: at most 3 values (u1, u2, u12), got {len(self.fixed_inputs)}")
@@ -281,7 +281,7 @@ class RecorderNode(ros.Node):
         if served is not None:
             raise SimulationError(f"the simulator serves {served['system']}: give the recorder "
                                   "the same system parameter")
-        maneuver = spec(req.maneuver).maneuver.value
+        maneuver = parse_maneuver(req.maneuver).value
         grid = theta_grid(req.theta0_min, req.theta0_max, int(req.num))
         fixed = req.fixed_inputs or FIXED_INPUTS[maneuver]
         # a fixed-input point's value is the cost of the maneuver's default problem (Eqs. (14),

@@ -12,7 +12,7 @@ from collections.abc import Callable
 from typing import Any
 
 from biped_opt import ros
-from biped_opt.hybrid import kernels_cached, warm_up
+from biped_opt.paper.biped import kernels_cached, warm_up
 
 __all__ = ["announce_ready", "run_node", "stop_on_sigterm", "warm_up_kernels"]
 

@@ -35,10 +35,10 @@ from typing import Any
 
 from biped_opt import ros
 from biped_opt.errors import BipedOptError, InvalidInputError, InvalidParameterError
-from biped_opt.hybrid import simulate
 from biped_opt.nodes import convert
 from biped_opt.nodes.refusals import refuse
 from biped_opt.nodes.run import announce_ready, run_node, warm_up_kernels
+from biped_opt.paper.biped import simulate
 
 __all__ = ["SimulatorNode", "main", "CONTACT_MODE_QOS", "SYSTEM_INFO_QOS", "BIPED"]
 

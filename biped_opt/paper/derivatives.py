@@ -32,14 +32,14 @@ from biped_opt.control.derivatives import (
 )
 from biped_opt.control.theorem1 import Derivatives, optimal_derivatives
 from biped_opt.errors import InvalidInputError
-from biped_opt.maneuvers import check_theta0, parse_maneuver
-from biped_opt.model.params import BipedParams
-from biped_opt.paper.problems import (
+from biped_opt.paper.biped import (
     INPUT_NAMES,
-    OptimalControlProblem,
+    BipedParams,
+    check_theta0,
     compiled_biped,
-    paper_branch,
+    parse_maneuver,
 )
+from biped_opt.paper.problems import OptimalControlProblem, paper_branch
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
 
 __all__ = ["PARAMETER_NAMES", "outcome_sensitivity", "outcome_derivative",

@@ -26,7 +26,7 @@ from biped_opt.analysis.figure_data import Mark, system_marks
 from biped_opt.analysis.switches import NonsmoothPoint, NonsmoothReport
 from biped_opt.control.derivatives import one_sided_derivatives
 from biped_opt.errors import InvalidInputError
-from biped_opt.model.modes import ContactMode
+from biped_opt.paper.biped import ContactMode
 from biped_opt.paper.nonsmooth import find_nonsmooth_fixed, find_nonsmooth_optimal
 from biped_opt.paper.problems import OptimalControlProblem, get_problem
 from biped_opt.paper.sweeps import FixedSweep, OptimalSweep, sweep_fixed, sweep_grid, sweep_optimal

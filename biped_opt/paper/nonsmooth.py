@@ -17,17 +17,21 @@ from biped_opt.analysis.switches import (
 )
 from biped_opt.control.solve import OptimalResult
 from biped_opt.errors import InvalidInputError
-from biped_opt.fixed_sweep import FIXED_INPUTS
-from biped_opt.hybrid import SimulatorOptions, simulate
-from biped_opt.hybrid.simulate import DEFAULT_OPTIONS, check_inputs
-from biped_opt.maneuvers import spec
-from biped_opt.model.modes import ContactMode
-from biped_opt.model.params import BipedParams
+from biped_opt.paper.biped import (
+    FIXED_INPUTS,
+    BipedParams,
+    ContactMode,
+    check_inputs,
+    parse_maneuver,
+    simulate,
+    theta0_limit,
+)
 from biped_opt.paper.derivatives import outcome_sensitivity
 from biped_opt.paper.problems import OptimalControlProblem
 from biped_opt.paper.solve import optimal_policy
 from biped_opt.paper.sweeps import sweep_fixed, sweep_grid, sweep_optimal
 from biped_opt.progress import bar as _bar
+from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
 
 __all__ = ["find_nonsmooth_fixed", "find_nonsmooth_optimal"]
 
@@ -68,8 +72,7 @@ def find_nonsmooth_fixed(
 
     ``theta0`` is the sweep grid (default: ``num`` points over the valid range, 0 included).
     """
-    s = spec(maneuver)
-    name = s.maneuver.value
+    name = parse_maneuver(maneuver).value
     u = check_inputs(FIXED_INPUTS[name] if inputs is None else inputs)
     grid = sweep_grid(name, num=num) if theta0 is None else np.asarray(theta0, dtype=float)
     sweep = sweep_fixed(name, grid, u, params=params, options=options, progress=progress)
@@ -89,7 +92,8 @@ def find_nonsmooth_fixed(
             branch=sweep.branch[k],
         )
     bar = _bar(progress, 1, f"{name} locating")
-    points = analyse_switches(ev, sweep.theta0, ["outcome"], s.theta0_limit, False, bar)
+    points = analyse_switches(ev, sweep.theta0, ["outcome"], theta0_limit(name), False,
+                              bar)
     return NonsmoothReport(
         subject=name,
         optimal=False,
@@ -128,7 +132,7 @@ def find_nonsmooth_optimal(
         ev.cache[float(r.theta0)] = _optimal_sample(r)
     quantities = ["outcome", *(f"policy:{d}" for d in problem.decisions), "value"]
     bar = _bar(progress, 1, f"{problem.name} locating")
-    limit = spec(problem.maneuver).theta0_limit
+    limit = theta0_limit(problem.maneuver)
     points = analyse_switches(ev, sweep.theta0, quantities, limit, True, bar,
                               bound_relocation(ev, limit, _bound_slope(problem)))
     return NonsmoothReport(

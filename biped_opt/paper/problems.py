@@ -14,7 +14,7 @@ paper               library biped        decisions, fixed inputs, target, weight
 An :class:`OptimalControlProblem` is one of them in the paper's words, as the command line and
 the nodes accept overrides of it: the target pitch th* (``theta_star``), the weights alpha
 (``alphas``) and ``bounds`` per decision, the fixed inputs as (u1, u2, u12), the biped's
-parameters as :class:`~biped_opt.model.params.BipedParams` and the simulator's options. Its
+parameters as :class:`~biped_opt.paper.biped.BipedParams` and the simulator's options. Its
 constructor validates each field and names the offending one; its :attr:`~OptimalControlProblem.
 problem` is the same problem as the one :class:`~biped_opt.control.problems.Problem` of the
 library biped that every computation (solver, sweeps, derivatives, nonsmooth tables) runs on:
@@ -42,21 +42,15 @@ import numpy.typing as npt
 
 from biped_opt.control.problems import COST_LIMIT, Problem
 from biped_opt.control.problems import get_problem as declared_problem
-from biped_opt.control.solve import compiled_for
 from biped_opt.errors import InvalidInputError, InvalidParameterError
-from biped_opt.maneuvers import Maneuver, parse_maneuver
-from biped_opt.model.params import BipedParams
-from biped_opt.simulation.compiled import CompiledSystem
+from biped_opt.paper.biped import BIPED, INPUT_NAMES, BipedParams, Maneuver, parse_maneuver
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
 from biped_opt.systems.description import System
 
 __all__ = [
-    "BIPED",
-    "INPUT_NAMES",
     "LIBRARY_NAMES",
     "OptimalControlProblem",
     "PROBLEMS",
-    "compiled_biped",
     "get_problem",
     "liftoff_problem",
     "liftoff_variant_problem",
@@ -67,10 +61,6 @@ __all__ = [
 
 Array = npt.NDArray[np.float64]
 
-#: the library system that is the paper's biped
-BIPED = "biped"
-#: the biped's inputs in its order (single-stance forces u1, u2; double-stance torque u12)
-INPUT_NAMES = ("u1", "u2", "u12")
 #: the paper's problem names -> the names the library's biped declares them by
 LIBRARY_NAMES = {"touchdown": "touchdown", "liftoff": "liftoff",
                  "liftoff-variant": "liftoff_variant"}
@@ -339,12 +329,6 @@ def get_problem(name: str, **overrides: Any) -> OptimalControlProblem:
     if key not in PROBLEMS:
         raise InvalidInputError(f"problem must be one of {', '.join(PROBLEMS)}; got {name!r}")
     return PROBLEMS[key](**overrides)
-
-
-def compiled_biped(params: BipedParams | None = None) -> CompiledSystem:
-    """The library biped compiled with ``params`` (default the paper's): the one
-    :func:`~biped_opt.control.solve.compiled_for` keeps for the problems with these parameters."""
-    return compiled_for(OptimalControlProblem(params=params or BipedParams()).problem)
 
 
 def paper_problem(name: str, **overrides: Any) -> Problem:

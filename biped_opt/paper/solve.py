@@ -5,7 +5,7 @@ ranges, solve the problem's one-lane :class:`~biped_opt.control.problems.Problem
 :func:`biped_opt.control.solve.optimal_policy` (global bracketing on a grid of 65, bounded Brent,
 Newton polish, the bound test) and return its :class:`~biped_opt.control.solve.OptimalResult`
 in the paper's words (:func:`in_paper_words`): ``problem`` the paper's problem, ``modes`` as
-:class:`~biped_opt.model.modes.ContactMode` and branches as ``AIR->LEFT->GROUND``.
+:class:`~biped_opt.paper.biped.ContactMode` and branches as ``AIR->LEFT->GROUND``.
 
 .. [1] B. Banjanin and S. A. Burden, "Nonsmooth optimal value and policy functions in mechanical
    systems subject to unilateral constraints", IEEE Control Systems Letters 4(2), 2020.
@@ -22,9 +22,7 @@ import numpy.typing as npt
 from biped_opt.control import solve as one_lane
 from biped_opt.control.solve import XATOL, OptimalResult
 from biped_opt.errors import InvalidInputError
-from biped_opt.maneuvers import check_theta0
-from biped_opt.model.modes import ContactMode
-from biped_opt.model.params import BipedParams
+from biped_opt.paper.biped import BipedParams, ContactMode, check_theta0
 from biped_opt.paper.problems import OptimalControlProblem, paper_branch
 
 __all__ = ["in_paper_words", "optimal_policy", "optimal_sweep"]

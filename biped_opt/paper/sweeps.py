@@ -23,16 +23,18 @@ import numpy.typing as npt
 
 from biped_opt.control.solve import OptimalResult, branch_of
 from biped_opt.errors import InvalidInputError
-from biped_opt.fixed_sweep import FIXED_INPUTS, theta_grid
-from biped_opt.maneuvers import check_theta0, spec
-from biped_opt.model.params import BipedParams
-from biped_opt.paper.problems import (
+from biped_opt.paper.biped import (
+    FIXED_INPUTS,
     INPUT_NAMES,
-    OptimalControlProblem,
+    BipedParams,
+    check_theta0,
     compiled_biped,
-    paper_branch,
+    parse_maneuver,
+    theta0_limit,
 )
+from biped_opt.paper.problems import OptimalControlProblem, paper_branch
 from biped_opt.paper.solve import optimal_sweep
+from biped_opt.piecewise import theta_grid
 from biped_opt.progress import Progress
 from biped_opt.progress import bar as _bar
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
@@ -53,7 +55,7 @@ def sweep_grid(
     maneuver: str, lo: float | None = None, hi: float | None = None, num: int = 201
 ) -> Array:
     """``num`` evenly spaced th0 in [lo, hi] (default: the maneuver's valid range), 0 included."""
-    limit = spec(maneuver).theta0_limit
+    limit = theta0_limit(maneuver)
     lo = -limit if lo is None else check_theta0(maneuver, lo)
     hi = limit if hi is None else check_theta0(maneuver, hi)
     if not lo < hi:
@@ -180,7 +182,7 @@ def sweep_fixed(
     The grid is sorted and gets th0 = 0 when it straddles 0. It runs as ``chunks`` parallel
     batches so that the progress bar moves.
     """
-    name = spec(maneuver).maneuver.value
+    name = parse_maneuver(maneuver).value
     th = _as_grid(name, theta0)
     compiled = compiled_biped(params)
     u = compiled.input_vector(FIXED_INPUTS[name] if inputs is None else inputs)

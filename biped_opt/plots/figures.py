@@ -23,7 +23,7 @@ import numpy as np  # noqa: E402
 import numpy.typing as npt  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 
-from biped_opt.model.modes import ContactMode  # noqa: E402
+from biped_opt.paper.biped import ContactMode  # noqa: E402
 from biped_opt.paper.figures import (  # noqa: E402
     FixedSweepData,
     NonsmoothMark,

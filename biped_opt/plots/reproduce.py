@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from biped_opt.analysis.switches import NonsmoothReport
-from biped_opt.model.params import BipedParams
+from biped_opt.paper.biped import BipedParams
 from biped_opt.paper.figures import (
     MANEUVERS,
     ReproductionData,

@@ -65,7 +65,7 @@ from biped_opt.analysis.figure_data import (  # noqa: E402
 from biped_opt.analysis.switches import NonsmoothReport  # noqa: E402
 from biped_opt.control.problems import Problem  # noqa: E402
 from biped_opt.errors import InvalidInputError  # noqa: E402
-from biped_opt.model.modes import ContactMode  # noqa: E402
+from biped_opt.paper.biped import ContactMode  # noqa: E402
 from biped_opt.paper.figures import (  # noqa: E402
     LIFTOFF_INPUTS,
     TOUCHDOWN_INPUTS,

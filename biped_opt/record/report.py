@@ -52,8 +52,7 @@ from biped_opt.analysis.sampled import GridPoint, Samples, labels
 from biped_opt.analysis.sampled import grid_nonsmooth as _grid_nonsmooth
 from biped_opt.analysis.switches import NonsmoothReport
 from biped_opt.errors import BipedOptError
-from biped_opt.hybrid.simulate import INPUT_NAMES
-from biped_opt.model.modes import ContactMode
+from biped_opt.paper.biped import INPUT_NAMES, ContactMode
 from biped_opt.paper.problems import OptimalControlProblem, get_problem
 from biped_opt.paper.sweeps import FixedSweep, OptimalSweep
 from biped_opt.record.reader import read_raw, recorded_system

@@ -299,7 +299,7 @@ class SweepWriter:
     ) -> int:
         """All samples of one trajectory on ``/biped/state`` in one vectorised pass.
 
-        ``samples`` has the columns of :attr:`biped_opt.hybrid.Trajectory.samples`
+        ``samples`` has the columns of :attr:`biped_opt.simulation.trajectory.Trajectory.samples`
         (t, y (14), mode, lambda_1, lambda_2). Header stamps and log times are
         ``stamp_offset_ns`` + t. Returns the number written.
         """

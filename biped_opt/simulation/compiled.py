@@ -30,6 +30,8 @@ import os
 import sys
 import tempfile
 import threading
+import time
+from collections.abc import Mapping
 from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
@@ -48,7 +50,8 @@ if TYPE_CHECKING:  # (imported where needed: SymPy and the generator are the slo
     from biped_opt.systems.description import System
 
 __all__ = ["BatchResult", "CompiledSystem", "SystemTrajectory", "Trajectory", "cache_dir",
-           "compile_system", "shared", "simulate", "simulate_batch"]
+           "kernels_cached", "warm_up",
+           "compile_system", "compiled_with", "shared", "simulate", "simulate_batch"]
 
 Array = npt.NDArray[np.float64]
 
@@ -219,6 +222,7 @@ class CompiledSystem:
         self._constraints: tuple[str, ...] = tuple(facts["constraints"])
         self._options = [dataclasses.replace(DEFAULT_OPTIONS, max_events=events, t_end=horizon)
                          for events, horizon in facts["budgets"]]
+        self._ranges = [(float(lo), float(hi)) for lo, hi in facts["ranges"]]
         self._initial_modes = [int(v) for v in self.module.INITIAL_MODE]
         self._codes = {name: k for k, name in enumerate(self.maneuvers)}
         self._ninputs = len(self.inputs)
@@ -240,7 +244,8 @@ class CompiledSystem:
                 "parameters": list(system.defaults.items()), "maneuvers": list(derived.maneuvers),
                 "inputs": list(system.u.names()), "constraints": list(system.constraints),
                 "budgets": [[m.description.max_events, m.description.horizon]
-                            for m in derived.maneuvers.values()]}
+                            for m in derived.maneuvers.values()],
+                "ranges": [list(m.description.s_range) for m in derived.maneuvers.values()]}
 
     @property
     def system(self) -> System:
@@ -294,18 +299,26 @@ class CompiledSystem:
                 f"{self._where}: these parameters give no invertible mass matrix "
                 f"({exc})") from None
         self.parameters = values
-        self._p = prepared
+        #: the parameter vector the generated module takes (values, then what depends on them)
+        self.prepared = prepared
 
     def initial_mode(self, maneuver: str) -> int:
         """The contact mode (bit mask) ``maneuver`` starts in."""
-        return self._initial_modes[self._code(maneuver)]
+        return self._initial_modes[self.code(maneuver)]
+
+    def s_range(self, maneuver: str) -> tuple[float, float]:
+        """The range of s ``maneuver`` declares valid (simulating outside it is allowed: other
+        mode sequences appear there, which studies may want)."""
+        return self._ranges[self.code(maneuver)]
 
     def maneuver_options(self, maneuver: str) -> SimulatorOptions:
         """The simulator's settings for ``maneuver``: the defaults with its own event budget
         and horizon (what :meth:`simulate` uses unless given other options)."""
-        return self._options[self._code(maneuver)]
+        return self._options[self.code(maneuver)]
 
-    def _code(self, maneuver: str) -> int:
+    def code(self, maneuver: str) -> int:
+        """The generated module's index of ``maneuver``; an unknown name is an
+        InvalidInputError listing the maneuvers."""
         code = self._codes.get(maneuver) if type(maneuver) is str else None
         if code is not None:
             return code
@@ -317,8 +330,9 @@ class CompiledSystem:
                 f"(maneuvers: {', '.join(self.maneuvers) or 'none'})") from None
 
     def input_vector(self, inputs: Any) -> Array:
-        """The system's input vector from a vector, a mapping of input names or None (zeros);
-        an unknown name or a non-finite value is an InvalidInputError naming it."""
+        """The system's input vector from a vector (the declared order, zero-padded), a mapping
+        of input names or None (zeros); an unknown name, too many values or a value that is not
+        a finite number is an InvalidInputError naming the input."""
         if type(inputs) is tuple and len(inputs) == self._ninputs > 0:
             # the common case, a full vector of numbers, checked in one call (per-element
             # checks and NumPy's would cost as much as a quarter of a trajectory): fsum
@@ -338,17 +352,49 @@ class CompiledSystem:
                     raise InvalidInputError(
                         f"{self._where}: unknown input {key!r} "
                         f"(inputs: {', '.join(self.inputs) or 'none'})")
-                u[self.inputs.index(key)] = value
+                u[self.inputs.index(key)] = _number(f"{self._where}: {key}", value)
         else:
-            values = np.asarray(inputs, dtype=np.float64).ravel()
+            try:
+                values = np.asarray(inputs, dtype=np.float64).ravel()
+            except (TypeError, ValueError):
+                raise InvalidInputError(
+                    f"{self._where}: inputs must be numbers, got {inputs!r}") from None
             if values.size > len(self.inputs):
                 raise InvalidInputError(
                     f"{self._where}: {values.size} inputs given, the system has "
                     f"{len(self.inputs)} ({', '.join(self.inputs) or 'none'})")
             u[: values.size] = values
-        if not np.all(np.isfinite(u)):
-            raise InvalidInputError(f"{self._where}: inputs must be finite, got {u}")
+        bad = np.flatnonzero(~np.isfinite(u))
+        if bad.size:
+            raise InvalidInputError(
+                f"{self._where}: {self.inputs[bad[0]]} must be finite, got {u[bad[0]]}")
         return u
+
+    def input_rows(self, inputs: npt.ArrayLike | None, n: int) -> Array:
+        """(n, inputs) rows for a batch of n cases from one input vector for all (or None) or
+        one row per case; the error names the input and the case."""
+        width = max(len(self.inputs), 1)
+        if inputs is None:
+            return np.zeros((n, width))
+        try:
+            raw = np.asarray(inputs, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise InvalidInputError(
+                f"{self._where}: inputs must be numbers, got {inputs!r}") from None
+        if raw.ndim <= 1 or (raw.ndim == 2 and raw.shape[0] == 1):  # one vector for all
+            return np.tile(self.input_vector(raw.ravel()), (n, 1))
+        if raw.ndim != 2 or raw.shape[0] != n or raw.shape[1] > len(self.inputs):
+            raise InvalidInputError(
+                f"{self._where}: inputs must have shape (<={len(self.inputs)},) or "
+                f"({n}, <={len(self.inputs)}) for {n} cases, got {raw.shape}")
+        rows = np.zeros((n, width))
+        rows[:, : raw.shape[1]] = raw
+        bad = np.argwhere(~np.isfinite(rows))
+        if bad.size:
+            k, i = bad[0]
+            raise InvalidInputError(
+                f"{self._where}: {self.inputs[i]} of case {k} must be finite, got {rows[k, i]}")
+        return rows
 
     def _cfg(self, options: SimulatorOptions, sample_dt: float) -> Array:
         key = (options, sample_dt)
@@ -363,7 +409,7 @@ class CompiledSystem:
         """One maneuver at s (inputs by name in a dict, or a vector in the declared order).
         ``options`` left at ``DEFAULT_OPTIONS`` means :meth:`maneuver_options` (the
         maneuver's own budget); any other options are taken as given."""
-        code = self._code(maneuver)
+        code = self.code(maneuver)
         if options is DEFAULT_OPTIONS:
             options = self._options[code]
         s = float(s)
@@ -383,7 +429,7 @@ class CompiledSystem:
         events = np.empty((options.max_events + 1, m.EVENT_WIDTH))
         y_out = np.empty(m.NSTATE)
         status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej, outcome = m.simulate_maneuver(
-            self._p, code, s, u, cfg, samples, events, y_out, m.FROM_S, 0)
+            self.prepared, code, s, u, cfg, samples, events, y_out, m.FROM_S, 0)
         return Trajectory.from_kernel(
             self._name, maneuver, s, tuple(u.tolist()[: self._ninputs]), status, t_f, outcome,
             y_out, mode_f, self._initial_modes[code], n_ev, events,
@@ -394,28 +440,37 @@ class CompiledSystem:
                        *, options: SimulatorOptions = DEFAULT_OPTIONS) -> BatchResult:
         """Many s (and input vectors, one row each or one for all) in parallel compiled threads
         (``options`` as in :meth:`simulate`)."""
-        code = self._code(maneuver)
+        code = self.code(maneuver)
         if options is DEFAULT_OPTIONS:
             options = self._options[code]
-        ss = np.atleast_1d(np.asarray(s, dtype=np.float64))
+        try:
+            ss = np.atleast_1d(np.asarray(s, dtype=np.float64))
+        except (TypeError, ValueError):
+            raise InvalidInputError(f"{self._where}: s must be numbers, got {s!r}") from None
+        if ss.ndim != 1:
+            raise InvalidInputError(f"{self._where}: s must be a 1-D array, got shape {ss.shape}")
         if not np.all(np.isfinite(ss)):
             raise InvalidInputError(f"{self._where}: s must be finite")
-        width = max(len(self.inputs), 1)
-        if inputs is None:
-            us = np.zeros((ss.size, width))
-        else:
-            rows = np.atleast_2d(np.asarray(inputs, dtype=np.float64))
-            us = np.zeros((ss.size, width))
-            us[:, : rows.shape[1]] = rows if rows.shape[0] == ss.size else rows[0]
+        us = self.input_rows(inputs, ss.size)
         m = self.module
         events = np.zeros((ss.size, options.max_events + 1, m.EVENT_WIDTH))
         y_out = np.zeros((ss.size, m.NSTATE))
         outcome = np.zeros(ss.size)
         info = np.zeros((ss.size, 8))
-        m.simulate_batch_kernel(self._p, code, ss, us, self._cfg(options, 0.0), events, y_out,
+        m.simulate_batch_kernel(self.prepared, code, ss, us, self._cfg(options, 0.0), events, y_out,
                                 outcome, info)
         return BatchResult.from_kernel(self._name, maneuver, ss, us, info, outcome, y_out, events,
                                        self._initial_modes[code], self._constraints)
+
+
+def _number(name: str, value: Any) -> float:
+    """``value`` as a float; anything else is an InvalidInputError naming ``name``."""
+    if isinstance(value, bool):
+        raise InvalidInputError(f"{name} must be a number, got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"{name} must be a number, got {value!r}") from None
 
 
 def compile_system(system: System | str, **parameters: float) -> CompiledSystem:
@@ -424,6 +479,42 @@ def compile_system(system: System | str, **parameters: float) -> CompiledSystem:
 
 
 _COMPILED: dict[tuple[int, str], CompiledSystem] = {}
+#: compiled_with's systems, by system and full parameter values (oldest first)
+_WITH: dict[tuple[Any, tuple[tuple[str, float], ...]], CompiledSystem] = {}
+#: how many parameter sets compiled_with keeps (each costs a parameter vector, not a compile)
+WITH_CACHE_SIZE = 64
+
+
+def compiled_with(system: System | str, parameters: Mapping[str, float] | None = None
+                  ) -> CompiledSystem:
+    """The compiled system of ``system`` (a System, a library name or a system file) with
+    ``parameters`` (defaults for the rest): one object per process and parameter set, whose
+    parameters never change afterwards, so threads may share it. Keyed by the full parameter
+    values (``{"k": 27.0}`` and the defaults are one key); the least recently made of more than
+    :data:`WITH_CACHE_SIZE` sets is dropped (a service's peers choose parameters)."""
+    named = isinstance(system, (str, Path))
+    ident: Any = str(system) if named else id(system)
+    base = _WITH.get((ident, ()))
+    if base is None or (not named and base.system is not system):
+        base = CompiledSystem(system)
+        with _LOCK:
+            _WITH[(ident, ())] = base
+    if not parameters:
+        return base
+    full = dict(base._defaults)
+    full.update(parameters)  # (unknown names and bad values: CompiledSystem refuses them below)
+    key = (ident, tuple(full.items()))
+    try:
+        found = _WITH.get(key)
+    except TypeError:  # a value that is not a number: CompiledSystem says which
+        return CompiledSystem(system, **parameters)
+    if found is None:
+        found = CompiledSystem(system, **parameters)
+        with _LOCK:
+            _WITH[key] = found
+            while len(_WITH) > WITH_CACHE_SIZE:
+                del _WITH[next(iter(_WITH))]
+    return found
 
 
 def shared(system: System | str) -> CompiledSystem:
@@ -459,3 +550,36 @@ def simulate_batch(system: System | str, maneuver: str, s: npt.ArrayLike,
     compiled = shared(system)
     compiled.set_parameters(**(parameters or {}))
     return compiled.simulate_batch(maneuver, s, inputs, options=options)
+
+
+def kernels_cached(system: str) -> bool:
+    """True when the compiled module of a library system or system file is on disk and Numba's
+    cache holds its simulation kernels for the current sources (a start then loads them in about
+    a second instead of compiling them)."""
+    m = cached_module(system)
+    if m is None:
+        return False
+    for fn in (m.simulate_maneuver, m.simulate_batch_kernel):
+        if fn.signatures:
+            continue  # compiled (or loaded) in this process already
+        try:
+            if not fn._cache._cache_file._load_index():
+                return False
+        except (AttributeError, OSError):  # another Numba layout: assume the worst
+            return False
+    return True
+
+
+def warm_up(system: str) -> float:
+    """Compile a system's simulation kernels now, or load them from Numba's on-disk cache,
+    rather than inside the first call; returns the seconds it took. A node calls it before it
+    offers its services, so that a client's first request is not held up by a compile longer
+    than its timeout. (The values simulated are irrelevant: a kernel compiles per signature.)"""
+    t0 = time.perf_counter()
+    compiled = shared(system)
+    maneuver = compiled.maneuvers[0]
+    lo, hi = compiled.s_range(maneuver)
+    mid = 0.5 * (lo + hi)
+    compiled.simulate(maneuver, mid, None, sample_dt=0.05)  # the single-call kernel
+    compiled.simulate_batch(maneuver, np.array([mid, mid]), None)  # the parallel one
+    return time.perf_counter() - t0

@@ -9,7 +9,7 @@ coefficient of restitution gamma. From these alone this module computes what Eq.
 - the impact map Delta_J applied on entering J, Eq. (1b).
 
 A contact mode is the bit mask of its active constraints (bit j set = constraint j active), the
-convention of :class:`biped_opt.model.modes.ContactMode`.
+convention of every trajectory (and of :class:`biped_opt.paper.biped.ContactMode`).
 
 .. [1] B. Banjanin and S. A. Burden, "Nonsmooth optimal value and policy functions in mechanical
    systems subject to unilateral constraints", IEEE Control Systems Letters 4(2), 2020.

@@ -27,9 +27,9 @@ from biped_opt.analysis.pieces import (
 from biped_opt.cli.main import main
 from biped_opt.control.derivatives import DEFAULT_VARIATIONAL
 from biped_opt.errors import InvalidInputError
-from biped_opt.hybrid.simulate import DEFAULT_OPTIONS
 from biped_opt.plots.pieces import pieces_figure
 from biped_opt.simulation.compiled import compile_system
+from biped_opt.simulation.options import DEFAULT_OPTIONS
 from biped_opt.systems import walker
 from biped_opt.systems.library import biped
 from tests.extrapolated import SAFETY, noise_weights

@@ -9,9 +9,8 @@ import numpy as np
 import pytest
 
 from biped_opt.cli.bench_cmd import load_bench
-from biped_opt.hybrid import Status, simulate
-from biped_opt.model.modes import ContactMode
-from biped_opt.model.params import BipedParams
+from biped_opt.paper.biped import BipedParams, ContactMode, simulate
+from biped_opt.simulation.trajectory import Status
 from tests.conftest import REFERENCE
 
 # the checkout's bench/ package, whatever sys.path pytest set up

@@ -22,8 +22,8 @@ from scipy.special import ellipk
 
 from biped_opt.codegen.render import UnsupportedExpressionError, _expand, render
 from biped_opt.codegen.runtime import Status
-from biped_opt.hybrid.simulate import SimulatorOptions
 from biped_opt.simulation.compiled import compile_system
+from biped_opt.simulation.options import SimulatorOptions
 from biped_opt.systems import System, derive
 
 #: the compiled integrator as tight as the references (rtol 1e-12), so that what is left of a

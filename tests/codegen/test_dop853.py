@@ -12,9 +12,8 @@ import numpy as np
 import pytest
 
 from biped_opt.codegen import dop853
-from biped_opt.hybrid.simulate import kernel
-from biped_opt.maneuvers import initial_state
-from biped_opt.model.params import BipedParams
+from biped_opt.paper.biped import BipedParams, compiled_biped
+from tests.paper.biped_physics import initial_state
 
 _OSCILLATOR = '''
 import numba as nb
@@ -97,8 +96,8 @@ def test_biped_workspace_layout():
     after a step of the biped's module slot 12 holds the vector field and reactions at the new
     point, equal to a separate evaluation there (bit for bit: the same arithmetic, in the step
     as text and in the field as a call)."""
-    k = kernel()
-    m, p = k.module, k.default_p
+    k = compiled_biped()
+    m, p = k.module, k.prepared
     assert m.STRIDE == 16
     assert m.WORKSPACE == 18 * 16
     y, mode = initial_state("liftoff", 0.1, BipedParams())
@@ -107,7 +106,7 @@ def test_biped_workspace_layout():
     m._field_at(p, int(mode), y, 0, u, f, 0, lam0, 0)
     W = np.full(m.WORKSPACE, np.nan)
     y_new, f_new, lam, probe = np.empty(14), np.empty(14), np.empty(2), np.empty(3)
-    code = k.codes[1]
+    code = k.code("liftoff")
     err = m.step(p, int(mode), u, code, y, f, 0.01, W, y_new, f_new, lam, 1e-11, 1e-12, probe)
     assert 0.0 < err < 1.0
     k12 = 12 * m.STRIDE
@@ -135,8 +134,8 @@ def test_step_has_no_reference_counting():
     """
     import numba as nb
 
-    k = kernel()
-    m, p = k.module, k.default_p
+    k = compiled_biped()
+    m, p = k.module, k.prepared
     fresh = nb.njit(error_model="numpy")(m.step.py_func)
     y, mode = initial_state("liftoff", 0.1, BipedParams())
     u = np.array([1.5, 3.0, 0.2])
@@ -144,7 +143,7 @@ def test_step_has_no_reference_counting():
     m._field_at(p, int(mode), y, 0, u, f, 0, lam, 0)
     W = np.zeros(m.WORKSPACE)
     out = [np.empty(14), np.empty(14), np.empty(2), np.empty(3)]
-    fresh(p, int(mode), u, k.codes[1], y, f, 0.01, W, out[0], out[1], out[2], 1e-11, 1e-12,
+    fresh(p, int(mode), u, k.code("liftoff"), y, f, 0.01, W, out[0], out[1], out[2], 1e-11, 1e-12,
           out[3])
     ir = fresh.inspect_llvm(fresh.signatures[0])
     start = ir.index("define ")  # the step itself comes first, then its Python wrappers

@@ -22,8 +22,9 @@ def test_signatures_are_the_kernels_calls():
     bar = compile_system("rocking_bar")
     m = bar.module
     fresh = nb.njit(error_model="numpy")(m.simulate_maneuver.py_func)
-    out = fresh(bar._p, 0, 0.1, np.zeros(1), bar._maneuver_cfgs[0], np.empty((0, m.SAMPLE_WIDTH)),
-                np.empty((17, m.EVENT_WIDTH)), np.empty(m.NSTATE), np.empty(0), 0)
+    out = fresh(bar.prepared, 0, 0.1, np.zeros(1), bar._maneuver_cfgs[0],
+                np.empty((0, m.SAMPLE_WIDTH)), np.empty((17, m.EVENT_WIDTH)), np.empty(m.NSTATE),
+                np.empty(0), 0)
     assert out[0] == 0  # OK
     expected = {**precompile.signatures(),
                 "step": precompile._types(precompile.STEP_SIGNATURE)}

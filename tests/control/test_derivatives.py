@@ -25,8 +25,8 @@ from biped_opt.control.derivatives import (
     outcome_gradient,
 )
 from biped_opt.errors import InvalidInputError, SimulationError
-from biped_opt.hybrid.simulate import SimulatorOptions
 from biped_opt.simulation.compiled import compile_system
+from biped_opt.simulation.options import SimulatorOptions
 from biped_opt.systems import System
 from tests.extrapolated import central, extrapolated, relative_noise
 from tests.paper import oracle_biped as biped_derivatives

@@ -17,8 +17,8 @@ from biped_opt.control.theorem1 import (
     optimal_derivatives_with_errors,
     polish_optimum,
 )
-from biped_opt.hybrid.simulate import DEFAULT_OPTIONS
 from biped_opt.paper.problems import get_problem as biped_problem
+from biped_opt.simulation.options import DEFAULT_OPTIONS
 from tests.extrapolated import SAFETY, extrapolated, relative_noise
 from tests.paper.oracle_biped import one_sided_derivatives
 

@@ -18,9 +18,9 @@ import pytest
 from cyclonedds._clayer import ddspy_write
 
 from biped_opt import ros
-from biped_opt.hybrid import simulate
 from biped_opt.nodes.graph import Graph
 from biped_opt.nodes.recorder import SweepRequest
+from biped_opt.paper.biped import simulate
 from biped_opt.paper.problems import get_problem
 from biped_opt.paper.solve import optimal_policy
 from biped_opt.piecewise import theta_grid

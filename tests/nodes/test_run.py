@@ -16,7 +16,7 @@ from biped_opt.nodes import run
 def test_kernels_cached_reads_the_on_disk_cache(tmp_path):
     """In a fresh interpreter whose Numba cache directory is empty nothing is cached (the check
     the first-compile message rests on; the next test checks the cached case)."""
-    code = "from biped_opt.hybrid import kernels_cached\nprint(kernels_cached())\n"
+    code = "from biped_opt.paper.biped import kernels_cached\nprint(kernels_cached())\n"
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                          timeout=60)
@@ -25,7 +25,7 @@ def test_kernels_cached_reads_the_on_disk_cache(tmp_path):
 
 def test_kernels_cached_in_this_checkout():
     """The test session has compiled (or loaded) the kernels: they are in the cache."""
-    from biped_opt.hybrid import kernels_cached, warm_up
+    from biped_opt.paper.biped import kernels_cached, warm_up
 
     warm_up()
     assert kernels_cached()

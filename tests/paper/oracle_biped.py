@@ -4,7 +4,7 @@ This was the biped-only lane's derivative engine (``biped_opt.optimal.derivative
 retired); the package now differentiates every system, the biped included, with
 :mod:`biped_opt.control.derivatives` and :mod:`biped_opt.control.theorem1` on generated code.
 Kept here as an independent implementation to compare those with: other physics code
-(:mod:`biped_opt.model.biped`, numba Jacobians by differences of the hand-written vector field),
+(:mod:`tests.paper.biped_physics`, numba Jacobians by differences of the hand-written vector field),
 other event bookkeeping, and for Theorem 1 another polish and another differencing of the second
 derivatives (only the starting optimum comes from the one solver).
 
@@ -61,22 +61,29 @@ from scipy.integrate import solve_ivp
 from biped_opt.control.derivatives import DEFAULT_VARIATIONAL, VariationalOptions, saltation_matrix
 from biped_opt.control.theorem1 import Derivatives
 from biped_opt.errors import InvalidInputError, SimulationError
-from biped_opt.hybrid.simulate import (
-    DEFAULT_OPTIONS,
+from biped_opt.paper.biped import (
     INPUT_NAMES,
-    SimulatorOptions,
+    BipedParams,
+    ContactMode,
     check_inputs,
-    kernel,
-    kernel_config,
+    compiled_biped,
+    parse_maneuver,
     simulate,
+    theta0_limit,
 )
-from biped_opt.hybrid.trajectory import Event, Status, Trajectory
-from biped_opt.maneuvers import initial_state, parse_maneuver, spec
-from biped_opt.model.biped import BODY_DZ, NSTATE, dynamics, generalised_forces
-from biped_opt.model.modes import ContactMode
-from biped_opt.model.params import BipedParams
 from biped_opt.paper.problems import OptimalControlProblem
 from biped_opt.paper.solve import optimal_policy
+from biped_opt.simulation.compiled import kernel_config
+from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
+from biped_opt.simulation.trajectory import Event, Status, Trajectory
+from tests.paper.biped_physics import (
+    BODY_DZ,
+    NSTATE,
+    dynamics,
+    generalised_forces,
+    initial_state,
+    packed,
+)
 
 __all__ = [
     "PARAMETER_NAMES",
@@ -348,22 +355,22 @@ def _continue(
     The compiled kernel starts at t = 0 with every guard near zero disarmed (the feet that just
     flipped), which is exactly the state right after an event; times are shifted by t0.
     """
-    s = spec(maneuver)
-    k = kernel()
+    name = parse_maneuver(maneuver).value
+    k = compiled_biped(params)
     m = k.module
     events = np.empty((options.max_events + 1, m.EVENT_WIDTH))
     y_out = np.empty(NSTATE)
-    cfg = kernel_config(options, 0.0, touched_down).copy()  # (a shared, cached vector)
+    cfg = kernel_config(m, options, 0.0, touched_down)
     cfg[m.CFG_T_END] = options.t_end - t0
     status, t_f, mode_f, n_ev, _, nfev, nsteps, nrej, _ = m.simulate_maneuver(
-        k.parameters(params), k.codes[s.code], 0.0, u, cfg, np.empty((0, m.SAMPLE_WIDTH)),
+        k.prepared, k.code(name), 0.0, u, cfg, np.empty((0, m.SAMPLE_WIDTH)),
         events, y_out, np.ascontiguousarray(y0, dtype=np.float64), int(mode0),
     )
     n_rows = n_ev + (1 if status in (Status.OK, Status.APEX_IN_CONTACT) else 0)
     rows = events[:n_rows].copy()
     rows[:, 0] += t0
     return Trajectory(
-        system="biped", maneuver=s.maneuver.value, s=theta0, inputs=tuple(u.tolist()),
+        system="biped", maneuver=name, s=theta0, inputs=tuple(u.tolist()),
         status=Status(status), t_final=t_f + t0, outcome=float(y_out[2]), y_final=y_out,
         mode_final=int(mode_f), initial_mode=int(mode0), n_events=int(n_ev), event_rows=rows,
         samples=None, nfev=nfev, nsteps=nsteps, nrejected=nrej, constraints=("left", "right"),
@@ -379,13 +386,13 @@ def _initial_sensitivity(maneuver: str, theta0: float, params: BipedParams) -> A
     keeps every evaluation inside it.
     """
     z = np.zeros((NEXT, NPARAM))
-    s = spec(maneuver)
+    name = parse_maneuver(maneuver).value
     h = 1e-5
 
     def y0(th: float) -> Array:
-        return initial_state(s.maneuver, th, params)[0]
+        return initial_state(name, th, params)[0]
 
-    if abs(theta0) + 2 * h <= s.theta0_limit:
+    if abs(theta0) + 2 * h <= theta0_limit(name):
         stencil = ((2.0, -1.0), (1.0, 8.0), (-1.0, -8.0), (-2.0, 1.0))
     else:
         sgn = -1.0 if theta0 > 0 else 1.0  # step toward the interior
@@ -439,7 +446,7 @@ def outcome_sensitivity(
     """
     name = parse_maneuver(maneuver).value
     p_obj = params if params is not None else BipedParams()
-    p = p_obj.as_array()
+    p = packed(p_obj)
     u = check_inputs(inputs)
     v = _check_direction(direction, None)
     traj = simulate(name, theta0, u, params=p_obj, options=options)
@@ -767,17 +774,17 @@ def one_sided_derivatives(
         raise InvalidInputError(f"probe must be a small positive number, got {probe!r}")
     if params is not None:
         problem = dataclasses.replace(problem, params=params)
-    s = spec(problem.maneuver)
+    limit = theta0_limit(problem.maneuver)
     th0 = float(theta0)
-    if not math.isfinite(th0) or abs(th0) > s.theta0_limit:
+    if not math.isfinite(th0) or abs(th0) > limit:
         raise InvalidInputError(
-            f"theta0 = {theta0} is outside the valid range |theta0| <= {s.theta0_limit}"
+            f"theta0 = {theta0} is outside the valid range |theta0| <= {limit}"
         )
     sides = {}
     nsens = 0
     for side in (-1, 1):
         th_probe = th0 + side * probe
-        if abs(th_probe) > s.theta0_limit:
+        if abs(th_probe) > limit:
             th_probe = th0
         start = optimal_policy(problem, th_probe)
         if not start.success:

@@ -29,8 +29,7 @@ import pytest
 from scipy.optimize import brentq
 
 from biped_opt.analysis.switches import LOCATE_TOL
-from biped_opt.maneuvers import spec
-from biped_opt.model.params import BipedParams
+from biped_opt.paper.biped import BipedParams, theta0_limit
 from biped_opt.paper.nonsmooth import find_nonsmooth_fixed, find_nonsmooth_optimal
 from biped_opt.paper.problems import liftoff_problem, liftoff_variant_problem, touchdown_problem
 from biped_opt.paper.solve import optimal_policy
@@ -56,7 +55,7 @@ def test_grids_keep_both_ends_and_hold_zero(num, lo, hi):
 @pytest.mark.parametrize("maneuver", ["touchdown", "liftoff"])
 @pytest.mark.parametrize("num", range(2, 7))
 def test_default_grids_span_the_valid_range(maneuver, num):
-    limit = spec(maneuver).theta0_limit
+    limit = theta0_limit(maneuver)
     grid = sweep_grid(maneuver, num=num)
     assert grid[0] == -limit and grid[-1] == limit and 0.0 in grid
     assert np.all(np.diff(grid) > 0)

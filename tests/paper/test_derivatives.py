@@ -20,9 +20,7 @@ import pytest
 
 from biped_opt.control.derivatives import DEFAULT_VARIATIONAL, saltation_matrix
 from biped_opt.errors import InvalidInputError, SimulationError
-from biped_opt.hybrid import simulate
-from biped_opt.hybrid.simulate import DEFAULT_OPTIONS
-from biped_opt.model.modes import ContactMode
+from biped_opt.paper.biped import ContactMode, simulate
 from biped_opt.paper.derivatives import (
     PARAMETER_NAMES,
     one_sided_derivatives,
@@ -32,6 +30,7 @@ from biped_opt.paper.derivatives import (
 from biped_opt.paper.problems import get_problem
 from biped_opt.paper.solve import optimal_policy
 from biped_opt.piecewise import locate_switch
+from biped_opt.simulation.options import DEFAULT_OPTIONS
 from tests.extrapolated import SAFETY, extrapolated, relative_noise
 
 TD_U = (2.0, 0.5, 0.0)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from biped_opt.analysis.figure_data import Mark
-from biped_opt.model.modes import ContactMode
+from biped_opt.paper.biped import ContactMode
 from biped_opt.paper.figures import (
     NonsmoothMark,
     at_zero,

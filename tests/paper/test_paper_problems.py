@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from biped_opt.errors import BipedOptError, InvalidInputError, InvalidParameterError
-from biped_opt.maneuvers import Maneuver
+from biped_opt.paper.biped import Maneuver
 from biped_opt.paper.problems import (
     OptimalControlProblem,
     get_problem,

@@ -9,14 +9,8 @@ import pytest
 from biped_opt.control.problems import get_problem as declared
 from biped_opt.control.solve import compiled_for
 from biped_opt.errors import InvalidParameterError
-from biped_opt.model.params import BipedParams
-from biped_opt.paper.problems import (
-    LIBRARY_NAMES,
-    compiled_biped,
-    get_problem,
-    paper_branch,
-    paper_problem,
-)
+from biped_opt.paper.biped import BipedParams, compiled_biped
+from biped_opt.paper.problems import LIBRARY_NAMES, get_problem, paper_branch, paper_problem
 from biped_opt.simulation.options import SimulatorOptions
 
 

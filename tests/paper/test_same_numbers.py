@@ -1,8 +1,9 @@
 """The any-system lane gives the numbers the biped-only lane gave for docs/MODEL.md's biped.
 
-``biped_lane.json`` holds what the biped-only lane computed (``capture_biped_lane.py``, run once
-before that lane is retired): trajectories, outcome branch gradients, optimal values and
-policies, Theorem 1's one-sided derivatives and the nonsmooth tables. Each test here computes the
+``biped_lane.json`` holds what the biped-only lane computed (recorded by a script that ran it
+once, in commit afd61cd, before that lane was retired; lane and script are gone since):
+trajectories, outcome branch gradients, optimal values and policies, Theorem 1's one-sided
+derivatives and the nonsmooth tables. Each test here computes the
 same quantity with the any-system lane alone -- the library's ``biped`` (the 2-leg walker,
 constraints ``left`` and ``right``, inputs u1, u2, u12) and its declared problems -- and compares,
 to a tolerance stated with its reason. Where the lanes differed in method, the one lane keeps

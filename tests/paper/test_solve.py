@@ -14,8 +14,7 @@ import pytest
 from scipy.optimize import minimize_scalar
 
 from biped_opt.errors import InvalidInputError
-from biped_opt.hybrid import simulate, simulate_batch
-from biped_opt.model.modes import ContactMode
+from biped_opt.paper.biped import ContactMode, simulate, simulate_batch
 from biped_opt.paper.problems import liftoff_problem, liftoff_variant_problem, touchdown_problem
 from biped_opt.paper.solve import optimal_policy, optimal_sweep
 
@@ -117,7 +116,7 @@ def test_variant_value_at_and_around_zero():
 
 
 def test_params_override_changes_the_model():
-    from biped_opt.model.params import BipedParams
+    from biped_opt.paper.biped import BipedParams
 
     stiff = optimal_policy(TD, 0.05, params=BipedParams(k=40.0))
     assert stiff.problem.params.k == 40.0 and TD.params.k == 27.0

@@ -40,7 +40,7 @@ def test_rclpy_backend_requested_but_absent():
 
 
 def test_core_never_imports_ros():
-    code = ("import sys, biped_opt, biped_opt.hybrid.simulate, biped_opt.fixed_sweep; "
+    code = ("import sys, biped_opt, biped_opt.paper.biped, biped_opt.paper.sweeps; "
             "print(any(m.startswith(('biped_opt.ros', 'rclpy', 'cyclonedds')) "
             "for m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

@@ -13,12 +13,11 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from biped_opt.maneuvers import initial_state
-from biped_opt.model.biped import Biped
-from biped_opt.model.params import BipedParams
+from biped_opt.paper.biped import BipedParams
 from biped_opt.systems import System, SystemDescriptionError, derive, walker
 from biped_opt.systems.library import LIBRARY, biped, rocking_bar
 from biped_opt.systems.mechanics import accelerations, impact_map, reaction_forces
+from tests.paper.biped_physics import Biped, initial_state
 
 RNG = np.random.default_rng(12)
 

@@ -5,17 +5,22 @@ import math
 import pytest
 
 from biped_opt.errors import BipedOptError, InvalidParameterError
-from biped_opt.model.modes import ContactMode
-from biped_opt.model.params import PARAM_ORDER, BipedParams
+from biped_opt.paper.biped import BipedParams, ContactMode, compiled_biped
+from tests.paper.biped_physics import PARAM_ORDER, packed
 
 
 def test_defaults_are_the_papers():
     p = BipedParams()
     assert (p.mb, p.Ib, p.mf, p.g, p.l0, p.w, p.k, p.c, p.gamma) == (
         1.0, 0.5, 1.0, 1.0, 0.5, 0.25, 27.0, 0.0, 0.0)
-    packed = p.as_array()
-    assert list(packed[:9]) == [getattr(p, n) for n in PARAM_ORDER]
-    assert list(packed[9:]) == [1 / p.mb, 1 / p.Ib, 1 / p.mf]
+    values = packed(p)  # (as the hand-written reference model takes them)
+    assert list(values[:9]) == [getattr(p, n) for n in PARAM_ORDER]
+    assert list(values[9:]) == [1 / p.mb, 1 / p.Ib, 1 / p.mf]
+
+
+def test_parameters_are_the_library_bipeds():
+    """BipedParams names exactly the library biped's parameters, with its defaults."""
+    assert compiled_biped().parameters == BipedParams().as_dict()
 
 
 def test_frozen():

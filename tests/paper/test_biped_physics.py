@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from biped_opt.model.biped import Biped, apply_impact, dynamics
-from biped_opt.model.params import BipedParams
+from biped_opt.paper.biped import BipedParams
 from biped_opt.systems.mechanics import (
     MechanicalSystem,
     accelerations,
@@ -14,6 +13,7 @@ from biped_opt.systems.mechanics import (
     impact_map,
     reaction_forces,
 )
+from tests.paper.biped_physics import Biped, apply_impact, dynamics, packed
 
 
 class Bar(MechanicalSystem):
@@ -102,7 +102,7 @@ def test_biped_specialised_dynamics_equal_generic_eq1(mode):
         y[1] += 1.0
         u = rng.normal(size=3)
         dy, lam = np.empty(14), np.empty(2)
-        dynamics(params.as_array(), mode, y, u, dy, lam)
+        dynamics(packed(params), mode, y, u, dy, lam)
         ddq, lam_ref = accelerations(biped, y[:7], y[7:], u, mode)
         np.testing.assert_allclose(dy[:7], y[7:], rtol=0, atol=0)
         np.testing.assert_allclose(dy[7:], ddq, rtol=1e-12, atol=1e-12)
@@ -115,7 +115,7 @@ def test_biped_specialised_impact_equals_generic_eq1b(mode):
     rng = np.random.default_rng(200 + mode)
     y = rng.normal(size=14)
     expected = impact_map(Biped(params), y[:7], mode) @ y[7:]
-    apply_impact(params.as_array(), mode, y)
+    apply_impact(packed(params), mode, y)
     np.testing.assert_allclose(y[7:], expected, atol=1e-15)
 
 

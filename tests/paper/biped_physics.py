@@ -9,13 +9,13 @@ force: u1 acts only in left single stance J = {1}, u2 only in right single stanc
 body torque u12 only in double stance J = {1, 2}. This *force coupling* (paper Sec. II-B) is what
 makes outcomes nonsmooth when the order of contact events changes.
 
-The physics is written here by hand, as compiled functions on flat float arrays, and wrapped by
-:class:`Biped` for the generic framework of :mod:`~biped_opt.systems.mechanics`: the biped's
-reference model. The simulator runs the module generated from the biped's description
-(``systems/library/biped.py``); the tests check that description's Eq. (1) against this model,
-and this model's constraint handling against Eq. (1) computed with general linear algebra. The
-tests' oracle of the biped's variational equations (``tests/paper/oracle_biped.py``) evaluates it
-directly.
+The physics is written here by hand, independently of the description the package generates
+its simulator from (``systems/library/biped.py``), as compiled functions on flat float arrays,
+wrapped by :class:`Biped` for the dense Eq. (1) of :mod:`biped_opt.systems.mechanics`; with the
+maneuvers' initial states (MODEL.md Sec. 4) it is the tests' reference model of the biped. The
+tests check the generated Eq. (1) and initial states against it, its constraint handling
+against Eq. (1) computed with general linear algebra, and the oracle of the biped's variational
+equations (:mod:`tests.paper.oracle_biped`) evaluates it directly.
 
 .. [1] B. Banjanin and S. A. Burden, "Nonsmooth optimal value and policy functions in mechanical
    systems subject to unilateral constraints", IEEE Control Systems Letters 4(2), 2020.
@@ -31,7 +31,7 @@ import numpy.typing as npt
 
 from biped_opt._jit import HOT_PATH
 from biped_opt.codegen.runtime import sincos
-from biped_opt.model.params import BipedParams
+from biped_opt.paper.biped import BipedParams, ContactMode, Maneuver, check_theta0, parse_maneuver
 from biped_opt.systems.mechanics import MechanicalSystem
 
 __all__ = [
@@ -47,9 +47,22 @@ __all__ = [
     "foot_support",
     "apply_impact",
     "energy",
+    "packed",
+    "initial_state",
 ]
 
 Array = npt.NDArray[np.float64]
+
+#: order of the parameters in :func:`packed` (the kernels below index by position)
+PARAM_ORDER = ("mb", "Ib", "mf", "g", "l0", "w", "k", "c", "gamma")
+
+
+def packed(params: BipedParams) -> Array:
+    """The parameters as the functions below take them: :data:`PARAM_ORDER`, then the inverse
+    masses 1/mb, 1/Ib, 1/mf."""
+    return np.array([getattr(params, name) for name in PARAM_ORDER]
+                    + [1.0 / params.mb, 1.0 / params.Ib, 1.0 / params.mf])
+
 
 NDOF = 7  #: configuration dimension d
 NSTATE = 2 * NDOF  #: state dimension, y = (q, q')
@@ -138,7 +151,7 @@ def generalised_forces(
 ) -> None:
     """Write f_J(q, q', u) into ``f[off:off + 7]`` (MODEL.md Sec. 2).
 
-    p: packed parameters (:meth:`~biped_opt.model.params.BipedParams.as_array`); mode: contact
+    p: packed parameters (:func:`packed`); mode: contact
     mode bit mask; y: state, shape (14,); u: inputs (u1, u2, u12), shape (3,).
     """
     fx, fz, fth, f1x, f1z, f2x, f2z = _force_components(p, mode, y, 0, u)
@@ -223,7 +236,7 @@ class Biped(MechanicalSystem):
 
     def __init__(self, params: BipedParams | None = None) -> None:
         self.params = params if params is not None else BipedParams()
-        self._p = self.params.as_array()
+        self._p = packed(self.params)
 
     @property
     def restitution(self) -> float:
@@ -258,3 +271,34 @@ def _inputs3(u: Array | tuple[float, ...]) -> Array:
     values = np.asarray(u, dtype=np.float64).ravel()
     out[: values.size] = values
     return out
+
+
+#: initial body height of the touchdown maneuver [length]
+TOUCHDOWN_HEIGHT = 1.0
+#: initial leg compression of the liftoff maneuver [length]
+LIFTOFF_COMPRESSION = 0.15
+#: the initial contact mode of each maneuver
+INITIAL_MODE = {Maneuver.TOUCHDOWN: ContactMode.AIR, Maneuver.LIFTOFF: ContactMode.GROUND}
+
+
+def initial_state(maneuver: Maneuver | str, theta0: float, params: BipedParams | None = None
+                  ) -> tuple[Array, ContactMode]:
+    """Initial state y0 = (q, q') and contact mode of ``maneuver`` at body pitch ``theta0``
+    (MODEL.md Sec. 4). touchdown: at rest at z = 1, legs at rest length and perpendicular to the
+    body, foot_j = body + R(th) (s_j w, -l0); liftoff: at rest at z = l0 - 0.15 with vertical,
+    compressed legs, feet on the ground directly below the hips."""
+    m = parse_maneuver(maneuver)
+    th = check_theta0(m, theta0)
+    p = params if params is not None else BipedParams()
+    wc, ws = p.w * math.cos(th), p.w * math.sin(th)
+    y0 = np.zeros(NSTATE)
+    y0[2] = th
+    if m is Maneuver.TOUCHDOWN:
+        z = TOUCHDOWN_HEIGHT
+        lx, lz = p.l0 * math.sin(th), p.l0 * math.cos(th)
+        y0[1] = z
+        y0[3:7] = (-wc + lx, z - ws - lz, wc + lx, z + ws - lz)
+    else:
+        y0[1] = p.l0 - LIFTOFF_COMPRESSION
+        y0[3], y0[5] = -wc, wc
+    return y0, INITIAL_MODE[m]

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from biped_opt.errors import InvalidInputError, InvalidParameterError
-from biped_opt.hybrid import SimulatorOptions, Status, simulate, simulate_batch
-from biped_opt.maneuvers import initial_state
-from biped_opt.model.biped import energy
-from biped_opt.model.modes import ContactMode as M
-from biped_opt.model.params import BipedParams
+from biped_opt.paper.biped import BipedParams, simulate, simulate_batch
+from biped_opt.paper.biped import ContactMode as M
+from biped_opt.simulation.options import SimulatorOptions
+from biped_opt.simulation.trajectory import Status
 from tests.conftest import REFERENCE
+from tests.paper.biped_physics import energy, initial_state, packed
 
 AIR, LEFT, RIGHT, GROUND = M.AIR, M.LEFT, M.RIGHT, M.GROUND
 
@@ -127,7 +127,7 @@ def test_mode_sequences(maneuver, theta0, u, sequence):
 
 def test_liftoff_events_are_roots_of_the_reaction_force():
     """Each liftoff happens where lambda_j = 0: |lambda_j| / |dlambda_j/dt| <= 1e-10."""
-    from biped_opt.model.biped import dynamics
+    from tests.paper.biped_physics import dynamics
 
     params = BipedParams()
     tr = simulate("liftoff", 0.07, (1.5, 3.0, 0.1), sample_dt=0.001)
@@ -136,7 +136,7 @@ def test_liftoff_events_are_roots_of_the_reaction_force():
         assert e.liftoff == (("left", "right")[leg - 1],)  # the constraint's name
         j = leg - 1
         dy, lam = np.empty(14), np.empty(2)
-        dynamics(params.as_array(), e.mask_before, e.state_before, np.array(tr.inputs), dy, lam)
+        dynamics(packed(params), e.mask_before, e.state_before, np.array(tr.inputs), dy, lam)
         # rate of lambda_j from the samples just before the event
         before = tr.samples[(tr.samples[:, 0] < e.t) & (tr.samples[:, 15] == e.mask_before)]
         rate = (before[-1, 16 + j] - before[-2, 16 + j]) / (before[-1, 0] - before[-2, 0])
@@ -219,7 +219,7 @@ def test_batch_equals_single_calls():
         ({"maneuver": "touchdown", "theta0": 0.1, "inputs": (1.0, math.inf)}, InvalidInputError,
          "u2 must be finite"),
         ({"maneuver": "touchdown", "theta0": 0.1, "inputs": (1, 2, 3, 4)}, InvalidInputError,
-         "at most 3 inputs"),
+         "4 inputs given, the system has 3"),
         ({"maneuver": "touchdown", "theta0": 0.1, "sample_dt": -1.0}, InvalidInputError,
          "sample_dt"),
     ],
@@ -250,9 +250,8 @@ def test_warm_up_compiles_both_kernels():
     loaded from the cache) before any simulation asked for them, so a node that calls it before
     serving never compiles inside a request."""
     script = (
-        "from biped_opt.hybrid import warm_up\n"
-        "from biped_opt.hybrid.simulate import kernel\n"
-        "m = kernel().module\n"
+        "from biped_opt.paper.biped import compiled_biped, warm_up\n"
+        "m = compiled_biped().module\n"
         "assert not m.simulate_maneuver.signatures\n"
         "assert not m.simulate_batch_kernel.signatures\n"
         "assert warm_up() > 0.0\n"

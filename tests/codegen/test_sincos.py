@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from biped_opt.model.biped import sincos
+from biped_opt.codegen.runtime import sincos
 
 
 def test_sincos_matches_libm_on_the_polynomial_range():
