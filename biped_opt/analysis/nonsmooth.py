@@ -51,7 +51,7 @@ WORDS = CauseWords(modes="mode sequence changes", acting="acting inputs change")
 def s_grid(compiled: CompiledSystem, maneuver: str, num: int,
            lo: float | None = None, hi: float | None = None) -> npt.NDArray[np.float64]:
     """``num`` evenly spaced s over the maneuver's range (or [lo, hi]), 0 included if inside."""
-    s_lo, s_hi = compiled.derived.maneuvers[maneuver].description.s_range
+    s_lo, s_hi = compiled.s_range(maneuver)
     lo = s_lo if lo is None else float(lo)
     hi = s_hi if hi is None else float(hi)
     if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):

@@ -20,7 +20,7 @@ import math
 import os
 import sys
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -81,23 +81,53 @@ def finite_float(name: str) -> Callable[[str], float]:
     return convert
 
 
-def int_in_range(name: str, low: int, high: int) -> Callable[[str], int]:
-    """An integer in [low, high]; the error names the argument and the range."""
+def int_in_range(name: str, low: int, high: int | Callable[[], int]) -> Callable[[str], int]:
+    """An integer in [low, high]; the error names the argument and the range. ``high`` may be
+    a function, called when a value is converted (a limit kept in a module the parser should
+    not import: building the parser stays fast)."""
 
     def convert(text: str) -> int:
+        top = high() if callable(high) else high
         try:
             value = int(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name} must be an integer, got {_given(text)}"
                                              ) from None
-        if not low <= value <= high:
+        if not low <= value <= top:
             shown = str(value) if len(text) <= 40 else _given(text)
             raise argparse.ArgumentTypeError(
-                f"{name} must be between {low} and {high}, got {shown}")
+                f"{name} must be between {low} and {top}, got {shown}")
         return value
 
     convert.__name__ = name
     return convert
+
+
+class LazyChoices(Sequence[str]):
+    """An option's choices read by ``load`` only when the option is given or help is shown,
+    so that building the parser does not import the module that defines them (give the
+    option a ``metavar``: argparse formats choices as the metavar otherwise)."""
+
+    def __init__(self, load: Callable[[], Iterable[str]]) -> None:
+        self._load = load
+        self._values: tuple[str, ...] | None = None
+
+    def _get(self) -> tuple[str, ...]:
+        if self._values is None:
+            self._values = tuple(self._load())
+        return self._values
+
+    def __getitem__(self, index: Any) -> Any:
+        return self._get()[index]
+
+    def __len__(self) -> int:
+        return len(self._get())
+
+    def __contains__(self, value: object) -> bool:
+        return value in self._get()
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._get())
 
 
 def float_in_range(name: str, low: float, high: float) -> Callable[[str], float]:

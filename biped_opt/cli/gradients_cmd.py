@@ -6,12 +6,12 @@ import argparse
 import sys
 from pathlib import Path
 
-from biped_opt.analysis.gradients import PROBLEMS, report, run_gradient_study
 from biped_opt.cli.args import (
     GRADIENT_EPS_VALUES,
     GRADIENT_SAMPLE_COUNTS,
     GRADIENT_SIGMAS,
     MAX_SEED,
+    LazyChoices,
     int_in_range,
     output_directory,
     path_arg,
@@ -26,7 +26,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="seed of every random draw (default 0)")
     p.add_argument("--quick", action="store_true",
                    help="small grids and samples (about a minute per problem)")
-    p.add_argument("--problem", action="append", choices=[name for _, name, _, _ in PROBLEMS],
+    p.add_argument("--problem", action="append", metavar="NAME",
+                   choices=LazyChoices(_problem_names),
                    help="study only this problem (repeatable; default all four)")
     p.add_argument("--figures", type=path_arg(output_directory, "--figures", create=False),
                    metavar="DIR", default=None,
@@ -36,7 +37,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _problem_names() -> list[str]:
+    from biped_opt.analysis.gradients import PROBLEMS
+
+    return [name for _, name, _, _ in PROBLEMS]
+
+
 def run(args: argparse.Namespace) -> int:
+    from biped_opt.analysis.gradients import report, run_gradient_study
+
     def say(message: str) -> None:
         print(message, file=sys.stderr, flush=True)
 

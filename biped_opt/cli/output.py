@@ -157,7 +157,7 @@ def show_trajectory(tr: Trajectory, as_json: bool) -> int:
 
 def system_trajectory_json(compiled: CompiledSystem, tr: Trajectory) -> dict[str, Any]:
     """The JSON form of any system's trajectory (coordinates and constraints by name)."""
-    names = compiled.system.coordinate_names
+    names = compiled.coordinates
     d = len(names)
     return {
         "system": tr.system, "maneuver": tr.maneuver, "s": tr.s,

@@ -24,9 +24,13 @@ LINEAR_TOL = 1e-8
 MAX_ROUNDS = 10
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def _max_legs() -> int:
     from biped_opt.analysis.pieces import MAX_LEGS
 
+    return MAX_LEGS
+
+
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "pieces", help="count the smooth pieces near simultaneous contact vs (n!)^k",
         description="Samples the n-leg walker's foot offsets around the simultaneous touchdown "
@@ -34,9 +38,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "(touchdown, liftoff, touchdown), confirms each piece's boundary by "
                     "bisection, and compares the count with (n!)^k; then checks one linear "
                     "piece of the B-derivative per touchdown order against finite differences.")
-    p.add_argument("--legs", type=int_in_range("--legs", 1, MAX_LEGS), nargs="+",
-                   default=list(range(1, MAX_LEGS + 1)), metavar="N",
-                   help=f"numbers of legs (default 1..{MAX_LEGS})")
+    p.add_argument("--legs", type=int_in_range("--legs", 1, _max_legs), nargs="+",
+                   default=None, metavar="N",
+                   help="numbers of legs (default: every number the study supports, 1..4)")
     p.add_argument("--rounds", type=int_in_range("--rounds", 1, MAX_ROUNDS), default=3, metavar="K",
                    help="count for k = 1..K rounds, as far as the walker has them (default 3)")
     p.add_argument("--samples", type=int_in_range("--samples", 2, MAX_POINTS), default=400,
@@ -68,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
 
     start = time.perf_counter()
     counts, derivatives = [], {}
-    for n in sorted(set(args.legs)):
+    for n in sorted(set(args.legs or range(1, _max_legs() + 1))):
         rounds = simultaneous_rounds(n)
         for k in range(1, min(args.rounds, len(rounds)) + 1):
             for velocities in (False, True):

@@ -23,8 +23,6 @@ from biped_opt.cli.args import (
     uses_system,
 )
 from biped_opt.cli.output import emit_sweep, fixed_sweep_table, optimal_sweep_table
-from biped_opt.paper.biped import FIXED_INPUTS
-from biped_opt.paper.sweeps import sweep_fixed, sweep_optimal
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -51,6 +49,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _optimal_biped(args: argparse.Namespace) -> int:
+    from biped_opt.paper.sweeps import sweep_optimal
+
     maneuver = parse_maneuver_arg(args.maneuver).value
     problem = problem_from_args(args)
     grid = grid_from_args(args, maneuver, SWEEP_NUM["optimal"])
@@ -63,6 +63,9 @@ def _optimal_biped(args: argparse.Namespace) -> int:
 
 
 def _fixed_biped(args: argparse.Namespace) -> int:
+    from biped_opt.paper.biped import FIXED_INPUTS
+    from biped_opt.paper.sweeps import sweep_fixed
+
     maneuver = parse_maneuver_arg(args.maneuver).value
     u = [value if value is not None else default
          for value, default in zip((args.u1, args.u2, args.u12), FIXED_INPUTS[maneuver])]

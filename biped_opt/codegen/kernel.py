@@ -698,15 +698,19 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
     return status, t, mode, n_events, ns, nfev, nsteps, nrejected, outcome
 
 
-@nb.njit(**HOT_PATH, parallel=True)
-def simulate_batch_kernel(p, code, ss, us, cfg, events, y_out, outcome, info):
-    """:func:`simulate_maneuver` over many s and inputs in parallel threads; ``outcome[k]``
-    receives the maneuver's outcome at the final state."""
+@nb.njit(**HOT_PATH, nogil=True)
+def simulate_batch_kernel(p, code, ss, us, cfg, events, y_out, outcome, info, start, stop):
+    """:func:`simulate_maneuver` for the cases start <= k < stop of many s and inputs (row k of
+    each array); ``outcome[k]`` receives the maneuver's outcome at the final state. It releases
+    the GIL: Python threads run it on disjoint ranges in parallel
+    (:meth:`biped_opt.simulation.compiled.CompiledSystem.simulate_batch` hands out the ranges),
+    which shares the work out by how fast each thread actually runs, where a parallel loop
+    splits it evenly in advance and waits for a thread whose core is busy elsewhere."""
     no_samples = np.empty((0, SAMPLE_WIDTH))
     from_s = np.empty(0)  # (FROM_S, allocated here: a global array would be frozen into code)
     mode0 = INITIAL_MODE[code]  # (unused with from_s; a variable, not a literal 0, which Numba
     # would compile a second specialisation of the whole kernel for)
-    for k in nb.prange(ss.shape[0]):
+    for k in range(start, stop):
         status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej, value = simulate_maneuver(
             p, code, ss[k], us[k], cfg, no_samples, events[k], y_out[k], from_s, mode0
         )

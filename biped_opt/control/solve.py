@@ -205,7 +205,7 @@ def branch_of(compiled: CompiledSystem, initial: int, events: Array,
     name = status if isinstance(status, str) else Status(status).name
     if name != "OK":
         return f"FAILED:{name}"
-    names = compiled.derived.constraint_names
+    names = compiled.constraints
     parts = [mode_name(initial, names)]
     for row in events:
         after, touched = int(row[5]), int(row[2])

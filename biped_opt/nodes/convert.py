@@ -136,11 +136,10 @@ SYSTEM_INFO_FIELDS = ("system", "source", "coordinates", "constraints", "inputs"
 def system_info_fields(compiled: CompiledSystem, source: str) -> dict[str, Any]:
     """SystemInfo's fields (plain str, list and float values) for ``compiled``, loaded from
     ``source`` (a library name or a file path)."""
-    system = compiled.system
     ranges = [compiled.s_range(m) for m in compiled.maneuvers]
     return {
         "system": compiled.name, "source": source,
-        "coordinates": list(system.coordinate_names), "constraints": list(system.constraints),
+        "coordinates": list(compiled.coordinates), "constraints": list(compiled.constraints),
         "inputs": list(compiled.inputs), "parameter_names": list(compiled.parameters),
         "parameter_values": [float(v) for v in compiled.parameters.values()],
         "maneuvers": list(compiled.maneuvers), "s_min": [float(lo) for lo, _ in ranges],

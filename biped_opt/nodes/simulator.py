@@ -183,7 +183,7 @@ class SimulatorNode(ros.Node):
         tr = self.run(maneuver, theta0, inputs)
         start_ns = self.get_clock().now().nanoseconds
         if self.system is not None:
-            states = convert.system_state_messages(tr, len(self.system.system.q), start_ns)
+            states = convert.system_state_messages(tr, len(self.system.coordinates), start_ns)
             modes: list[tuple[float, Any]] = []
         else:
             states = convert.state_messages(tr, start_ns)
@@ -236,7 +236,7 @@ class SimulatorNode(ros.Node):
                 f"simulation ended with status {tr.status.name}"
             response.contact_modes = [int(m) for m in tr.modes]
             response.system_states = states if states is not None else \
-                convert.system_state_messages(tr, len(self.system.system.q), 0)
+                convert.system_state_messages(tr, len(self.system.coordinates), 0)
         else:
             response.success = tr.success
             response.message = tr.message

@@ -266,7 +266,7 @@ def control_experiment_data(*, half_width: float = 0.02, num: int = 801,
             zero[(maneuver, law)] = at_zero(mine, law) or (
                 "C1", one_sided_derivatives(walker, maneuver, 0.0, list(u)))
     bar = CompiledSystem("rocking_bar")
-    lo, hi = bar.derived.maneuvers["drop"].description.s_range
+    lo, hi = bar.s_range("drop")
     bar_s = theta_grid(lo, hi, bar_num)
     bar_y, bar_marks = system_marks(bar, "drop", bar_s)
     return ControlExperiment(s=s, touchdown=outcomes["touchdown"], liftoff=outcomes["liftoff"],

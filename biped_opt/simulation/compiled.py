@@ -24,6 +24,7 @@ import dataclasses
 import hashlib
 import importlib.metadata
 import importlib.util
+import itertools
 import json
 import math
 import os
@@ -32,6 +33,7 @@ import tempfile
 import threading
 import time
 from collections.abc import Mapping
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
@@ -50,7 +52,7 @@ if TYPE_CHECKING:  # (imported where needed: SymPy and the generator are the slo
     from biped_opt.systems.description import System
 
 __all__ = ["BatchResult", "CompiledSystem", "SystemTrajectory", "Trajectory", "cache_dir",
-           "kernels_cached", "warm_up",
+           "available_cores", "batch_threads", "kernels_cached", "run_batch", "warm_up",
            "compile_system", "compiled_with", "shared", "simulate", "simulate_batch"]
 
 Array = npt.NDArray[np.float64]
@@ -223,6 +225,7 @@ class CompiledSystem:
         self._options = [dataclasses.replace(DEFAULT_OPTIONS, max_events=events, t_end=horizon)
                          for events, horizon in facts["budgets"]]
         self._ranges = [(float(lo), float(hi)) for lo, hi in facts["ranges"]]
+        self._coordinates: tuple[str, ...] = tuple(facts["coordinates"])
         self._initial_modes = [int(v) for v in self.module.INITIAL_MODE]
         self._codes = {name: k for k, name in enumerate(self.maneuvers)}
         self._ninputs = len(self.inputs)
@@ -245,7 +248,8 @@ class CompiledSystem:
                 "inputs": list(system.u.names()), "constraints": list(system.constraints),
                 "budgets": [[m.description.max_events, m.description.horizon]
                             for m in derived.maneuvers.values()],
-                "ranges": [list(m.description.s_range) for m in derived.maneuvers.values()]}
+                "ranges": [list(m.description.s_range) for m in derived.maneuvers.values()],
+                "coordinates": list(system.coordinate_names)}
 
     @property
     def system(self) -> System:
@@ -269,6 +273,12 @@ class CompiledSystem:
     @property
     def name(self) -> str:
         return self._name
+
+    @property
+    def coordinates(self) -> tuple[str, ...]:
+        """The generalised coordinates' names in their declared order (the state is
+        (q, q') in this order)."""
+        return self._coordinates
 
     @property
     def constraints(self) -> tuple[str, ...]:
@@ -457,10 +467,71 @@ class CompiledSystem:
         y_out = np.zeros((ss.size, m.NSTATE))
         outcome = np.zeros(ss.size)
         info = np.zeros((ss.size, 8))
-        m.simulate_batch_kernel(self.prepared, code, ss, us, self._cfg(options, 0.0), events, y_out,
-                                outcome, info)
+        run_batch(m.simulate_batch_kernel, ss.size,
+                  (self.prepared, code, ss, us, self._cfg(options, 0.0), events, y_out, outcome,
+                   info))
         return BatchResult.from_kernel(self._name, maneuver, ss, us, info, outcome, y_out, events,
                                        self._initial_modes[code], self._constraints)
+
+
+#: the fewest cases a batch gives each thread: a thread's start and hand-over cost about one
+#: trajectory of a small system, so fewer cases per thread would not pay for it
+MIN_CASES_PER_THREAD = 8
+#: each thread takes the work in about this many pieces, so that a thread whose core is busy
+#: elsewhere takes fewer of them
+PIECES_PER_THREAD = 8
+
+_POOL: list[ThreadPoolExecutor] = []
+
+
+def available_cores() -> int:
+    """The cores this process may run on (its CPU affinity; all of them where that is not
+    known)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # (not on Linux)
+        return max(1, os.cpu_count() or 1)
+
+
+def batch_threads(n: int, cores: int | None = None) -> int:
+    """Threads for a batch of ``n`` cases: one per :data:`MIN_CASES_PER_THREAD` cases, at most
+    one per available core."""
+    cores = available_cores() if cores is None else cores
+    return max(1, min(cores, n // MIN_CASES_PER_THREAD))
+
+
+def _pool() -> ThreadPoolExecutor:
+    with _LOCK:
+        if not _POOL:
+            _POOL.append(ThreadPoolExecutor(max(1, available_cores() - 1),
+                                            thread_name_prefix="biped_opt-batch"))
+        return _POOL[0]
+
+
+def run_batch(kernel: Any, n: int, args: tuple, threads: int | None = None) -> None:
+    """``kernel(*args, start, stop)`` over 0 <= k < n in :func:`batch_threads` threads (the
+    calling thread one of them): each takes the next piece of :data:`PIECES_PER_THREAD` per
+    thread until none is left, so the work goes where it runs fastest and a batch is never
+    held up by a thread on a busy core. The kernel must release the GIL and write only the
+    rows of its range. (The caller works too, so a batch completes even when every pool thread
+    serves another batch.)"""
+    threads = batch_threads(n) if threads is None else max(1, int(threads))
+    if threads == 1:
+        kernel(*args, 0, n)
+        return
+    size = max(1, -(-n // (threads * PIECES_PER_THREAD)))
+    starts = itertools.count(0, size)  # (next() on it is atomic under the GIL)
+
+    def work() -> None:
+        for start in starts:
+            if start >= n:
+                return
+            kernel(*args, start, min(n, start + size))
+
+    helpers = [_pool().submit(work) for _ in range(threads - 1)]
+    work()
+    for helper in helpers:
+        helper.result()
 
 
 def _number(name: str, value: Any) -> float:
