@@ -153,6 +153,8 @@ def _machine() -> dict:
     import numba
     import scipy
 
+    from biped_opt.simulation.compiled import batch_threads
+
     try:
         usable = len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
@@ -160,7 +162,7 @@ def _machine() -> dict:
     return {
         "cpu_count": os.cpu_count(),
         "usable_cpus": usable,
-        "numba_threads": numba.config.NUMBA_NUM_THREADS,
+        "batch_threads": batch_threads(1 << 20),
         "machine": platform.machine(),
         "processor": platform.processor() or platform.machine(),
         "python": platform.python_version(),

@@ -71,8 +71,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numba
-
 from biped_opt import ros
 from biped_opt.control.solve import optimal_policy
 from biped_opt.control.theorem1 import value_slopes
@@ -97,6 +95,7 @@ from biped_opt.nodes.sources import (
 )
 from biped_opt.paper.biped import Maneuver
 from biped_opt.paper.problems import OptimalControlProblem, get_problem
+from biped_opt.simulation.compiled import batch_thread_limit
 
 if TYPE_CHECKING:
     from biped_opt.control.problems import Problem
@@ -309,10 +308,11 @@ class OptimiserNode(ros.Node):
                 if not 0 <= index < len(points):
                     raise InvalidInputError(
                         f"indices: {index} is not a point of the study ({len(points)} points)")
-            # one core per node for study points (the batch kernels' threads would take the
-            # other cores from the nodes beside it): start one optimiser per core to use them
-            numba.set_num_threads(1)
-            rows = [r for index in indices for r in evaluate_point(study, index, points[index])]
+            # one core per node for study points (the batches' threads would take the other
+            # cores from the nodes beside it): start one optimiser per core to use them
+            with batch_thread_limit(1):
+                rows = [r for index in indices
+                        for r in evaluate_point(study, index, points[index])]
         except BaseException as exc:  # bad request, or a bug: one refused request either way
             if not answers(exc):
                 raise

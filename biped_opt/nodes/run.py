@@ -21,6 +21,8 @@ FIRST_COMPILE_S = (30, 60)
 #: after SIGINT/SIGTERM, how long callbacks under way may take to return before the process
 #: ends without them [s]
 STOP_GRACE_S = 3.0
+#: then how long the node's own clean-up (destroy_node, the middleware's) may take [s]
+TEARDOWN_S = 10.0
 
 
 def stop_on_sigterm() -> None:
@@ -76,10 +78,12 @@ def run_node(make_node: Callable[[], Any], args: list[str] | None, *, threads: i
     executor = (ros.MultiThreadedExecutor(num_threads=threads) if threads > 1
                 else ros.SingleThreadedExecutor())
     executor.add_node(node)
+    stopped = False
     try:
         executor.spin()
+        stopped = True
     except KeyboardInterrupt:
-        pass
+        stopped = True
     finally:
         # callbacks under way get STOP_GRACE_S to return; a longer one (an optimisation, a
         # study's points) must not keep a stopped node alive: the process ends without it
@@ -90,8 +94,29 @@ def run_node(make_node: Callable[[], Any], args: list[str] | None, *, threads: i
             kill_work = getattr(node, "kill_work", None)
             if kill_work is not None:  # (the processes it started: a compile)
                 kill_work()
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os._exit(0)
+            _exit_now()
+        # the node's own clean-up (a recorder finishes its file) gets TEARDOWN_S; then, on a
+        # stop (not an error, which must show), the process ends without the interpreter's
+        # finalisation: the middleware's threads and objects met there could hold it up
+        errors: list[BaseException] = []
+        teardown = threading.Thread(target=_teardown, args=(node, errors), daemon=True)
+        teardown.start()
+        teardown.join(TEARDOWN_S)
+        if stopped or teardown.is_alive():
+            _exit_now(1 if errors else 0)  # (the thread printed an error's traceback)
+
+
+def _teardown(node: Any, errors: list[BaseException]) -> None:
+    try:
         node.destroy_node()
         ros.try_shutdown()
+    except BaseException as exc:
+        errors.append(exc)
+        raise
+
+
+def _exit_now(status: int = 0) -> None:
+    """End the process with ``status`` at once, the standard streams flushed."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(status)

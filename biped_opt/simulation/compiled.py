@@ -20,6 +20,7 @@ The cache lives in ``$BIPED_OPT_CACHE`` if set, else ``$XDG_CACHE_HOME/biped_opt
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import importlib.metadata
@@ -32,7 +33,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from types import ModuleType
@@ -51,9 +52,9 @@ if TYPE_CHECKING:  # (imported where needed: SymPy and the generator are the slo
     from biped_opt.systems.derive import DerivedSystem
     from biped_opt.systems.description import System
 
-__all__ = ["BatchResult", "CompiledSystem", "SystemTrajectory", "Trajectory", "cache_dir",
-           "available_cores", "batch_threads", "kernels_cached", "run_batch", "warm_up",
-           "compile_system", "compiled_with", "shared", "simulate", "simulate_batch"]
+__all__ = ["BatchResult", "CompiledSystem", "SystemTrajectory", "Trajectory", "available_cores",
+           "batch_thread_limit", "batch_threads", "cache_dir", "compile_system", "compiled_with",
+           "kernels_cached", "run_batch", "shared", "simulate", "simulate_batch", "warm_up"]
 
 Array = npt.NDArray[np.float64]
 
@@ -482,6 +483,20 @@ MIN_CASES_PER_THREAD = 8
 PIECES_PER_THREAD = 8
 
 _POOL: list[ThreadPoolExecutor] = []
+_LIMIT = threading.local()
+
+
+@contextlib.contextmanager
+def batch_thread_limit(threads: int) -> Iterator[None]:
+    """Batches started by this thread (inside the ``with``) use at most ``threads`` threads: a
+    process that shares the machine with others of its kind (one optimiser node per core)
+    keeps to its share."""
+    before = getattr(_LIMIT, "threads", None)
+    _LIMIT.threads = max(1, int(threads))
+    try:
+        yield
+    finally:
+        _LIMIT.threads = before
 
 
 def available_cores() -> int:
@@ -495,8 +510,11 @@ def available_cores() -> int:
 
 def batch_threads(n: int, cores: int | None = None) -> int:
     """Threads for a batch of ``n`` cases: one per :data:`MIN_CASES_PER_THREAD` cases, at most
-    one per available core."""
+    one per available core (and at most the calling thread's :func:`batch_thread_limit`)."""
     cores = available_cores() if cores is None else cores
+    limit = getattr(_LIMIT, "threads", None)
+    if limit is not None:
+        cores = min(cores, limit)
     return max(1, min(cores, n // MIN_CASES_PER_THREAD))
 
 

@@ -407,12 +407,12 @@ def test_a_bad_domain_in_the_environment_is_one_line(value, fragment, argv, plac
 def test_what_the_machine_refuses_is_one_line(error, fragment, monkeypatch, capsys):
     """Out of memory, a full disk, Ctrl-C in the middle of the work: one line, no traceback
     (status 2, or 130 for an interrupted command as a shell gives it)."""
-    from biped_opt.cli import sweep_cmd
+    from biped_opt.paper import sweeps
 
     def refuse(*_args, **_kwargs):
         raise error
 
-    monkeypatch.setattr(sweep_cmd, "sweep_fixed", refuse)
+    monkeypatch.setattr(sweeps, "sweep_fixed", refuse)  # (the command imports it as it runs)
     status = main(["sweep", "--maneuver", "touchdown", "--num", "3"])
     err = capsys.readouterr().err
     assert status == (130 if isinstance(error, KeyboardInterrupt) else 2)

@@ -72,3 +72,18 @@ def test_a_threaded_batch_is_single_calls_to_the_last_bit():
         assert batch.outcome[k] == one.outcome and batch.t_final[k] == one.t_final
         assert batch.statuses()[k] is one.status and batch.nfev[k] == one.nfev
         np.testing.assert_array_equal(batch.event_times(k), one.event_times)
+
+
+def test_a_thread_limit_holds_for_its_thread_only():
+    """batch_thread_limit (what an optimiser node computing study points uses: one core per
+    node) caps this thread's batches and no other thread's."""
+    from biped_opt.simulation.compiled import batch_thread_limit
+
+    seen = {}
+    with batch_thread_limit(1):
+        seen["inside"] = batch_threads(10_000, 8)
+        other = threading.Thread(target=lambda: seen.update(other=batch_threads(10_000, 8)))
+        other.start()
+        other.join()
+    seen["after"] = batch_threads(10_000, 8)
+    assert seen == {"inside": 1, "other": 8, "after": 8}

@@ -82,3 +82,51 @@ def test_system_file_starts_from_the_index_and_a_changed_file_misses(tmp_path):
     again = _probe(str(path))  # and the entry the miss wrote serves the next start
     assert again["derive_calls"] == 0 and again["parameters"]["g"] == 2.0
     assert again["outcome"] == pytest.approx(changed["outcome"], rel=1e-12, abs=1e-14)
+
+
+# The command line's cached start: the whole `biped-opt simulate` in a fresh interpreter, then
+# what it imported. A user's file that prints when run tells whether it ran.
+_CLI_PROBE = """
+import contextlib, io, json, sys
+from biped_opt.cli.main import main
+out = io.StringIO()
+with contextlib.redirect_stdout(out):
+    rc = main(sys.argv[1:])
+print(json.dumps({"rc": rc, "stdout": out.getvalue(), "sympy": "sympy" in sys.modules,
+                  "scipy.optimize": "scipy.optimize" in sys.modules,
+                  "derive": "biped_opt.systems.derive" in sys.modules}))
+"""
+
+
+def _cli(*args: str) -> dict:
+    path = os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])
+    done = subprocess.run([sys.executable, "-c", _CLI_PROBE, *args], capture_output=True,
+                          text=True, timeout=300, check=False,
+                          env=dict(os.environ, PYTHONPATH=path))
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.parametrize("json_out", [False, True])
+def test_cli_simulate_of_a_cached_file_runs_neither_sympy_nor_the_file(tmp_path, json_out):
+    path = tmp_path / "bar.py"
+    path.write_text("print('the file ran')\n"
+                    "from biped_opt.systems.library import rocking_bar\n"
+                    "SYSTEM = rocking_bar()\n")
+    args = ["simulate", "--system", str(path), "--maneuver", "drop", "--s", "0.1"]
+    first = _cli(*args, *(["--json"] if json_out else []))  # (compiles, or reads the index)
+    again = _cli(*args, *(["--json"] if json_out else []))
+    assert first["rc"] == again["rc"] == 0
+    assert again["stdout"] == first["stdout"].replace("the file ran\n", "")
+    assert "the file ran" not in again["stdout"]
+    assert not again["sympy"] and not again["scipy.optimize"] and not again["derive"]
+    if json_out:  # the coordinates by name, from the index
+        state = json.loads(again["stdout"])["state"]
+        assert list(state["q"]) == list(CompiledSystem(str(path)).coordinates)
+
+
+def test_cli_simulate_of_the_biped_imports_no_sympy():
+    _cli("simulate", "--maneuver", "touchdown", "--theta0", "0.1")  # (the index entry)
+    again = _cli("simulate", "--maneuver", "touchdown", "--theta0", "0.1", "--u1", "2")
+    assert again["rc"] == 0 and "outcome" in again["stdout"]
+    assert not again["sympy"] and not again["scipy.optimize"]
