@@ -117,3 +117,21 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         defs = info.name2fixturedefs.values() if info is not None else ()
         if any(d[-1].scope in ("module", "class") for d in defs if d):
             item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
+
+
+def signal_state(pid: int) -> str:
+    """What a stuck process shows of its signals and threads, for a failure's message: the
+    state, blocked/ignored/caught masks of ``pid`` and of this test process (signals ignored or
+    blocked here would be inherited by the processes a test starts)."""
+    out = []
+    for who, path in ((f"process {pid}", f"/proc/{pid}/status"), ("test process",
+                                                               "/proc/self/status")):
+        try:
+            lines = Path(path).read_text().splitlines()
+        except OSError as exc:
+            out.append(f"{who}: {exc.strerror}")
+            continue
+        keep = [ln for ln in lines if ln.split(":")[0] in
+                ("State", "Threads", "SigBlk", "SigIgn", "SigCgt")]
+        out.append(f"{who}: " + "; ".join(" ".join(ln.split()) for ln in keep))
+    return " | ".join(out)

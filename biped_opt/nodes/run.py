@@ -26,9 +26,16 @@ TEARDOWN_S = 10.0
 
 
 def stop_on_sigterm() -> None:
-    """Let SIGTERM (what ``ros2 launch`` sends after SIGINT) end a node like Ctrl-C: spin raises
-    KeyboardInterrupt, the node is destroyed, open files are finished, the exit status is 0."""
+    """Let SIGINT and SIGTERM (what ``ros2 launch`` sends after SIGINT) end a node like Ctrl-C:
+    spin raises KeyboardInterrupt, the node is destroyed, open files are finished, the exit
+    status is 0. Both are installed and unblocked here whatever the process inherited: a parent
+    that ignores SIGINT (SIG_IGN survives exec, and Python then keeps it) or blocks it in the
+    spawning thread (the mask survives exec too) would otherwise leave a node that no signal
+    but SIGKILL stops."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     signal.signal(signal.SIGTERM, signal.default_int_handler)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
 
 
 def warm_up_kernels(node: Any) -> None:

@@ -152,6 +152,10 @@ class System:
         self.mass_matrix: Any = None
         self.forces: Callable[[frozenset[str]], Any] | Any = None
         self.restitution: Any = restitution
+        #: the total energy (kinetic plus potential), an expression in q, q' and the
+        #: parameters, if declared: ``biped-opt systems FILE --check`` tests the forces with it
+        #: (:mod:`biped_opt.simulation.energy`)
+        self.energy: Any = None
         self.constraints: dict[str, Any] = {}
         self.maneuvers: dict[str, ManeuverDescription] = {}
         #: optimal-control problems by name (see :mod:`biped_opt.control.problems`)

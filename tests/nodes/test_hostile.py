@@ -27,7 +27,7 @@ from biped_opt import ros
 from biped_opt.nodes.compiler import BUSY
 from biped_opt.nodes.coordinator import StudyCoordinator
 from biped_opt.nodes.optimiser import OptimiserNode
-from tests.conftest import unique_domain_id
+from tests.conftest import signal_state, unique_domain_id
 from tests.ros.test_robustness import send_raw
 
 from .test_study_fanout import Host
@@ -97,6 +97,7 @@ class NodeProcess:
             try:
                 return self.proc.wait(30)
             except subprocess.TimeoutExpired:
+                self.stuck = signal_state(self.proc.pid)  # (for the failing test's message)
                 self.proc.kill()
                 self.proc.wait()
         return self.proc.returncode
@@ -253,7 +254,7 @@ def test_large_systems_do_not_hold_up_a_valid_request_and_sigint_stops_the_node(
         client.close()
         start = time.monotonic()
         status = node.stop()
-    assert status == 0 and time.monotonic() - start < 10.0
+    assert status == 0 and time.monotonic() - start < 10.0, getattr(node, "stuck", "")
     time.sleep(0.5)
     assert not any(Path(f"/proc/{pid}").exists() and "compiler" in
                    Path(f"/proc/{pid}/cmdline").read_text(errors="replace")

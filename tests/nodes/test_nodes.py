@@ -25,6 +25,7 @@ from biped_opt.paper.problems import get_problem
 from biped_opt.paper.solve import optimal_policy
 from biped_opt.piecewise import theta_grid
 from biped_opt.record import read_recording
+from tests.conftest import signal_state
 
 NS = 1_000_000_000
 
@@ -268,7 +269,12 @@ def _stop(proc, sig, ready):
     """Send ``sig``; the node must exit 0 promptly, having logged one ``ready`` line and no
     warning, error or traceback."""
     proc.send_signal(sig)
-    _out, err = proc.communicate(timeout=30)
+    try:
+        _out, err = proc.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        state = signal_state(proc.pid)
+        proc.kill()
+        raise AssertionError(f"no exit 30 s after signal {sig}: {state}") from None
     assert proc.returncode == 0, err
     assert "Traceback" not in err and "[ERROR]" not in err and "[WARN]" not in err, err
     assert [line.split("]: ", 1)[1] for line in err.splitlines() if "]: ready" in line] \

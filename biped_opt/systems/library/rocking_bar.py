@@ -25,6 +25,8 @@ def rocking_bar() -> System:
     s.constraint("left", z - w * sp.sin(th))
     s.constraint("right", z + w * sp.sin(th))
     s.forces = lambda J: [0, -m * g, s.u.u_th if not J else 0]  # the torque acts in the air
+    dq = sp.Matrix(s.dq)
+    s.energy = (dq.T * s.mass_matrix * dq)[0, 0] / 2 + m * g * z
     s.maneuver("drop", initial={z: 1, th: s.s}, terminal=s.dq[1], outcome=s.dq[2],
                armed_after="touchdown", final_mode=(), s_range=(-0.3, 0.3),
                description="drop from rest at z = 1 to the first apex after the first impact")

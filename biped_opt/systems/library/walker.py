@@ -94,6 +94,14 @@ def walker(n: int = 3, law: str = "coupled", *, name: str | None = None,
         return f
 
     s.forces = forces
+    dq = sp.Matrix(s.dq)
+    springs = []
+    for i, si in enumerate(hips):
+        ex = x + si * p.w * sp.cos(th) - s.q[3 + 2 * i]
+        ez = z + si * p.w * sp.sin(th) - s.q[4 + 2 * i]
+        springs.append(p.k * (p.l0 - sp.sqrt(ex**2 + ez**2)) ** 2 / 2)
+    s.energy = ((dq.T * s.mass_matrix * dq)[0, 0] / 2 + p.mb * p.g * z
+                + sum(p.mf * p.g * s.q[4 + 2 * i] for i in range(n)) + sum(springs))
     body = {s.q[1]: TOUCHDOWN_HEIGHT, s.q[2]: s.s}
     for i, si in enumerate(hips):
         body[s.q[3 + 2 * i]] = si * p.w * sp.cos(s.s) + p.l0 * sp.sin(s.s)
