@@ -236,8 +236,6 @@ def simulate(
     """
     name = maneuver if type(maneuver) is str else parse_maneuver(maneuver).value
     th = check_theta0(name, theta0)
-    if sample_dt is not None and not (math.isfinite(sample_dt) and sample_dt > 0):
-        raise InvalidInputError(f"sample_dt must be a positive number, got {sample_dt!r}")
     biped = _default() if params is None else compiled_biped(params)
     return biped.simulate(name, th, inputs, options=options, sample_dt=sample_dt)
 

@@ -426,6 +426,8 @@ class CompiledSystem:
         s = float(s)
         if not math.isfinite(s):
             raise InvalidInputError(f"{self._where}: s must be finite, got {s}")
+        if sample_dt is not None and not (math.isfinite(sample_dt) and sample_dt > 0):
+            raise InvalidInputError(f"sample_dt must be a positive number, got {sample_dt!r}")
         u = self.input_vector(inputs)
         m = self.module
         if sample_dt:
@@ -665,7 +667,7 @@ def warm_up(system: str) -> float:
     offers its services, so that a client's first request is not held up by a compile longer
     than its timeout. (The values simulated are irrelevant: a kernel compiles per signature.)"""
     t0 = time.perf_counter()
-    compiled = shared(system)
+    compiled = compiled_with(system)  # (the object later calls with the defaults use)
     maneuver = compiled.maneuvers[0]
     lo, hi = compiled.s_range(maneuver)
     mid = 0.5 * (lo + hi)

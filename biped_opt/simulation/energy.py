@@ -12,7 +12,6 @@ start to its first event), evaluates the energy at dense samples and reports the
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -78,11 +77,8 @@ def energy_drift(compiled: CompiledSystem, maneuver: str | None = None, s: float
     energy = sp.lambdify(symbols, system.energy, modules="math")
     kinetic = sp.lambdify(symbols, (sp.Matrix(system.dq).T * system.mass_matrix
                                     * sp.Matrix(system.dq))[0, 0] / 2, modules="math")
-    options = compiled.maneuver_options(name)
-    first = compiled.simulate(name, value, None, options=options)
-    t_end = first.contact_events[0].t if first.contact_events else first.t_final
-    dt = max(t_end, 1e-9) / max(8, int(math.ceil(SAMPLES_PER_TIME * t_end)))
-    run = compiled.simulate(name, value, None, options=options, sample_dt=dt)
+    run = compiled.simulate(name, value, None, sample_dt=1.0 / SAMPLES_PER_TIME)
+    t_end = run.contact_events[0].t if run.contact_events else run.t_final
     samples = run.samples
     assert samples is not None
     d = len(system.q)
