@@ -62,6 +62,9 @@ from biped_opt.paper.biped import FIXED_INPUTS, parse_maneuver
 from biped_opt.paper.problems import OptimalControlProblem, get_problem
 from biped_opt.piecewise import theta_grid
 from biped_opt.record import SweepWriter
+from biped_opt.record.scene import SCENE_TOPICS, SceneMessages
+from biped_opt.record.writer import BIPED_TOPICS, SYSTEM_TOPICS
+from biped_opt.ros.interfaces import load_interfaces
 
 if TYPE_CHECKING:  # the systems' modules (SymPy) load only where a system is used
     from biped_opt.control.problems import Problem
@@ -293,9 +296,11 @@ class RecorderNode(ros.Node):
             "fixed_inputs": "" if req.optimal else json.dumps(list(fixed)),
             "cost": json.dumps(problem.describe()),
         }
-        writer = SweepWriter(req.output, metadata={k: str(v) for k, v in metadata.items()})
+        scene = self._scene("biped")
+        writer = SweepWriter(req.output, metadata={k: str(v) for k, v in metadata.items()},
+                             topics=BIPED_TOPICS + (tuple(SCENE_TOPICS) if scene else ()))
         return self._sweep(writer, req, grid, lambda th, offset: self._record_point(
-            writer, maneuver, th, req.optimal, fixed, problem, offset))
+            writer, maneuver, th, req.optimal, fixed, problem, offset, scene), scene)
 
     def _record_system(self, req: SweepRequest) -> SweepSummary:
         """A fixed-input or optimal sweep over s of the non-biped system the simulator
@@ -313,16 +318,40 @@ class RecorderNode(ros.Node):
         }
         if req.optimal:
             metadata["problem"] = json.dumps(req.system_problem(info).as_dict())
+        scene = self._scene(req.system.strip())
         writer = SweepWriter(req.output, metadata={k: str(v) for k, v in metadata.items()},
-                             system=info)
+                             system=info,
+                             topics=SYSTEM_TOPICS + (tuple(SCENE_TOPICS) if scene else ()))
         ndof = len(info["coordinates"])
         return self._sweep(writer, req, grid, lambda s, offset: self._record_system_point(
-            writer, req, s, inputs, ndof, offset))
+            writer, req, s, inputs, ndof, offset, scene), scene)
+
+    def _scene(self, spec: str) -> SceneMessages | None:
+        """What draws the recorded system (its compiled scene, loaded from the cache the
+        simulator filled), or None when it declares no looks or cannot be loaded (then the
+        recording has no scene topics, and the log says why)."""
+        from biped_opt.simulation.compiled import compiled_with
+
+        try:
+            compiled = compiled_with(spec)
+            scene = compiled.scene
+        except Exception as exc:  # the recording goes on without /tf and markers
+            self.get_logger().warning(f"no /tf and markers for {spec!r}: "
+                                      f"{type(exc).__name__}: {exc}")
+            return None
+        if scene.empty:
+            return None
+        return SceneMessages(load_interfaces().typestore, scene,
+                             list(compiled.parameters.values()), len(compiled.coordinates))
 
     def _sweep(self, writer: SweepWriter, req: SweepRequest, grid: Any,
-               record_point: Callable[[float, int], tuple[bool, float]]) -> SweepSummary:
+               record_point: Callable[[float, int], tuple[bool, float]],
+               scene: SceneMessages | None = None) -> SweepSummary:
         """Record every point of ``grid`` (``record_point(angle, log-time offset)`` -> (reached
-        its end, final time)) into ``writer`` and finish it."""
+        its end, final time)) into ``writer`` and finish it; the system's URDF first when it
+        is drawn (``scene``)."""
+        if scene is not None:
+            writer.write_robot_description(scene)
         with self._writer_lock:
             self._writer = writer
         failed = 0
@@ -351,8 +380,8 @@ class RecorderNode(ros.Node):
         return summary
 
     def _record_point(self, writer: SweepWriter, maneuver: str, th: float, optimal: bool,
-                      fixed: tuple[float, ...], problem: OptimalControlProblem, offset: int
-                      ) -> tuple[bool, float]:
+                      fixed: tuple[float, ...], problem: OptimalControlProblem, offset: int,
+                      scene: SceneMessages | None = None) -> tuple[bool, float]:
         if optimal:
             q = ros.srvs.OptimalPolicy.Request()
             q.maneuver, q.theta0 = maneuver, th
@@ -379,6 +408,8 @@ class RecorderNode(ros.Node):
               *np.asarray(s.contact_force)] for s in reply.states], dtype=float,
         )
         writer.write_states(maneuver=maneuver, theta0=th, samples=samples, stamp_offset_ns=offset)
+        if scene is not None:
+            writer.write_scene(scene, samples=samples, stamp_offset_ns=offset)
         modes = [int(m) for m in np.asarray(reply.mode_sequence)]
         times = [0.0, *[float(t) for t in np.asarray(reply.event_times)]]
         for t, mode in zip(times, modes):
@@ -395,7 +426,8 @@ class RecorderNode(ros.Node):
         return self._write_point(writer, point, offset, reply)
 
     def _record_system_point(self, writer: SweepWriter, req: SweepRequest, s: float,
-                             inputs: list[float], ndof: int, offset: int) -> tuple[bool, float]:
+                             inputs: list[float], ndof: int, offset: int,
+                             scene: SceneMessages | None = None) -> tuple[bool, float]:
         maneuver = req.maneuver
         policy, value = list(inputs), float("nan")
         if req.optimal:
@@ -427,6 +459,8 @@ class RecorderNode(ros.Node):
               *np.asarray(m.contact_force)] for m in reply.system_states], dtype=float)
         writer.write_system_states(maneuver=maneuver, s=s, samples=samples, ndof=ndof,
                                    stamp_offset_ns=offset)
+        if scene is not None:
+            writer.write_scene(scene, samples=samples, stamp_offset_ns=offset)
         point = {
             "header": _header_fields(offset, writer.system["system"]), "maneuver": maneuver,
             "theta0": s, "optimal": req.optimal, "policy": policy, "value": value,

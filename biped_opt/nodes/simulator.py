@@ -24,6 +24,22 @@ Any other system (parameter ``system``: a library name such as ``rocking_bar`` o
 The default ``maneuver`` and ``inputs`` of such a system are its first maneuver and zeros. An
 unknown system or a bad system file stops the node at start-up with one line saying why, as
 does (with ``autostart``) a run the parameters cannot start.
+
+**Simulated time and the scene** (ROS.md Sec. 6). The node keeps a simulated clock that starts at
+0 and runs on through successive runs (a run starts where the previous one ended). Every message
+is stamped with it, and while a run plays the node publishes:
+
+- ``/clock`` (rosgraph_msgs/Clock): the time of every shown sample, so nodes with
+  ``use_sim_time`` run on simulated time;
+- ``/tf`` (tf2_msgs/TFMessage): world -> each body frame the system declares;
+- ``/biped/markers`` (visualization_msgs/MarkerArray): the ground, the shapes, the contact points
+  (active ones red) and the contact forces as arrows;
+- ``/robot_description`` (std_msgs/String, transient local, once): the URDF of the frames.
+
+A run played as fast as possible (``real_time_factor`` 0, as a sweep asks) publishes its states
+and contact modes as before but ``/clock``, ``/tf`` and the markers of its last sample only: no
+viewer follows a run played in a millisecond, and the recorder writes every sample to its file
+from the reply.
 """
 
 from __future__ import annotations
@@ -38,7 +54,9 @@ from biped_opt.errors import BipedOptError, InvalidInputError, InvalidParameterE
 from biped_opt.nodes import convert
 from biped_opt.nodes.refusals import refuse
 from biped_opt.nodes.run import announce_ready, run_node, warm_up_kernels
-from biped_opt.paper.biped import simulate
+from biped_opt.paper.biped import compiled_biped, simulate
+from biped_opt.record.scene import SCENE_TOPICS, SceneMessages
+from biped_opt.ros.interfaces import load_interfaces
 
 __all__ = ["SimulatorNode", "main", "CONTACT_MODE_QOS", "SYSTEM_INFO_QOS", "BIPED"]
 
@@ -81,15 +99,26 @@ def compile_served_system(spec: str) -> Any:
     return compiled
 
 
+def scene_qos(topic: str) -> Any:
+    """The QoS a scene topic is offered with (:data:`SCENE_TOPICS`, rosbag2's enums)."""
+    q = SCENE_TOPICS[topic][1]
+    return ros.QoSProfile(depth=q["depth"], history=ros.HistoryPolicy.KEEP_LAST,
+                          reliability=ros.ReliabilityPolicy(q["reliability"]),
+                          durability=ros.DurabilityPolicy(q["durability"]))
+
+
 @dataclass
 class _Playback:
     trajectory: Any  #: a Trajectory (biped) or a SystemTrajectory
     states: list[Any]
     modes: list[tuple[float, Any]]
+    #: (t, {topic: CDR}) of the shown samples' /clock, /tf and markers, decoded when due
+    scene: list[tuple[float, dict[str, bytes]]]
     rate: float  # real-time factor; 0 = everything at once
     wall_start: float
     next_state: int = 0
     next_mode: int = 0
+    next_scene: int = 0
 
 
 class SimulatorNode(ros.Node):
@@ -135,6 +164,24 @@ class SimulatorNode(ros.Node):
             self._info_pub.publish(ros.msgs.SystemInfo(
                 **convert.system_info_fields(self.system, self.source)))
             topics = ("/biped/system_state", "/biped/system_info")
+        compiled = compiled_biped() if biped else self.system
+        scene = compiled.scene
+        #: the scene's messages (None: the system declares no looks)
+        self.scene: SceneMessages | None = None if scene.empty else SceneMessages(
+            load_interfaces().typestore, scene, list(compiled.parameters.values()),
+            len(compiled.coordinates))
+        self._scene_pubs: dict[str, tuple[Any, type]] = {}
+        if self.scene is not None:
+            for topic, (typename, _) in SCENE_TOPICS.items():
+                cls = ros.message_type(typename)
+                assert cls is not None, typename
+                self._scene_pubs[topic] = (
+                    self.create_publisher(cls, topic, scene_qos(topic)), cls)
+            topics += tuple(SCENE_TOPICS)
+            pub, cls = self._scene_pubs["/robot_description"]
+            pub.publish(ros.from_cdr(cls, self.scene.robot_description()))
+        #: the simulated clock: where the next run starts [ns]
+        self._sim_ns = 0
         self._service = self.create_service(
             ros.srvs.Simulate, "/biped/simulate", self._on_simulate
         )
@@ -181,17 +228,26 @@ class SimulatorNode(ros.Node):
                 f"real_time_factor must be >= 0 (0: as fast as possible), got {real_time_factor}"
             )
         tr = self.run(maneuver, theta0, inputs)
-        start_ns = self.get_clock().now().nanoseconds
+        with self._lock:
+            start_ns = self._sim_ns
+            self._sim_ns = start_ns + max(round(tr.t_final * convert.NS), 1)
         if self.system is not None:
             states = convert.system_state_messages(tr, len(self.system.coordinates), start_ns)
             modes: list[tuple[float, Any]] = []
         else:
             states = convert.state_messages(tr, start_ns)
             modes = convert.contact_mode_messages(tr, start_ns)
+        scene: list[tuple[float, dict[str, bytes]]] = []
+        if self.scene is not None and tr.samples is not None and len(tr.samples):
+            shown = tr.samples if real_time_factor > 0 else tr.samples[-1:]
+            stamps, data = self.scene.messages(shown, start_ns)
+            scene = [((int(ns) - start_ns) / convert.NS, {k: v[i] for k, v in data.items()})
+                     for i, ns in enumerate(stamps)]
         playback = _Playback(
             trajectory=tr,
             states=states,
             modes=modes,
+            scene=scene,
             rate=real_time_factor,
             wall_start=time.monotonic(),
         )
@@ -210,13 +266,19 @@ class SimulatorNode(ros.Node):
             while pb.next_mode < len(pb.modes) and pb.modes[pb.next_mode][0] <= sim_now:
                 self._mode_pub.publish(pb.modes[pb.next_mode][1])
                 pb.next_mode += 1
+            while pb.next_scene < len(pb.scene) and pb.scene[pb.next_scene][0] <= sim_now:
+                for topic, data in pb.scene[pb.next_scene][1].items():
+                    pub, cls = self._scene_pubs[topic]
+                    pub.publish(ros.from_cdr(cls, data))
+                pb.next_scene += 1
             while pb.next_state < len(pb.states) and pb.states[pb.next_state].t <= sim_now:
                 self._state_pub.publish(pb.states[pb.next_state])
                 pb.next_state += 1
-            done = pb.next_state == len(pb.states) and pb.next_mode == len(pb.modes)
+            done = pb.next_state == len(pb.states) and pb.next_mode == len(pb.modes) \
+                and pb.next_scene == len(pb.scene)
             if done:
                 if self.get_parameter("loop").value and pb.rate > 0:
-                    pb.next_state = pb.next_mode = 0
+                    pb.next_state = pb.next_mode = pb.next_scene = 0
                     pb.wall_start = time.monotonic()
                 else:
                     self._playback = None

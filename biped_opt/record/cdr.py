@@ -80,9 +80,13 @@ class FixedLayout:
 
 
 def compile_layout(typestore: Any, typename: str, strings: dict[str, str],
-                   lengths: dict[str, int] | None = None) -> FixedLayout:
+                   lengths: dict[str, int] | None = None, *,
+                   empty_rest: bool = False) -> FixedLayout:
     """Layout of ``typename`` with the string fields set to ``strings`` (dotted path -> text)
-    and the sequences of primitives to ``lengths`` (dotted path -> number of elements)."""
+    and the sequences to ``lengths`` (dotted path -> number of elements). The elements of a
+    sequence of messages are paths ``<sequence>.<index>.<field>``. ``empty_rest``: strings and
+    sequences not given are empty (a message with unused optional parts, such as a Marker's
+    texture); otherwise each must be given."""
     lengths = lengths or {}
     names: list[str] = []
     formats: list[Any] = []
@@ -109,21 +113,29 @@ def compile_layout(typestore: Any, typename: str, strings: dict[str, str],
             elif kind == "BASE":
                 base = spec[0]
                 if base == "string":
-                    if path not in strings:
+                    if path not in strings and not empty_rest:
                         raise LayoutError(f"{typename}: string field {path} needs a value")
-                    data = strings[path].encode() + b"\x00"
+                    data = strings.get(path, "").encode() + b"\x00"
                     offset = _align(offset, 4)
                     constant[offset] = len(data).to_bytes(4, "little") + data
                     offset += 4 + len(data)
                 else:
                     offset = numbers(path, base, None, offset)
-            elif kind == "ARRAY" or path in lengths:
+            elif kind == "SEQUENCE" and getattr(spec[0][0], "name", spec[0][0]) == "NAME" \
+                    and (path in lengths or empty_rest):
+                count = int(lengths.get(path, 0))  # a sequence of messages: length, elements
+                offset = _align(offset, 4)
+                constant[offset] = count.to_bytes(4, "little")
+                offset += 4
+                for i in range(count):
+                    offset = walk(spec[0][1], f"{path}.{i}.", offset)
+            elif kind == "ARRAY" or path in lengths or empty_rest:
                 what = "array" if kind == "ARRAY" else "sequence"
                 (elem_kind, elem_spec), count = spec
                 if getattr(elem_kind, "name", elem_kind) != "BASE" or elem_spec[0] == "string":
                     raise LayoutError(f"{typename}: {what} {path} of non-primitives")
                 if kind != "ARRAY":  # a sequence: its length, then (if any) its elements
-                    count = int(lengths[path])
+                    count = int(lengths.get(path, 0))
                     offset = _align(offset, 4)
                     constant[offset] = count.to_bytes(4, "little")
                     offset += 4

@@ -163,7 +163,7 @@ class Player:
             skipped = []
             for topic in self.topics:
                 channel = self.recording.channels[topic]
-                cls = getattr(ros.msgs, channel.type.rsplit("/", 1)[-1], None)
+                cls = ros.message_type(channel.type)
                 if cls is None or channel.message_encoding != "cdr":
                     skipped.append(channel.type)
                     continue

@@ -47,6 +47,7 @@ from mcap.writer import CompressionType, Writer
 
 from biped_opt.errors import BipedOptError
 from biped_opt.record.cdr import FixedLayout, compile_layout, numpy_dtype
+from biped_opt.record.scene import SCENE_TOPICS, SceneMessages
 from biped_opt.ros.interfaces import load_interfaces
 from biped_opt.version import __version__
 
@@ -96,6 +97,7 @@ TOPICS: dict[str, tuple[str, dict[str, int]]] = {
         {"history": 1, "depth": 10, "reliability": 1, "durability": 2},
     ),
 }
+TOPICS.update(SCENE_TOPICS)  # /clock, /tf, the markers and /robot_description (ROS.md Sec. 6)
 #: the topics of a recording of the biped, and of any other system
 BIPED_TOPICS = ("/biped/state", "/biped/contact_mode", "/biped/sweep")
 SYSTEM_TOPICS = ("/biped/system_info", "/biped/system_state", "/biped/sweep")
@@ -370,6 +372,20 @@ class SweepWriter:
         if n:
             msgs["contact_force"] = samples[:, 2 + 2 * d :]
         return self._add_batch("/biped/system_state", layout.serialize(msgs), stamps)
+
+    def write_scene(self, scene: SceneMessages, *, samples: npt.NDArray[np.float64],
+                    stamp_offset_ns: int) -> int:
+        """``/clock``, ``/tf`` and the markers of one trajectory's samples (the columns of
+        :meth:`write_system_states`), stamped ``stamp_offset_ns`` + t; the number of samples
+        shown (:meth:`SceneMessages.messages`). The topics must be among the recording's."""
+        stamps, out = scene.messages(samples, stamp_offset_ns)
+        for topic, data in out.items():
+            self._add_batch(topic, data, stamps)
+        return len(stamps)
+
+    def write_robot_description(self, scene: SceneMessages, log_time_ns: int = 0) -> None:
+        """The system's URDF on ``/robot_description`` (once per recording)."""
+        self.write_raw("/robot_description", scene.robot_description(), log_time_ns)
 
     def _add_batch(self, topic: str, data: list[bytes], stamps: npt.NDArray[np.int64]) -> int:
         """Pre-serialized messages of one topic, under one lock and signal hold."""

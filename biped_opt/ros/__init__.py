@@ -23,7 +23,8 @@ import types
 from biped_opt.errors import BipedOptError
 
 __all__ = [
-    "BACKEND", "BackendError", "msgs", "srvs", "actions", "std_msgs",
+    "BACKEND", "BackendError", "msgs", "srvs", "actions", "std_msgs", "message_type",
+    "from_cdr",
     "ActionServer", "ActionClient", "GoalResponse", "CancelResponse",
     "init", "shutdown", "try_shutdown", "ok", "spin", "spin_once", "spin_until_future_complete",
     "Context", "Node", "Future", "Parameter", "SingleThreadedExecutor", "MultiThreadedExecutor",
@@ -155,3 +156,32 @@ else:
         name.rsplit("/", 1)[1]: action for name, action in _ifc.actions.items()})
     std_msgs = types.SimpleNamespace(Header=_ifc.message_class("std_msgs/msg/Header"))
     del _ifc, PACKAGE
+
+
+def message_type(ros_name: str) -> type | None:
+    """The message class of the ROS type ``pkg/msg/Name`` on this backend (the project's own
+    and the standard ones: ``tf2_msgs/msg/TFMessage``, ``rosgraph_msgs/msg/Clock``...), or None
+    if the backend does not know it."""
+    parts = ros_name.split("/")
+    if len(parts) != 3 or parts[1] != "msg":
+        return None
+    if BACKEND == "rclpy":
+        try:
+            return getattr(importlib.import_module(f"{parts[0]}.msg"), parts[2], None)
+        except ImportError:
+            return None
+    from .interfaces import InterfaceError, load_interfaces
+
+    try:
+        return load_interfaces().message_class(ros_name)
+    except InterfaceError:
+        return None
+
+
+def from_cdr(cls: type, data: bytes) -> object:
+    """A message of class ``cls`` from its CDR bytes (with the 4-byte encapsulation header)."""
+    if BACKEND == "rclpy":
+        from rclpy.serialization import deserialize_message  # type: ignore[import-not-found]
+
+        return deserialize_message(data, cls)
+    return cls.deserialize(data)  # type: ignore[attr-defined]

@@ -45,6 +45,7 @@ import numpy.typing as npt
 from biped_opt.codegen import precompile
 from biped_opt.errors import InvalidInputError, InvalidParameterError
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
+from biped_opt.simulation.scene import Scene
 from biped_opt.simulation.trajectory import BatchResult, Trajectory
 from biped_opt.version import PACKAGE_DIR
 
@@ -93,6 +94,23 @@ def _import(name: str, path: Path) -> ModuleType:
         spec.loader.exec_module(module)
         _LOADED[name] = module
     return _LOADED[name]
+
+
+def _scene_for(system: System) -> dict[str, Any]:
+    """Render the scene module of ``system`` into the cache (named by a hash of its text, like
+    the simulator's) and the facts a :class:`~biped_opt.simulation.scene.Scene` reads."""
+    from biped_opt.codegen.render import source_key
+    from biped_opt.codegen.scene import render_scene, scene_facts
+
+    text = render_scene(system)
+    name = f"{system.name}_scene_{source_key(text)}"
+    folder = cache_dir()
+    path = folder / f"{name}.py"
+    with _LOCK:
+        folder.mkdir(parents=True, exist_ok=True)
+        if not path.exists() or path.read_text() != text:
+            _write(folder, path, text)
+    return {"module": name, **scene_facts(system)}
 
 
 def _module_for(derived: DerivedSystem) -> tuple[str, ModuleType]:
@@ -227,6 +245,8 @@ class CompiledSystem:
                          for events, horizon in facts["budgets"]]
         self._ranges = [(float(lo), float(hi)) for lo, hi in facts["ranges"]]
         self._coordinates: tuple[str, ...] = tuple(facts["coordinates"])
+        self._scene_facts: dict[str, Any] = facts["scene"]
+        self._scene: Scene | None = None
         self._initial_modes = [int(v) for v in self.module.INITIAL_MODE]
         self._codes = {name: k for k, name in enumerate(self.maneuvers)}
         self._ninputs = len(self.inputs)
@@ -250,7 +270,7 @@ class CompiledSystem:
                 "budgets": [[m.description.max_events, m.description.horizon]
                             for m in derived.maneuvers.values()],
                 "ranges": [list(m.description.s_range) for m in derived.maneuvers.values()],
-                "coordinates": list(system.coordinate_names)}
+                "coordinates": list(system.coordinate_names), "scene": _scene_for(system)}
 
     @property
     def system(self) -> System:
@@ -274,6 +294,18 @@ class CompiledSystem:
     @property
     def name(self) -> str:
         return self._name
+
+    @property
+    def scene(self) -> Scene:
+        """How the system looks (:class:`~biped_opt.simulation.scene.Scene`: frames, shapes,
+        contact points), read from its generated scene module (no SymPy)."""
+        if self._scene is None:
+            name = self._scene_facts["module"]
+            with _LOCK:
+                module = _import(name, cache_dir() / f"{name}.py")
+            self._scene = Scene(self._name, self._scene_facts, module.scene_values,
+                                self._constraints)
+        return self._scene
 
     @property
     def coordinates(self) -> tuple[str, ...]:

@@ -32,7 +32,8 @@ import sympy as sp
 
 from biped_opt.errors import BipedOptError
 
-__all__ = ["System", "ManeuverDescription", "SystemDescriptionError", "Symbols"]
+__all__ = ["System", "ManeuverDescription", "SystemDescriptionError", "Symbols", "Frame", "Shape",
+           "WORLD", "SHAPE_KINDS"]
 
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -107,6 +108,42 @@ class ManeuverDescription:
     horizon: float = DEFAULT_HORIZON
 
 
+#: the fixed frame every declared frame's pose is given in (REP 105's name in simulators)
+WORLD = "world"
+#: what a shape may be: a box or a sphere fixed in a frame, a polyline between world points
+SHAPE_KINDS = ("box", "sphere", "line")
+#: the colours shapes take in turn when none is given (RGBA, each in [0, 1])
+PALETTE = ((0.20, 0.45, 0.75, 1.0), (0.85, 0.40, 0.10, 1.0), (0.30, 0.65, 0.30, 1.0),
+           (0.60, 0.35, 0.70, 1.0), (0.55, 0.55, 0.55, 1.0))
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A body frame (SYSTEMS.md Sec. 6): its origin (x, y, z) and orientation (roll, pitch, yaw:
+    fixed-axis X, Y, Z rotations, as URDF's rpy) in the world frame, expressions of q and the
+    parameters. A planar system lives in the x-z plane (REP 103: x forward, z up), so its
+    pitch turns x towards -z."""
+
+    name: str
+    position: tuple[Any, Any, Any]
+    rpy: tuple[Any, Any, Any]
+
+
+@dataclass(frozen=True)
+class Shape:
+    """A simple shape to draw (SYSTEMS.md Sec. 6): ``box`` (edge lengths ``size``) or ``sphere``
+    (``size`` = (radius,)) fixed at the origin of ``frame``, or ``line``: a polyline through
+    world ``points`` (expressions of q) of width ``size`` = (width,). Sizes may depend on the
+    parameters, not on q."""
+
+    name: str
+    kind: str
+    frame: str
+    size: tuple[Any, ...]
+    points: tuple[tuple[Any, Any, Any], ...]
+    color: tuple[float, float, float, float]
+
+
 class System:
     """A mechanical system subject to unilateral constraints, described symbolically.
 
@@ -157,6 +194,12 @@ class System:
         #: (:mod:`biped_opt.simulation.energy`)
         self.energy: Any = None
         self.constraints: dict[str, Any] = {}
+        #: where each constraint touches, for drawing: a world point (x, y, z) and the
+        #: direction its force lambda pushes (SYSTEMS.md Sec. 6)
+        self.contact_points: dict[str, tuple[tuple[Any, Any, Any], tuple[Any, Any, Any]]] = {}
+        #: how the system looks (SYSTEMS.md Sec. 6): body frames and shapes, by name
+        self.frames: dict[str, Frame] = {}
+        self.shapes: dict[str, Shape] = {}
         self.maneuvers: dict[str, ManeuverDescription] = {}
         #: optimal-control problems by name (see :mod:`biped_opt.control.problems`)
         self.problems: dict[str, dict[str, Any]] = {}
@@ -167,12 +210,73 @@ class System:
     def coordinate_names(self) -> tuple[str, ...]:
         return tuple(str(c) for c in self.q)
 
-    def constraint(self, name: str, expression: Any) -> System:
-        """Unilateral constraint a_j(q) >= 0 named ``name`` (contact where it is 0)."""
+    def constraint(self, name: str, expression: Any, *, at: Sequence[Any] | None = None,
+                   normal: Sequence[Any] = (0, 0, 1)) -> System:
+        """Unilateral constraint a_j(q) >= 0 named ``name`` (contact where it is 0). ``at``, the
+        world point (x, y, z) where it touches, and ``normal``, the direction of its force,
+        are for drawing only (the contact force's arrow)."""
         _check_name("constraint name", name, self.name)
         if name in self.constraints:
             raise SystemDescriptionError(f"{self.name}: constraint {name!r} is given twice")
         self.constraints[name] = expression
+        if at is not None:
+            self.contact_points[name] = (_triple(self, f"constraint {name!r}: at", at),
+                                         _triple(self, f"constraint {name!r}: normal", normal))
+        return self
+
+    def frame(self, name: str, *, x: Any = 0, y: Any = 0, z: Any = 0, roll: Any = 0,
+              pitch: Any = 0, yaw: Any = 0) -> System:
+        """Declare a body frame (see :class:`Frame`); its transform from ``world`` is
+        published on ``/tf`` and drawn by the animations."""
+        _check_name("frame name", name, self.name)
+        if name == WORLD or name in self.frames:
+            raise SystemDescriptionError(
+                f"{self.name}: frame {name!r} is " + ("the fixed frame" if name == WORLD
+                                                       else "given twice"))
+        self.frames[name] = Frame(name, (x, y, z), (roll, pitch, yaw))
+        return self
+
+    def box(self, name: str, frame: str, size: Sequence[Any], *,
+            color: Sequence[float] | None = None) -> System:
+        """A box of edge lengths ``size`` (x, y, z) centred on ``frame``'s origin."""
+        return self._shape(name, "box", frame, _triple(self, f"box {name!r}: size", size), (),
+                           color)
+
+    def sphere(self, name: str, frame: str, radius: Any, *,
+               color: Sequence[float] | None = None) -> System:
+        """A sphere of ``radius`` centred on ``frame``'s origin."""
+        return self._shape(name, "sphere", frame, (radius,), (), color)
+
+    def line(self, name: str, points: Sequence[Sequence[Any]], *, width: Any = 0.02,
+             color: Sequence[float] | None = None) -> System:
+        """A polyline through the world ``points`` (each (x, y, z), expressions of q): a leg,
+        a link, a spring."""
+        pts = tuple(_triple(self, f"line {name!r}: point", p) for p in points)
+        if len(pts) < 2:
+            raise SystemDescriptionError(
+                f"{self.name}: line {name!r}: needs at least two points, got {len(pts)}")
+        return self._shape(name, "line", WORLD, (width,), pts, color)
+
+    def _shape(self, name: str, kind: str, frame: str, size: tuple[Any, ...],
+               points: tuple[tuple[Any, Any, Any], ...], color: Sequence[float] | None
+               ) -> System:
+        _check_name("shape name", name, self.name)
+        if name in self.shapes:
+            raise SystemDescriptionError(f"{self.name}: shape {name!r} is given twice")
+        if kind != "line" and frame not in self.frames:
+            raise SystemDescriptionError(
+                f"{self.name}: {kind} {name!r}: unknown frame {frame!r} (frames: "
+                f"{', '.join(self.frames) or 'none; declare one with frame()'})")
+        rgba = PALETTE[len(self.shapes) % len(PALETTE)] if color is None else tuple(color)
+        if len(rgba) == 3:
+            rgba = (*rgba, 1.0)
+        if len(rgba) != 4 or not all(isinstance(c, (int, float)) and not isinstance(c, bool)
+                                     and 0 <= c <= 1 for c in rgba):
+            raise SystemDescriptionError(
+                f"{self.name}: {kind} {name!r}: color must be 3 or 4 numbers in [0, 1], "
+                f"got {color!r}")
+        self.shapes[name] = Shape(name, kind, frame, size, points,
+                                  tuple(float(c) for c in rgba))  # type: ignore[arg-type]
         return self
 
     def maneuver(self, name: str, *, initial: Mapping[Any, Any], terminal: Any, outcome: Any,
@@ -234,6 +338,17 @@ def _check_name(kind: str, name: Any, system: str) -> None:
     if not isinstance(name, str) or not _NAME.match(name) or keyword.iskeyword(name):
         raise SystemDescriptionError(
             f"{system}: {kind} must be a Python identifier, got {name!r}")
+
+
+def _triple(system: System, what: str, value: Any) -> tuple[Any, Any, Any]:
+    """Three expressions (x, y, z)."""
+    try:
+        items = tuple(value)
+    except TypeError:
+        items = ()
+    if len(items) != 3:
+        raise SystemDescriptionError(f"{system.name}: {what} must be (x, y, z), got {value!r}")
+    return items
 
 
 def _check_budget(system: str, maneuver: str, max_events: Any, horizon: Any) -> None:

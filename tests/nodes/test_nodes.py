@@ -316,6 +316,7 @@ def test_simulator_in_a_subprocess_exits_cleanly_on_sigterm(domain_id):
                 executor.spin_once(timeout_sec=0.1)
             assert modes, "the simulator never published its contact mode"
         _stop(proc, signal.SIGTERM,
-              "ready: serving /biped/simulate; publishing /biped/state, /biped/contact_mode")
+              "ready: serving /biped/simulate; publishing /biped/state, /biped/contact_mode, "
+              "/clock, /tf, /biped/markers, /robot_description")
     finally:
         proc.kill()

@@ -134,6 +134,7 @@ def test_recorder_records_the_system_and_mcap_ros2_reads_it(served, tmp_path):
     full = [*inputs, *[0.0] * (len(compiled.inputs) - len(inputs))]
     by_s: dict[float, list] = {}
     points, infos = [], []
+    scene: dict[str, list] = {}
     with open(out, "rb") as stream:
         reader = make_reader(stream, decoder_factories=[DecoderFactory()])
         assert reader.get_header().profile == "ros2"
@@ -143,8 +144,10 @@ def test_recorder_records_the_system_and_mcap_ros2_reads_it(served, tmp_path):
                     [msg.t, *msg.q, *msg.qdot, msg.contact_mode, *msg.contact_force])
             elif channel.topic == "/biped/sweep":
                 points.append(msg)
-            else:
+            elif channel.topic == "/biped/system_info":
                 infos.append(msg)
+            else:
+                scene.setdefault(channel.topic, []).append(msg)
         metadata = {m.name: m.metadata for m in reader.iter_metadata()}
     assert sorted(by_s) == list(theta_grid(-0.1, 0.1, 5))
     for s, rows in by_s.items():
@@ -154,6 +157,30 @@ def test_recorder_records_the_system_and_mcap_ros2_reads_it(served, tmp_path):
         assert list(point.mode_sequence) == list(tr.modes)
         assert abs(point.outcome - tr.outcome) <= TOL and list(point.policy) == full
     assert len(infos) == 1 and list(infos[0].constraints) == list(compiled.system.constraints)
+    # the scene: one URDF; /clock, /tf and markers at every sample but an event's pre-reset
+    # row; the body frame is (x, 0, z) turned by -th about y, in closed form from the states
+    assert len(scene["/robot_description"]) == 1
+    assert "<robot name=" in scene["/robot_description"][0].data
+    rows = sorted((r for rs in by_s.values() for r in rs), key=lambda r: r[0])
+    shown = len({(s, r[0]) for s, rs in by_s.items() for r in rs})
+    assert len(scene["/clock"]) == len(scene["/tf"]) == len(scene["/biped/markers"]) == shown
+    assert rows
+    for tf in scene["/tf"]:
+        body = tf.transforms[0]
+        assert body.header.frame_id == "world" and body.child_frame_id == "base_link"
+    last = {}
+    for s, rs in by_s.items():
+        last[s] = rs[-1]
+    offset_free = [tf.transforms[0].transform for tf in scene["/tf"]]
+    finals = {(round(x.translation.x, 12), round(x.translation.z, 12)) for x in offset_free}
+    for r in last.values():
+        x, z, th = r[1], r[2], r[3]
+        assert (round(x, 12), round(z, 12)) in finals
+        match = next(f for f in offset_free if abs(f.translation.z - z) < 1e-12
+                     and abs(f.translation.x - x) < 1e-12)
+        # (the quaternion of a rotation by -th about y: (0, -sin(th/2), 0, cos(th/2)))
+        assert match.rotation.y == pytest.approx(-np.sin(th / 2), abs=1e-12)
+        assert match.rotation.w == pytest.approx(np.cos(th / 2), abs=1e-12)
     assert metadata["biped_opt.system"]["system"] == name
     assert metadata["biped_opt.sweep"]["maneuver"] == maneuver
 

@@ -54,7 +54,7 @@ class _Listener:
         self.arrivals = []  # (topic, monotonic ns, message)
         self.lock = threading.Lock()
         for topic, (typename, q) in TOPICS.items():
-            cls = getattr(ros.msgs, typename.rsplit("/", 1)[1])
+            cls = ros.message_type(typename)
             profile = ros.QoSProfile(depth=100, reliability=ros.ReliabilityPolicy(q["reliability"]))
             self.node.create_subscription(cls, topic, self._on(topic), profile)
         self.executor = ros.SingleThreadedExecutor(context=self.context)

@@ -107,9 +107,10 @@ def test_two_processes_compile_the_same_new_system_at_once(tmp_path):
         assert report["outcome"] == pytest.approx(ref.outcome, rel=1e-12, abs=1e-14)
     a, b = reports
     assert b["misses"] == 1 and a["hits"] == 1 and a["misses"] == 0, (a, b)  # "b" compiled
-    files = [p.name for p in (cache / "systems").iterdir() if p.is_file()]
-    # one module, no temporary file left behind
-    assert len(files) == 1 and files[0].startswith("rocking_bar_"), files
+    files = sorted(p.name for p in (cache / "systems").iterdir() if p.is_file())
+    # one simulator module and one scene module, no temporary file left behind
+    assert len(files) == 2 and files[0].startswith("rocking_bar_") \
+        and files[1].startswith("rocking_bar_scene_"), files
     load = _report(subprocess.Popen([sys.executable, "-c", _LOAD], env=_env(cache),
                                     cwd=tmp_path, stdout=subprocess.PIPE,
                                     stderr=subprocess.PIPE, text=True))

@@ -26,7 +26,7 @@ from . import context as _ctx
 from .entities import Entity, Publisher, Subscription, Timer
 from .lifetime import delete_dds
 from .log import Logger
-from .qos import QoSProfile, as_profile, qos_profile_services_default
+from .qos import QoSProfile, ReliabilityPolicy, as_profile, qos_profile_services_default
 from .services import Client, Service
 
 __all__ = [
@@ -83,10 +83,22 @@ class Time:
 
 
 class Clock:
-    """``rclpy.clock.Clock`` subset: ``now()`` of the system clock."""
+    """``rclpy.clock.Clock`` subset: ``now()`` of the system clock, or of ``/clock`` while ROS
+    time is active (a node's ``use_sim_time``: then 0 until the first message, as rclpy)."""
+
+    def __init__(self) -> None:
+        self._ros_ns: int | None = None
+
+    @property
+    def ros_time_is_active(self) -> bool:
+        return self._ros_ns is not None
 
     def now(self) -> Time:
-        return Time(nanoseconds=time.time_ns())
+        ros_ns = self._ros_ns
+        return Time(nanoseconds=time.time_ns() if ros_ns is None else ros_ns)
+
+    def _set_ros_time(self, msg: Any) -> None:
+        self._ros_ns = int(msg.clock.sec) * 1_000_000_000 + int(msg.clock.nanosec)
 
 
 # -- parameters ------------------------------------------------------------------------------
@@ -263,6 +275,15 @@ class Node:
                 self._parameters[name] = Parameter(name, value=value)
         self._destroyed = False
         self.context.add_node(self)
+        if "use_sim_time" not in self._parameters:
+            self.declare_parameter("use_sim_time", False)
+        if self.get_parameter("use_sim_time").value is True:
+            # rclpy's time source: /clock, best effort, the latest message only
+            self._clock._ros_ns = 0
+            self.create_subscription(
+                load_interfaces().message_class("rosgraph_msgs/msg/Clock"), "/clock",
+                self._clock._set_ros_time,
+                QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT))
 
     # names
     def get_name(self) -> str:

@@ -22,8 +22,11 @@ def rocking_bar() -> System:
     m, w, g = s.p.m, s.p.w, s.p.g
     s.mass_matrix = sp.diag(m, m, m * (2 * w) ** 2 / 12)
     s.restitution = s.p.gamma
-    s.constraint("left", z - w * sp.sin(th))
-    s.constraint("right", z + w * sp.sin(th))
+    # (the ends, for drawing: the left one at -w along the bar, which pitch th turns upwards)
+    s.constraint("left", z - w * sp.sin(th), at=(x - w * sp.cos(th), 0, z - w * sp.sin(th)))
+    s.constraint("right", z + w * sp.sin(th), at=(x + w * sp.cos(th), 0, z + w * sp.sin(th)))
+    s.frame("base_link", x=x, z=z, pitch=-th)  # (a ROS pitch turns x towards -z)
+    s.box("bar", "base_link", (2 * w, 0.08, 0.04), color=(0.20, 0.45, 0.75))
     s.forces = lambda J: [0, -m * g, s.u.u_th if not J else 0]  # the torque acts in the air
     dq = sp.Matrix(s.dq)
     s.energy = (dq.T * s.mass_matrix * dq)[0, 0] / 2 + m * g * z

@@ -70,7 +70,8 @@ def walker(n: int = 3, law: str = "coupled", *, name: str | None = None,
     s.restitution = p.gamma
     hips = hip_offsets(n)
     for i, foot in enumerate(feet):
-        s.constraint(foot, s.q[4 + 2 * i])
+        s.constraint(foot, s.q[4 + 2 * i], at=(s.q[3 + 2 * i], 0, s.q[4 + 2 * i]))
+    _looks(s, feet, hips)
 
     def forces(J: frozenset[str]) -> list[sp.Expr]:
         f = [sp.Integer(0)] * len(coords)
@@ -130,6 +131,28 @@ def walker(n: int = 3, law: str = "coupled", *, name: str | None = None,
                    description="the same fall, bouncing on until t = horizon")
     _problems(s, feet, [str(v) for v in u])
     return s
+
+
+#: drawing sizes: the body's thickness and depth, the feet's radius, the legs' width
+BODY_THICKNESS, BODY_DEPTH, FOOT_RADIUS, LEG_WIDTH = 0.06, 0.12, 0.035, 0.02
+
+
+def _looks(s: System, feet: list[str], hips: list[sp.Rational]) -> None:
+    """How the walker looks (SYSTEMS.md Sec. 6): the body as a bar between its outer hips
+    (frame ``base_link``, pitch -th: th turns x towards +z, a ROS pitch towards -z), each foot
+    as a ball (frame ``<foot>_foot``) and each leg as a line from its hip to its foot."""
+    x, z, th = s.q[:3]
+    w = s.p.w
+    s.frame("base_link", x=x, z=z, pitch=-th)
+    span = 2 * w * max(abs(h) for h in hips) if len(hips) > 1 else w
+    s.box("body", "base_link", (span + BODY_THICKNESS, BODY_DEPTH, BODY_THICKNESS),
+          color=(0.20, 0.45, 0.75))
+    for i, (foot, si) in enumerate(zip(feet, hips)):
+        xf, zf = s.q[3 + 2 * i], s.q[4 + 2 * i]
+        s.frame(f"{foot}_foot", x=xf, z=zf)
+        s.sphere(f"{foot}_foot", f"{foot}_foot", FOOT_RADIUS, color=(0.15, 0.15, 0.15))
+        hip = (x + si * w * sp.cos(th), 0, z + si * w * sp.sin(th))
+        s.line(f"{foot}_leg", [hip, (xf, 0, zf)], width=LEG_WIDTH, color=(0.85, 0.40, 0.10))
 
 
 def _problems(s: System, feet: list[str], u: list[str]) -> None:

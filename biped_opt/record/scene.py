@@ -1,0 +1,217 @@
+"""A run as a ROS tool shows it: ``/clock``, ``/tf``, markers and ``/robot_description`` (ROS.md
+Sec. 6), serialized to CDR for a whole trajectory in one vectorised pass.
+
+:class:`SceneMessages` turns the samples of a run (the columns of
+:attr:`biped_opt.simulation.trajectory.Trajectory.samples`) and the system's
+:class:`~biped_opt.simulation.scene.Scene` into, per sample:
+
+- ``rosgraph_msgs/msg/Clock`` on ``/clock``: the sample's time;
+- ``tf2_msgs/msg/TFMessage`` on ``/tf``: world -> every body frame;
+- ``visualization_msgs/msg/MarkerArray`` on ``/biped/markers``: the ground, every shape (boxes and
+  spheres in their frames, lines through their world points), the contact points (red when the
+  constraint is active, grey when not) and each contact force lambda_j as an arrow along its
+  direction, :data:`FORCE_SCALE` m per unit of force (invisible while the constraint is free).
+
+A sample repeated at an event (the rows before and after the reset share their time and
+configuration) is shown once, after the reset, so no frame is sent twice for one stamp. The
+messages' layouts are fixed once the scene is known (:func:`biped_opt.record.cdr.compile_layout`),
+so a trajectory costs a few NumPy assignments per field, whatever its length. The same bytes go
+into MCAP files and, deserialized, onto the live topics: one definition of what is shown.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from biped_opt.record.cdr import CDR_LE_HEADER, FixedLayout, compile_layout
+from biped_opt.simulation.scene import Scene, SceneState
+
+__all__ = ["SceneMessages", "SCENE_TOPICS", "FORCE_SCALE", "MARKERS_TOPIC", "NS"]
+
+NS = 1_000_000_000
+MARKERS_TOPIC = "/biped/markers"
+#: topic -> (ROS type, offered QoS as rosbag2 integer enums: history 1 = KEEP_LAST, reliability
+#: 1 = RELIABLE, durability 1 = TRANSIENT_LOCAL / 2 = VOLATILE): tf2_ros' broadcaster (depth 100,
+#: reliable, volatile), robot_state_publisher's description (depth 1, transient local), a clock
+#: every subscriber matches (reliable, depth 1)
+SCENE_TOPICS: dict[str, tuple[str, dict[str, int]]] = {
+    "/clock": ("rosgraph_msgs/msg/Clock",
+               {"history": 1, "depth": 1, "reliability": 1, "durability": 2}),
+    "/tf": ("tf2_msgs/msg/TFMessage",
+            {"history": 1, "depth": 100, "reliability": 1, "durability": 2}),
+    MARKERS_TOPIC: ("visualization_msgs/msg/MarkerArray",
+                    {"history": 1, "depth": 10, "reliability": 1, "durability": 2}),
+    "/robot_description": ("std_msgs/msg/String",
+                           {"history": 1, "depth": 1, "reliability": 1, "durability": 1}),
+}
+#: metres of arrow per unit of contact force
+FORCE_SCALE = 0.1
+#: visualization_msgs/Marker types used here
+ARROW, CUBE, SPHERE, LINE_STRIP, SPHERE_LIST = 0, 1, 2, 4, 7
+#: the ground: a thin slab whose top is z = 0, and the contact points' and arrows' looks
+GROUND_SIZE = (20.0, 2.0, 0.01)
+GROUND_COLOR = (0.75, 0.75, 0.72, 1.0)
+CONTACT_DIAMETER = 0.05
+ACTIVE_COLOR, FREE_COLOR = (0.85, 0.1, 0.1, 1.0), (0.5, 0.5, 0.5, 0.6)
+ARROW_COLOR = (0.1, 0.7, 0.2, 1.0)
+ARROW_SCALE = (0.015, 0.035, 0.04)  # shaft diameter, head diameter, head length
+
+
+class SceneMessages:
+    """CDR of the scene topics for the samples of runs of one system (see the module
+    docstring); ``parameters``: the parameter values, in their declared order."""
+
+    def __init__(self, typestore: Any, scene: Scene, parameters: npt.ArrayLike,
+                 ndof: int) -> None:
+        self.typestore = typestore
+        self.scene = scene
+        self.parameters = np.asarray(parameters, dtype=np.float64)
+        self.ndof = int(ndof)
+        self.world = scene.world
+        # one marker per item, in this order: ground, shapes, contact points, force arrows
+        self._markers: list[tuple[str, int, str, int]] = [("ground", CUBE, self.world, 0)]
+        for s in scene.shapes:
+            kind = {"box": CUBE, "sphere": SPHERE, "line": LINE_STRIP}[s.kind]
+            self._markers.append((s.name, kind, s.frame, s.npoints))
+        if scene.contacts:
+            self._markers.append(("contacts", SPHERE_LIST, self.world, len(scene.contacts)))
+            for name in scene.contact_names:
+                self._markers.append((f"{name}_force", ARROW, self.world, 2))
+        self._clock = compile_layout(typestore, SCENE_TOPICS["/clock"][0], {})
+        tf_strings = {}
+        for k, frame in enumerate(scene.frames):
+            tf_strings[f"transforms.{k}.header.frame_id"] = self.world
+            tf_strings[f"transforms.{k}.child_frame_id"] = frame
+        self._tf = compile_layout(typestore, SCENE_TOPICS["/tf"][0], tf_strings,
+                                  {"transforms": len(scene.frames)})
+        strings, lengths = {}, {"markers": len(self._markers)}
+        for k, (name, kind, frame, npoints) in enumerate(self._markers):
+            strings[f"markers.{k}.ns"] = f"{scene.system}/{name}"
+            strings[f"markers.{k}.header.frame_id"] = frame
+            lengths[f"markers.{k}.points"] = npoints
+            lengths[f"markers.{k}.colors"] = npoints if kind == SPHERE_LIST else 0
+        self._marker_layout = compile_layout(typestore, SCENE_TOPICS[MARKERS_TOPIC][0],
+                                             strings, lengths, empty_rest=True)
+        self._marker_template = self._constant_markers()
+
+    # -- the constant parts ----------------------------------------------------------------
+    def _constant_markers(self) -> npt.NDArray[Any]:
+        """One MarkerArray with everything that does not change from sample to sample."""
+        m = self._marker_layout.empty(1)
+        for k, (_name, kind, _frame, _npoints) in enumerate(self._markers):
+            f = f"markers.{k}."
+            m[f + "id"] = k
+            m[f + "type"] = kind
+            m[f + "pose.orientation.w"] = 1.0
+            m[f + "frame_locked"] = kind in (CUBE, SPHERE) and k > 0
+            color = {SPHERE_LIST: (1.0, 1.0, 1.0, 1.0), ARROW: ARROW_COLOR}.get(kind)
+            for c, v in zip("rgba", color or (GROUND_COLOR if k == 0 else (0, 0, 0, 0))):
+                m[f + "color." + c] = v
+        m["markers.0.pose.position.z"] = -GROUND_SIZE[2] / 2
+        for c, v in zip("xyz", GROUND_SIZE):
+            m["markers.0.scale." + c] = v
+        for k, s in enumerate(self.scene.shapes, start=1):
+            for c, v in zip("rgba", s.color):
+                m[f"markers.{k}.color.{c}"] = v
+        if self.scene.contacts:
+            k = 1 + len(self.scene.shapes)
+            for c in "xyz":
+                m[f"markers.{k}.scale.{c}"] = CONTACT_DIAMETER
+            for j in range(len(self.scene.contacts)):
+                for c, v in zip("xyz", ARROW_SCALE):
+                    m[f"markers.{k + 1 + j}.scale.{c}"] = v
+        return m
+
+    def robot_description(self) -> bytes:
+        """The ``std_msgs/msg/String`` CDR of the system's URDF (:meth:`Scene.urdf`)."""
+        urdf = self.scene.urdf(self.parameters, np.zeros((1, self.ndof)))
+        typename = SCENE_TOPICS["/robot_description"][0]
+        msg = self.typestore.types[typename](data=urdf)
+        data = bytes(self.typestore.serialize_cdr(msg, typename))
+        assert data[:4] == CDR_LE_HEADER
+        return data
+
+    # -- per trajectory ----------------------------------------------------------------------
+    def shown(self, samples: npt.NDArray[np.float64]) -> npt.NDArray[np.intp]:
+        """The rows shown: all but the first of rows with equal time (an event's pre-reset
+        row)."""
+        t = samples[:, 0]
+        keep = np.ones(t.size, dtype=bool)
+        keep[:-1] = t[:-1] != t[1:]
+        return np.flatnonzero(keep)
+
+    def messages(self, samples: npt.NDArray[np.float64], stamp_offset_ns: int
+                 ) -> tuple[npt.NDArray[np.int64], dict[str, list[bytes]]]:
+        """The stamps (``stamp_offset_ns`` + t) of the shown rows of ``samples`` and the CDR of
+        ``/clock``, ``/tf`` and the markers at each of them."""
+        rows = samples[self.shown(samples)]
+        d = self.ndof
+        stamps = stamp_offset_ns + np.round(rows[:, 0] * NS).astype(np.int64)
+        sec, nsec = stamps // NS, stamps % NS
+        state = self.scene.evaluate(rows[:, 1 : 1 + d], self.parameters)
+        mode = rows[:, 1 + 2 * d].astype(np.int64)
+        lam = rows[:, 2 + 2 * d :]
+        out = {"/clock": self._fill_clock(sec, nsec),
+               "/tf": self._fill_tf(sec, nsec, state),
+               MARKERS_TOPIC: self._fill_markers(sec, nsec, state, mode, lam)}
+        return stamps, out
+
+    def _fill_clock(self, sec: npt.NDArray[np.int64], nsec: npt.NDArray[np.int64]
+                    ) -> list[bytes]:
+        m = self._clock.empty(sec.size)
+        m["clock.sec"], m["clock.nanosec"] = sec, nsec
+        return self._clock.serialize(m)
+
+    def _fill_tf(self, sec: npt.NDArray[np.int64], nsec: npt.NDArray[np.int64],
+                 state: SceneState) -> list[bytes]:
+        layout: FixedLayout = self._tf
+        m = layout.empty(sec.size)
+        for k in range(len(self.scene.frames)):
+            f = f"transforms.{k}."
+            m[f + "header.stamp.sec"], m[f + "header.stamp.nanosec"] = sec, nsec
+            for j, c in enumerate("xyz"):
+                m[f + "transform.translation." + c] = state.positions[:, k, j]
+            for j, c in enumerate("xyzw"):
+                m[f + "transform.rotation." + c] = state.quaternions[:, k, j]
+        return layout.serialize(m)
+
+    def _fill_markers(self, sec: npt.NDArray[np.int64], nsec: npt.NDArray[np.int64],
+                      state: SceneState, mode: npt.NDArray[np.int64],
+                      lam: npt.NDArray[np.float64]) -> list[bytes]:
+        n = sec.size
+        m = np.repeat(self._marker_template, n)
+        for k in range(len(self._markers)):
+            m[f"markers.{k}.header.stamp.sec"] = sec
+            m[f"markers.{k}.header.stamp.nanosec"] = nsec
+        for k, s in enumerate(self.scene.shapes, start=1):
+            f = f"markers.{k}."
+            size = state.sizes[s.name]
+            if s.kind == "box":
+                for j, c in enumerate("xyz"):
+                    m[f + "scale." + c] = size[:, j]
+            elif s.kind == "sphere":
+                for c in "xyz":
+                    m[f + "scale." + c] = 2 * size[:, 0]
+            else:
+                m[f + "scale.x"] = size[:, 0]
+                for p in range(s.npoints):
+                    for j, c in enumerate("xyz"):
+                        m[f"{f}points.{p}.{c}"] = state.points[s.name][:, p, j]
+        if self.scene.contacts:
+            k = 1 + len(self.scene.shapes)
+            for i, j in enumerate(self.scene.contacts):
+                active = (mode >> j) & 1 == 1
+                for c, (on, off) in zip("rgba", zip(ACTIVE_COLOR, FREE_COLOR)):
+                    m[f"markers.{k}.colors.{i}.{c}"] = np.where(active, on, off)
+                force = np.where(active, lam[:, j] if j < lam.shape[1] else 0.0, 0.0)
+                f = f"markers.{k + 1 + i}."
+                for a, c in enumerate("xyz"):
+                    at = state.contacts[:, i, a]
+                    m[f"markers.{k}.points.{i}.{c}"] = at
+                    m[f + f"points.0.{c}"] = at
+                    m[f + f"points.1.{c}"] = at + FORCE_SCALE * force * state.normals[:, i, a]
+                m[f + "color.a"] = np.where(active, ARROW_COLOR[3], 0.0)
+        return self._marker_layout.serialize(m)

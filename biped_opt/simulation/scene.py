@@ -1,0 +1,135 @@
+"""Where a system's bodies are: frames, shapes and contact points at every sample of a run.
+
+:class:`Scene` reads the generated ``scene_values`` (:mod:`biped_opt.codegen.scene`) of a compiled
+system and turns its columns into poses (positions and unit quaternions in the world frame),
+shape sizes, line points and contact points, for a whole trajectory in one call
+(:meth:`Scene.evaluate`). :meth:`Scene.urdf` writes the description as a URDF (SYSTEMS.md
+Sec. 6): the world link and one link per frame on a floating joint, with the frame's boxes and
+spheres as visuals, which is what ``/robot_description`` carries. Nothing here imports ROS.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["Scene", "SceneState", "ShapeInfo", "quaternions"]
+
+Array = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ShapeInfo:
+    """A shape of the scene (see :class:`biped_opt.systems.description.Shape`)."""
+
+    name: str
+    kind: str  #: "box", "sphere" or "line"
+    frame: str  #: the frame it is fixed in ("world" for a line)
+    color: tuple[float, float, float, float]
+    npoints: int  #: a line's number of points (0 otherwise)
+
+    @property
+    def nsize(self) -> int:
+        return 3 if self.kind == "box" else 1
+
+
+@dataclass(frozen=True)
+class SceneState:
+    """The scene at n samples: ``positions`` (n, F, 3) and ``quaternions`` (n, F, 4, as x, y,
+    z, w) of the frames; ``sizes`` and ``points`` of each shape by name ((n, 3) or (n, 1) and
+    (n, P, 3)); ``contacts`` and ``normals`` (n, C, 3) of the contact points."""
+
+    positions: Array
+    quaternions: Array
+    sizes: dict[str, Array]
+    points: dict[str, Array]
+    contacts: Array
+    normals: Array
+
+
+def quaternions(rpy: Array) -> Array:
+    """Unit quaternions (x, y, z, w) of fixed-axis roll, pitch, yaw rotations (URDF's rpy:
+    R = Rz(yaw) Ry(pitch) Rx(roll)); ``rpy`` has the angles in its last axis."""
+    half = 0.5 * np.asarray(rpy, dtype=np.float64)
+    cr, cp, cy = np.cos(half[..., 0]), np.cos(half[..., 1]), np.cos(half[..., 2])
+    sr, sp, sy = np.sin(half[..., 0]), np.sin(half[..., 1]), np.sin(half[..., 2])
+    return np.stack([sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
+                     cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy], axis=-1)
+
+
+class Scene:
+    """The drawable parts of a compiled system (see the module docstring)."""
+
+    def __init__(self, system: str, facts: dict[str, Any],
+                 values: Callable[[Array, Array], Array], constraints: tuple[str, ...]) -> None:
+        self.system = system
+        #: the fixed frame (the description's name for it, kept in the facts: reading it from
+        #: the description would import SymPy on a cached start)
+        self.world: str = facts["world"]
+        self.frames: tuple[str, ...] = tuple(facts["frames"])
+        self.shapes: tuple[ShapeInfo, ...] = tuple(
+            ShapeInfo(s["name"], s["kind"], s["frame"], tuple(s["color"]),
+                      int(s["points"])) for s in facts["shapes"])
+        #: the constraints with a contact point, by index (bit j of a contact mode)
+        self.contacts: tuple[int, ...] = tuple(int(j) for j in facts["contacts"])
+        self.contact_names = tuple(constraints[j] for j in self.contacts)
+        self._values = values
+
+    @property
+    def empty(self) -> bool:
+        """Nothing declared: no frame, no shape, no contact point."""
+        return not (self.frames or self.shapes or self.contacts)
+
+    def evaluate(self, q: npt.ArrayLike, parameters: npt.ArrayLike) -> SceneState:
+        """The scene at the rows of ``q`` ((n, d) coordinates) for the parameter values
+        ``parameters`` (their declared order)."""
+        q = np.atleast_2d(np.asarray(q, dtype=np.float64))
+        cols = self._values(q, np.asarray(parameters, dtype=np.float64))
+        cols = np.broadcast_to(cols, (q.shape[0], cols.shape[1]))
+        n, k = q.shape[0], 0
+        nf = len(self.frames)
+        frames = cols[:, : 6 * nf].reshape(n, nf, 6)
+        k = 6 * nf
+        sizes: dict[str, Array] = {}
+        points: dict[str, Array] = {}
+        for s in self.shapes:
+            sizes[s.name] = cols[:, k : k + s.nsize]
+            k += s.nsize
+            points[s.name] = cols[:, k : k + 3 * s.npoints].reshape(n, s.npoints, 3)
+            k += 3 * s.npoints
+        contact = cols[:, k:].reshape(n, len(self.contacts), 2, 3)
+        return SceneState(positions=frames[:, :, :3], quaternions=quaternions(frames[:, :, 3:]),
+                          sizes=sizes, points=points, contacts=contact[:, :, 0],
+                          normals=contact[:, :, 1])
+
+    def urdf(self, parameters: npt.ArrayLike, q: npt.ArrayLike) -> str:
+        """The URDF of the system (see the module docstring); shape sizes for ``parameters``,
+        ``q`` any configuration (sizes do not depend on it)."""
+        state = self.evaluate(q, parameters)
+        out = ['<?xml version="1.0"?>', f"<robot name={quoteattr(self.system)}>",
+               f"  <link name={quoteattr(self.world)}/>"]
+        for frame in self.frames:
+            out.append(f"  <link name={quoteattr(frame)}>")
+            for s in self.shapes:
+                if s.frame != frame:
+                    continue
+                size = state.sizes[s.name][0]
+                geometry = (f'<box size="{size[0]:.9g} {size[1]:.9g} {size[2]:.9g}"/>'
+                            if s.kind == "box" else f'<sphere radius="{size[0]:.9g}"/>')
+                rgba = " ".join(f"{c:.9g}" for c in s.color)
+                out += [f"    <visual name={quoteattr(s.name)}>",
+                        f"      <geometry>{geometry}</geometry>",
+                        f'      <material name={quoteattr(s.name)}><color rgba="{rgba}"/>'
+                        "</material>", "    </visual>"]
+            out.append("  </link>")
+        for frame in self.frames:
+            out += [f"  <joint name={quoteattr(frame + '_joint')} type=\"floating\">",
+                    f"    <parent link={quoteattr(self.world)}/>",
+                    f"    <child link={quoteattr(frame)}/>", "  </joint>"]
+        out.append("</robot>")
+        return "\n".join(out) + "\n"
