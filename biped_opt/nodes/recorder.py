@@ -18,7 +18,10 @@ node is destroyed and on SIGINT/SIGTERM (see :func:`main`).
 Parameters: ``maneuver``, ``theta0_min``, ``theta0_max``, ``num``, ``optimal``, ``output``
 (path of the .mcap), ``fixed_inputs`` ([u1, u2, u12] for fixed-input sweeps; empty: the paper's),
 ``autostart`` (record the parameters' sweep at start-up), ``service_timeout`` [s], ``system``,
-``problem``.
+``problem``, ``scene`` (also write ``/clock``, ``/tf``, the markers and ``/robot_description``,
+ROS.md Sec. 6; default true) and ``scene_rate_hz`` (how many of a trajectory's samples per unit
+of simulation time carry them, besides every event and the last sample: default 50, a smooth
+view at a quarter of the state samples' cost; 0: every sample).
 
 **Other systems.** With ``system`` set (as the simulator's: a library name or a system file;
 ``""`` = the biped) the recorder takes the system's description from the simulator's latched
@@ -75,6 +78,11 @@ __all__ = ["RecorderNode", "SweepRequest", "SweepSummary", "main"]
 GAP = 0.5
 #: SweepPoint.mode_sequence is uint8[]: the masks of at most this many constraints fit
 MAX_RECORDED_CONSTRAINTS = 8
+
+
+#: samples per unit of simulation time that carry the scene in a recording (the parameter's
+#: default; each scene message costs the recording about as much as a state message)
+SCENE_RATE_HZ = 50.0
 
 
 @dataclass(frozen=True)
@@ -187,6 +195,8 @@ class RecorderNode(ros.Node):
         self.declare_parameter("fixed_inputs", [0.0])
         self.declare_parameter("autostart", False)
         self.declare_parameter("service_timeout", 30.0)
+        self.declare_parameter("scene", True)
+        self.declare_parameter("scene_rate_hz", SCENE_RATE_HZ)
         self.declare_parameter("system", "")
         self.declare_parameter("problem", "")
         group = ros.ReentrantCallbackGroup()
@@ -332,6 +342,14 @@ class RecorderNode(ros.Node):
         recording has no scene topics, and the log says why)."""
         from biped_opt.simulation.compiled import compiled_with
 
+        if self.get_parameter("scene").value is not True:
+            return None
+        rate = self.get_parameter("scene_rate_hz").value
+        if isinstance(rate, bool) or not isinstance(rate, (int, float)) \
+                or not convert.finite(rate) or rate < 0:
+            raise InvalidParameterError(
+                f"scene_rate_hz must be a number >= 0 (0: every sample), got {rate!r}")
+        self._scene_rate = float(rate)
         try:
             compiled = compiled_with(spec)
             scene = compiled.scene
@@ -409,7 +427,8 @@ class RecorderNode(ros.Node):
         )
         writer.write_states(maneuver=maneuver, theta0=th, samples=samples, stamp_offset_ns=offset)
         if scene is not None:
-            writer.write_scene(scene, samples=samples, stamp_offset_ns=offset)
+            writer.write_scene(scene, samples=samples, stamp_offset_ns=offset,
+                               rate=self._scene_rate)
         modes = [int(m) for m in np.asarray(reply.mode_sequence)]
         times = [0.0, *[float(t) for t in np.asarray(reply.event_times)]]
         for t, mode in zip(times, modes):
@@ -460,7 +479,8 @@ class RecorderNode(ros.Node):
         writer.write_system_states(maneuver=maneuver, s=s, samples=samples, ndof=ndof,
                                    stamp_offset_ns=offset)
         if scene is not None:
-            writer.write_scene(scene, samples=samples, stamp_offset_ns=offset)
+            writer.write_scene(scene, samples=samples, stamp_offset_ns=offset,
+                               rate=self._scene_rate)
         point = {
             "header": _header_fields(offset, writer.system["system"]), "maneuver": maneuver,
             "theta0": s, "optimal": req.optimal, "policy": policy, "value": value,

@@ -2,7 +2,8 @@
 
 Parameters: ``maneuver``, ``theta0``, ``inputs`` ([u1, u2, u12]), ``publish_rate_hz`` (samples per
 unit of simulation time, default 200), ``real_time_factor`` (default 1; 0 = as fast as possible),
-``loop`` (replay the trajectory forever), ``autostart`` (play the parameters' run at start-up).
+``loop`` (replay the trajectory forever), ``autostart`` (play the parameters' run at start-up),
+``scene`` (publish /clock, /tf, markers and /robot_description, below; default true).
 
 - ``/biped/state`` (BipedState, sensor-data QoS): the dense trajectory, sampled every
   1 / publish_rate_hz of simulation time plus before and after each event;
@@ -164,10 +165,12 @@ class SimulatorNode(ros.Node):
             self._info_pub.publish(ros.msgs.SystemInfo(
                 **convert.system_info_fields(self.system, self.source)))
             topics = ("/biped/system_state", "/biped/system_info")
+        self.declare_parameter("scene", True)
         compiled = compiled_biped() if biped else self.system
         scene = compiled.scene
-        #: the scene's messages (None: the system declares no looks)
-        self.scene: SceneMessages | None = None if scene.empty else SceneMessages(
+        #: the scene's messages (None: turned off, or the system declares no looks)
+        self.scene: SceneMessages | None = None \
+            if scene.empty or self.get_parameter("scene").value is not True else SceneMessages(
             load_interfaces().typestore, scene, list(compiled.parameters.values()),
             len(compiled.coordinates))
         self._scene_pubs: dict[str, tuple[Any, type]] = {}

@@ -13,7 +13,9 @@ Sec. 6), serialized to CDR for a whole trajectory in one vectorised pass.
   direction, :data:`FORCE_SCALE` m per unit of force (invisible while the constraint is free).
 
 A sample repeated at an event (the rows before and after the reset share their time and
-configuration) is shown once, after the reset, so no frame is sent twice for one stamp. The
+configuration) is shown once, after the reset, so no frame is sent twice for one stamp. A rate
+thins the rows out (the recorder's ``scene_rate_hz``): the first row of each interval, every
+event's post-reset row and the last row are kept. The
 messages' layouts are fixed once the scene is known (:func:`biped_opt.record.cdr.compile_layout`),
 so a trajectory costs a few NumPy assignments per field, whatever its length. The same bytes go
 into MCAP files and, deserialized, onto the live topics: one definition of what is shown.
@@ -135,19 +137,28 @@ class SceneMessages:
         return data
 
     # -- per trajectory ----------------------------------------------------------------------
-    def shown(self, samples: npt.NDArray[np.float64]) -> npt.NDArray[np.intp]:
+    @staticmethod
+    def shown(samples: npt.NDArray[np.float64], rate: float = 0.0) -> npt.NDArray[np.intp]:
         """The rows shown: all but the first of rows with equal time (an event's pre-reset
-        row)."""
+        row); with ``rate`` > 0 (per unit of simulation time) only the first row of each
+        1 / rate interval, every post-reset row and the last row."""
         t = samples[:, 0]
         keep = np.ones(t.size, dtype=bool)
         keep[:-1] = t[:-1] != t[1:]
+        if rate > 0 and t.size > 1:
+            tick = np.floor(t * rate)
+            fresh = np.ones(t.size, dtype=bool)
+            fresh[1:] = (tick[1:] != tick[:-1]) | (t[1:] == t[:-1])
+            fresh[-1] = True
+            keep &= fresh
         return np.flatnonzero(keep)
 
-    def messages(self, samples: npt.NDArray[np.float64], stamp_offset_ns: int
-                 ) -> tuple[npt.NDArray[np.int64], dict[str, list[bytes]]]:
-        """The stamps (``stamp_offset_ns`` + t) of the shown rows of ``samples`` and the CDR of
-        ``/clock``, ``/tf`` and the markers at each of them."""
-        rows = samples[self.shown(samples)]
+    def messages(self, samples: npt.NDArray[np.float64], stamp_offset_ns: int,
+                 rate: float = 0.0) -> tuple[npt.NDArray[np.int64], dict[str, list[bytes]]]:
+        """The stamps (``stamp_offset_ns`` + t) of the shown rows of ``samples``
+        (:meth:`shown` at ``rate``) and the CDR of ``/clock``, ``/tf`` and the markers at each
+        of them."""
+        rows = samples[self.shown(samples, rate)]
         d = self.ndof
         stamps = stamp_offset_ns + np.round(rows[:, 0] * NS).astype(np.int64)
         sec, nsec = stamps // NS, stamps % NS

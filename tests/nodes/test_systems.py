@@ -26,6 +26,12 @@ from biped_opt.simulation.compiled import CompiledSystem
 
 from .test_nodes import call
 
+NS = convert.NS
+
+
+def _ns(stamp) -> int:
+    return stamp.sec * NS + stamp.nanosec
+
 #: the node and the test run the same compiled kernel on the same inputs, and the messages
 #: carry float64: the numbers agree to the last bit; 1e-12 allows for nothing but that
 TOL = 1e-12
@@ -135,11 +141,13 @@ def test_recorder_records_the_system_and_mcap_ros2_reads_it(served, tmp_path):
     by_s: dict[float, list] = {}
     points, infos = [], []
     scene: dict[str, list] = {}
+    state_msgs: list = []
     with open(out, "rb") as stream:
         reader = make_reader(stream, decoder_factories=[DecoderFactory()])
         assert reader.get_header().profile == "ros2"
         for _schema, channel, _message, msg in reader.iter_decoded_messages():
             if channel.topic == "/biped/system_state":
+                state_msgs.append(msg)
                 by_s.setdefault(msg.s, []).append(
                     [msg.t, *msg.q, *msg.qdot, msg.contact_mode, *msg.contact_force])
             elif channel.topic == "/biped/sweep":
@@ -157,30 +165,29 @@ def test_recorder_records_the_system_and_mcap_ros2_reads_it(served, tmp_path):
         assert list(point.mode_sequence) == list(tr.modes)
         assert abs(point.outcome - tr.outcome) <= TOL and list(point.policy) == full
     assert len(infos) == 1 and list(infos[0].constraints) == list(compiled.system.constraints)
-    # the scene: one URDF; /clock, /tf and markers at every sample but an event's pre-reset
-    # row; the body frame is (x, 0, z) turned by -th about y, in closed form from the states
+    # the scene: one URDF; /clock, /tf and markers at 50 samples per unit of time (the
+    # recorder's default), every event and the last sample, at stamps of state samples; the
+    # body frame is (x, 0, z) turned by -th about y, in closed form from the recorded state
     assert len(scene["/robot_description"]) == 1
     assert "<robot name=" in scene["/robot_description"][0].data
-    rows = sorted((r for rs in by_s.values() for r in rs), key=lambda r: r[0])
-    shown = len({(s, r[0]) for s, rs in by_s.items() for r in rs})
-    assert len(scene["/clock"]) == len(scene["/tf"]) == len(scene["/biped/markers"]) == shown
-    assert rows
+    assert len(scene["/clock"]) == len(scene["/tf"]) == len(scene["/biped/markers"])
+    states = {_ns(m.header.stamp): m for m in state_msgs}
+    stamps = [_ns(tf.transforms[0].header.stamp) for tf in scene["/tf"]]
+    assert len(set(stamps)) == len(stamps)  # no stamp twice
+    assert [c.clock.sec * NS + c.clock.nanosec for c in scene["/clock"]] == stamps
+    for point in points:  # each run's last sample is shown
+        assert _ns(point.header.stamp) + round(point.t_final * NS) in stamps
     for tf in scene["/tf"]:
         body = tf.transforms[0]
         assert body.header.frame_id == "world" and body.child_frame_id == "base_link"
-    last = {}
-    for s, rs in by_s.items():
-        last[s] = rs[-1]
-    offset_free = [tf.transforms[0].transform for tf in scene["/tf"]]
-    finals = {(round(x.translation.x, 12), round(x.translation.z, 12)) for x in offset_free}
-    for r in last.values():
-        x, z, th = r[1], r[2], r[3]
-        assert (round(x, 12), round(z, 12)) in finals
-        match = next(f for f in offset_free if abs(f.translation.z - z) < 1e-12
-                     and abs(f.translation.x - x) < 1e-12)
+        state = states[_ns(body.header.stamp)]
+        x, z, th = state.q[0], state.q[1], state.q[2]
+        move = body.transform
+        assert (move.translation.x, move.translation.y, move.translation.z) == \
+            pytest.approx((x, 0.0, z), abs=1e-12)
         # (the quaternion of a rotation by -th about y: (0, -sin(th/2), 0, cos(th/2)))
-        assert match.rotation.y == pytest.approx(-np.sin(th / 2), abs=1e-12)
-        assert match.rotation.w == pytest.approx(np.cos(th / 2), abs=1e-12)
+        assert (move.rotation.x, move.rotation.y, move.rotation.z, move.rotation.w) == \
+            pytest.approx((0.0, -np.sin(th / 2), 0.0, np.cos(th / 2)), abs=1e-12)
     assert metadata["biped_opt.system"]["system"] == name
     assert metadata["biped_opt.sweep"]["maneuver"] == maneuver
 
