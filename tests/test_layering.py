@@ -23,7 +23,8 @@ PACKAGE = Path(__file__).resolve().parent.parent / "biped_opt"
 #: layers from the bottom up; a module may import modules of its own layer or of lower ones
 LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("base", ("biped_opt.errors", "biped_opt.strict_json", "biped_opt._jit",
-              "biped_opt.progress", "biped_opt.piecewise", "biped_opt.version")),
+              "biped_opt.progress", "biped_opt.piecewise", "biped_opt.version",
+              "biped_opt.system_spec")),
     ("descriptions", ("biped_opt.systems",)),
     ("code generation", ("biped_opt.codegen",)),
     ("hybrid simulation", ("biped_opt.simulation",)),

@@ -23,12 +23,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def describe(spec: str) -> dict:
+    from biped_opt.system_spec import parse_file_spec
     from biped_opt.systems import derive, load_system
 
     system = load_system(spec)
     derived = derive(system)  # checks the description, so a broken file says so here
     return {
-        "name": spec if spec != system.name and not spec.endswith(".py") else system.name,
+        "name": spec if spec != system.name and parse_file_spec(spec) is None else system.name,
         "d": derived.ndof, "n": derived.nconstraints,
         "coordinates": list(system.coordinate_names),
         "constraints": list(system.constraints),

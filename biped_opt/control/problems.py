@@ -41,6 +41,7 @@ import sympy as sp
 
 from biped_opt.errors import InvalidParameterError, quoted
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
+from biped_opt.system_spec import FileSpec, parse_file_spec
 from biped_opt.systems.description import System
 from biped_opt.systems.files import load_system
 
@@ -258,21 +259,31 @@ class Problem:
         }
 
 
-_DESCRIPTIONS: dict[tuple[str, float], System] = {}
+_DESCRIPTIONS: dict[str, tuple[System, tuple[int | None, ...]]] = {}
+
+
+def _stamps(paths: tuple[Path, ...]) -> tuple[int | None, ...]:
+    def stamp(path: Path) -> int | None:
+        try:
+            return path.stat().st_mtime_ns
+        except OSError:
+            return None
+
+    return tuple(stamp(p) for p in paths)
 
 
 def describe(system: System | str) -> System:
-    """:func:`load_system`, remembered per library name or file (and its modification time):
-    building a description costs SymPy time that problems on the same system need not repeat."""
+    """:func:`load_system`, remembered per library name or file spec until a file it read (the
+    system file or a module beside it) changes: building a description costs SymPy time that
+    problems on the same system need not repeat."""
     if isinstance(system, System):
         return system
     text = str(system)
-    path = Path(text)
-    key = (text, path.stat().st_mtime if path.suffix == ".py" and path.is_file() else 0.0)
-    found = _DESCRIPTIONS.get(key)
-    if found is None:
-        found = _DESCRIPTIONS[key] = load_system(text)
-    return found
+    found = _DESCRIPTIONS.get(text)
+    if found is None or _stamps(found[0].reads) != found[1]:
+        loaded = load_system(text)
+        found = _DESCRIPTIONS[text] = (loaded, _stamps(loaded.reads))
+    return found[0]
 
 
 def input_modes(system: System, derived_forces: tuple[sp.Matrix, ...]) -> dict[str, set[int]]:
@@ -335,8 +346,9 @@ def load_problem(spec: str | Path, *, system: System | str | None = None) -> Pro
                                     f"{', '.join(KEYS)}")
     spec_map = dict(spec_map)
     target = spec_map.get("system", system)
-    if isinstance(target, str) and target.endswith(".py") and not Path(target).is_absolute():
-        target = str(path.parent / target)  # a system file next to the problem file
+    file = parse_file_spec(target) if isinstance(target, str) else None
+    if file is not None and not file.path.is_absolute():  # a system file next to the problem
+        target = str(FileSpec(path.parent / file.path, file.arguments))
     spec_map["system"] = target
     spec_map.setdefault("name", path.stem)
     return Problem.from_spec(spec_map, where=str(path))

@@ -47,6 +47,7 @@ from biped_opt.errors import InvalidInputError, InvalidParameterError
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
 from biped_opt.simulation.scene import Scene
 from biped_opt.simulation.trajectory import BatchResult, Trajectory
+from biped_opt.system_spec import parse_file_spec
 from biped_opt.version import PACKAGE_DIR
 
 if TYPE_CHECKING:  # (imported where needed: SymPy and the generator are the slow part of a start)
@@ -161,12 +162,17 @@ def _start_entry(spec: object) -> Path | None:
         return None
     text = str(spec)
     request = f"library\0{text}".encode()
-    if text.endswith(".py"):
+    try:
+        file = parse_file_spec(text)
+    except InvalidInputError:
+        return None  # (the slow path says what is wrong)
+    if file is not None:
         try:
-            content = Path(text).read_bytes()
+            content = file.path.read_bytes()
         except OSError:
             return None
-        request = f"file\0{text}\0".encode() + hashlib.sha256(content).digest()
+        request = f"file\0{file.path}\0{file.key()}\0".encode() \
+            + hashlib.sha256(content).digest()
     key = hashlib.sha256(_generator_key().encode() + b"\0" + request).hexdigest()[:32]
     return cache_dir() / "start" / f"{key}.json"
 
@@ -177,6 +183,9 @@ def _read_entry(entry: Path | None) -> tuple[dict[str, Any], ModuleType] | None:
         return None
     try:
         facts = json.loads(entry.read_text())
+        for path, digest in facts["depends"]:  # the modules a system file imported
+            if _digest(Path(path)) != digest:
+                return None
         name = facts["module"]
         path = cache_dir() / f"{name}.py"
         with _LOCK:
@@ -185,6 +194,14 @@ def _read_entry(entry: Path | None) -> tuple[dict[str, Any], ModuleType] | None:
             return facts, _import(name, path)
     except (OSError, ValueError, KeyError, TypeError):
         return None  # absent or unreadable: derive and render instead
+
+
+def _digest(path: Path) -> str | None:
+    """SHA-256 of a file's content (None if it cannot be read)."""
+    try:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError:
+        return None
 
 
 def kernel_config(module: ModuleType, options: SimulatorOptions, sample_dt: float = 0.0,
@@ -270,7 +287,8 @@ class CompiledSystem:
                 "budgets": [[m.description.max_events, m.description.horizon]
                             for m in derived.maneuvers.values()],
                 "ranges": [list(m.description.s_range) for m in derived.maneuvers.values()],
-                "coordinates": list(system.coordinate_names), "scene": _scene_for(system)}
+                "coordinates": list(system.coordinate_names), "scene": _scene_for(system),
+                "depends": [[str(p), _digest(p)] for p in system.reads[1:]]}
 
     @property
     def system(self) -> System:

@@ -26,6 +26,7 @@ import math
 import re
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import sympy as sp
@@ -204,6 +205,8 @@ class System:
         #: optimal-control problems by name (see :mod:`biped_opt.control.problems`)
         self.problems: dict[str, dict[str, Any]] = {}
         self.source: str | None = None  #: the file a system was loaded from, for messages
+        #: the files a system file read: itself, then modules beside it that it imported
+        self.reads: tuple[Path, ...] = ()
 
     # -- building ---------------------------------------------------------------------------
     @property
