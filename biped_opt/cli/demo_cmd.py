@@ -78,11 +78,12 @@ def run(args: argparse.Namespace) -> int:
     study_figures = two_node_study(args.out)
     piece_counts()
     gradient_methods(args.out / "figures")
+    movies = animations(args.out)
     print("\nSummary")
     for s in recorded:
         print(f"  {s.path}  {sum(s.counts.values())} messages, {s.failed} failed points")
     for path in (*offline.figures, *result.figures, result.captions, experiment,
-                 *study_figures):
+                 *study_figures, *movies):
         print(f"  {path}")
     print(f"  total {time.perf_counter() - start:.1f} s")
     failed = sum(s.failed for s in recorded)
@@ -160,6 +161,32 @@ def gradient_methods(folder: Path) -> None:
     print(report(study, GRADIENT_SAMPLE_COUNTS))
     for name in study.curves:
         print(f"  {gradient_figure(study, name, folder / f'gradients_{name}.png')}")
+
+
+#: the demo's animations (``biped-opt animate --side-by-side --fps 20``, th0 = -+0.02):
+#: system, maneuver, simulated seconds per second, file
+ANIMATIONS = (("biped", "touchdown", 0.5, "touchdown_pair.gif"),
+              ("biped", "liftoff", 0.25, "liftoff_pair.gif"),
+              ("rocking_bar", "drop", 0.5, "rocking_bar_pair.gif"))
+
+
+def animations(out: Path) -> list[Path]:
+    """The flip at a simultaneous event, to watch: each maneuver of :data:`ANIMATIONS` at
+    s = -0.02 and +0.02 side by side, written into ``out``. Returns the files' paths."""
+    from biped_opt.plots.animate import side_by_side
+
+    print("\nAnimations: each maneuver at s = -0.02 and +0.02 side by side (the order of "
+          "contacts flips at 0, and with it the outcome)\n", flush=True)
+    paths = []
+    for system, maneuver, speed, name in ANIMATIONS:
+        t0 = time.perf_counter()
+        movie = side_by_side(system, maneuver, out / name, delta=0.02, fps=20, speed=speed)
+        for p in movie.panels:
+            print("  " + p.title.replace("\n", "  "))
+        print(f"  -> {out / name} ({movie.frames} frames, {time.perf_counter() - t0:.1f} s)",
+              flush=True)
+        paths.append(out / name)
+    return paths
 
 
 #: the demo's parameter study: the liftoff jump over leg stiffness and body inertia (5 x 5)

@@ -36,6 +36,7 @@ COMMAND_MODULES = (
     "report_cmd",
     "info_cmd",
     "pieces_cmd",
+    "animate_cmd",
 )
 
 EXIT_USAGE = 2
