@@ -117,6 +117,8 @@ class _Playback:
     scene: list[tuple[float, dict[str, bytes]]]
     rate: float  # real-time factor; 0 = everything at once
     wall_start: float
+    #: (maneuver, theta0, inputs) of the run, to play it again on the clock when looping
+    request: tuple[str, float, Any] = ("", 0.0, ())
     next_state: int = 0
     next_mode: int = 0
     next_scene: int = 0
@@ -253,6 +255,7 @@ class SimulatorNode(ros.Node):
             scene=scene,
             rate=real_time_factor,
             wall_start=time.monotonic(),
+            request=(maneuver, theta0, inputs),
         )
         with self._lock:
             self._playback = playback
@@ -261,6 +264,7 @@ class SimulatorNode(ros.Node):
         return tr
 
     def _on_tick(self) -> None:
+        again = None
         with self._lock:
             pb = self._playback
             if pb is None:
@@ -280,11 +284,11 @@ class SimulatorNode(ros.Node):
             done = pb.next_state == len(pb.states) and pb.next_mode == len(pb.modes) \
                 and pb.next_scene == len(pb.scene)
             if done:
+                self._playback = None
                 if self.get_parameter("loop").value and pb.rate > 0:
-                    pb.next_state = pb.next_mode = pb.next_scene = 0
-                    pb.wall_start = time.monotonic()
-                else:
-                    self._playback = None
+                    again = pb
+        if again is not None:  # the same run once more, later on the simulated clock
+            self.start(*again.request, again.rate, publish_now=False)
 
     # -- service --------------------------------------------------------------------------
     def _on_simulate(self, request: Any, response: Any) -> Any:

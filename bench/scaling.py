@@ -1,0 +1,193 @@
+"""How the costs grow with the system (issue 25 part 5): legs, coordinates, contact modes.
+
+For each system, in one run:
+
+- ``cold``: a new interpreter with an empty cache compiling the system and simulating once;
+- ``cached``: a new process running ``biped-opt simulate`` of it from that cache (what a user
+  waits for at every later start);
+- ``per traj.``: the median over cases of the best of ``--rounds`` single ``simulate`` calls;
+- ``batch``: one ``simulate_batch`` of all cases, per case;
+- the SciPy comparator of the same system in the same run (``bench/system_reference.py`` with
+  ``bench/walker_model.py`` for the walkers; the chain's reference of the user-system suite),
+  its per-trajectory time and its start (a new interpreter importing SciPy and the model and
+  simulating once), and each figure above as a ratio to the comparator's (below 1: faster);
+- ``max |err|``: the largest outcome difference from the comparator over its cases.
+
+Systems: the walker with n = 2, 3, 4, 6, 8, 10 legs (d = 3 + 2n, a diagonal M, 2^n contact
+modes; ``--legs``) and the planar chain of ``tests/simulation/user/chain.py`` (d = 5, a dense
+configuration-dependent M). Cold compiles of the larger walkers take minutes; ``--legs 2 3 4``
+gives a quick table.
+
+    python bench/scaling.py [--legs 2 3 4 6 8 10] [--no-chain] [--cases 20] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+
+CHAIN = ROOT / "tests" / "simulation" / "user" / "chain.py"
+
+_COLD = """
+import sys, time
+t0 = time.perf_counter()
+from biped_opt.simulation.compiled import CompiledSystem
+system = CompiledSystem(sys.argv[1])
+system.simulate(system.maneuvers[0], 0.01)
+print(time.perf_counter() - t0)
+"""
+
+_REFERENCE_START = """
+import sys, time
+t0 = time.perf_counter()
+sys.path.insert(0, sys.argv[1])
+kind, n = sys.argv[2], int(sys.argv[3])
+if kind == "walker":
+    from bench import system_reference
+    from bench.walker_model import Walker
+    system_reference.simulate(Walker(n, "coupled"), "touchdown", 0.01, [0.0] * (n + 1))
+else:
+    from tests.simulation.user import reference_chain
+    reference_chain.simulate(reference_chain.Chain(), 0.01)
+print(time.perf_counter() - t0)
+"""
+
+
+def _process_seconds(args: list[str], env: dict[str, str]) -> float:
+    """Wall time of a command (its own figure when it prints one on its last line)."""
+    t0 = time.perf_counter()
+    proc = subprocess.run(args, env=env, capture_output=True, text=True, timeout=1800,
+                          check=False, cwd=ROOT)
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        tail = (proc.stderr.strip().splitlines() or ["(no output)"])[-1]
+        raise RuntimeError(f"{' '.join(args[:3])}...: {tail}")
+    try:
+        return float(proc.stdout.strip().splitlines()[-1])
+    except (ValueError, IndexError):
+        return wall
+
+
+def _best(call: Callable[[Any], float], cases: list[Any], rounds: int
+          ) -> tuple[np.ndarray, np.ndarray]:
+    best = np.full(len(cases), np.inf)
+    values = np.zeros(len(cases))
+    for _ in range(rounds):
+        for k, case in enumerate(cases):
+            t0 = time.perf_counter()
+            values[k] = call(case)
+            best[k] = min(best[k], time.perf_counter() - t0)
+    return best, values
+
+
+def measure(spec: str, kind: str, n: int, *, cases: int, rounds: int,
+            reference_cases: int) -> dict[str, Any]:
+    """One row of the table (see the module docstring)."""
+    from biped_opt.simulation.compiled import CompiledSystem
+
+    with tempfile.TemporaryDirectory(prefix="biped_opt_scaling_") as cache:
+        env = dict(os.environ, BIPED_OPT_CACHE=cache)
+        cold = _process_seconds([sys.executable, "-c", _COLD, spec], env)
+        maneuver = "touchdown" if kind == "walker" else "drop"
+        cached = _process_seconds([sys.executable, "-m", "biped_opt.cli.main", "simulate",
+                                   "--system", spec, "--maneuver", maneuver, "--s", "0.01"],
+                                  env)
+    compiled = CompiledSystem(spec)
+    d, ninputs = len(compiled.coordinates), len(compiled.inputs)
+    s_values = np.linspace(-0.2, 0.2, cases)
+    zero = np.zeros(ninputs)
+    compiled.simulate(maneuver, 0.0, zero)  # (loaded and warm)
+    gen_t, gen_v = _best(lambda s: compiled.simulate(maneuver, s, zero).outcome,
+                         list(s_values), rounds)
+    batch = np.inf
+    for _ in range(rounds):
+        t0 = time.perf_counter()
+        compiled.simulate_batch(maneuver, s_values, np.tile(zero, (cases, 1)))
+        batch = min(batch, (time.perf_counter() - t0) / cases)
+    if kind == "walker":
+        from bench import system_reference
+        from bench.walker_model import Walker
+
+        model = Walker(n, "coupled")
+
+        def reference(s: float) -> float:
+            return system_reference.simulate(model, "touchdown", s, [0.0] * (n + 1)).outcome
+    else:
+        from tests.simulation.user import reference_chain
+
+        chain = reference_chain.Chain()
+
+        def reference(s: float) -> float:
+            return reference_chain.simulate(chain, s).outcome
+    picks = list(s_values[:: max(1, cases // reference_cases)])[:reference_cases]
+    ref_t, ref_v = _best(reference, picks, 1)
+    own = np.array([compiled.simulate(maneuver, s, zero).outcome for s in picks])
+    ref_start = _process_seconds([sys.executable, "-c", _REFERENCE_START, str(ROOT), kind,
+                                  str(n)], dict(os.environ))
+    per, ref = float(np.median(gen_t)), float(np.median(ref_t))
+    return {"system": spec if kind == "walker" else "chain (user file)", "d": d,
+            "modes": 2 ** len(compiled.constraints), "cold_s": cold, "cached_s": cached,
+            "per_trajectory_s": per, "batch_per_trajectory_s": float(batch),
+            "reference_per_trajectory_s": ref, "reference_start_s": ref_start,
+            "ratio_per_trajectory": per / ref, "ratio_batch": float(batch) / ref,
+            "ratio_cold": cold / ref_start, "ratio_cached": cached / ref_start,
+            "max_abs_error": float(np.max(np.abs(own - ref_v)))}
+
+
+def _time(v: float) -> str:
+    return f"{v * 1e6:.1f} us" if v < 1e-3 else f"{v * 1e3:.2f} ms" if v < 1 else f"{v:.1f} s"
+
+
+def table(rows: list[dict[str, Any]]) -> str:
+    head = (f"{'system':<20}{'d':>3}{'modes':>6}{'cold':>9}{'cached':>9}{'per traj.':>11}"
+            f"{'batch':>11}{'SciPy':>11}{'SciPy start':>12}  ratios cold/cached/traj/batch"
+            f"{'max |err|':>11}")
+    lines = [head]
+    for r in rows:
+        lines.append(
+            f"{r['system']:<20}{r['d']:>3}{r['modes']:>6}{_time(r['cold_s']):>9}"
+            f"{_time(r['cached_s']):>9}{_time(r['per_trajectory_s']):>11}"
+            f"{_time(r['batch_per_trajectory_s']):>11}{_time(r['reference_per_trajectory_s']):>11}"
+            f"{_time(r['reference_start_s']):>12}  {r['ratio_cold']:.2f} / {r['ratio_cached']:.2f}"
+            f" / {r['ratio_per_trajectory']:.3f} / {r['ratio_batch']:.3f}"
+            f"{r['max_abs_error']:>11.1e}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--legs", type=int, nargs="+", default=[2, 3, 4, 6, 8, 10])
+    ap.add_argument("--no-chain", action="store_true")
+    ap.add_argument("--cases", type=int, default=20)
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--reference-cases", type=int, default=4)
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args(argv)
+    plan = [(f"walker{n}", "walker", n) for n in args.legs]
+    if not args.no_chain:
+        plan.append((str(CHAIN), "chain", 0))
+    rows = []
+    for spec, kind, n in plan:
+        rows.append(measure(spec, kind, n, cases=args.cases, rounds=args.rounds,
+                            reference_cases=args.reference_cases))
+        if not args.json:
+            print(table(rows[-1:]).splitlines()[-1], flush=True)
+    print(json.dumps(rows, indent=2) if args.json else table(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
