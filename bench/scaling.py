@@ -30,7 +30,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +37,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
+
+from bench.systems_bench import _best_times  # noqa: E402
 
 CHAIN = ROOT / "tests" / "simulation" / "user" / "chain.py"
 
@@ -81,18 +82,6 @@ def _process_seconds(args: list[str], env: dict[str, str]) -> float:
         return wall
 
 
-def _best(call: Callable[[Any], float], cases: list[Any], rounds: int
-          ) -> tuple[np.ndarray, np.ndarray]:
-    best = np.full(len(cases), np.inf)
-    values = np.zeros(len(cases))
-    for _ in range(rounds):
-        for k, case in enumerate(cases):
-            t0 = time.perf_counter()
-            values[k] = call(case)
-            best[k] = min(best[k], time.perf_counter() - t0)
-    return best, values
-
-
 def measure(spec: str, kind: str, n: int, *, cases: int, rounds: int,
             reference_cases: int) -> dict[str, Any]:
     """One row of the table (see the module docstring)."""
@@ -110,7 +99,7 @@ def measure(spec: str, kind: str, n: int, *, cases: int, rounds: int,
     s_values = np.linspace(-0.2, 0.2, cases)
     zero = np.zeros(ninputs)
     compiled.simulate(maneuver, 0.0, zero)  # (loaded and warm)
-    gen_t, gen_v = _best(lambda s: compiled.simulate(maneuver, s, zero).outcome,
+    gen_t, gen_v = _best_times(lambda s: compiled.simulate(maneuver, s, zero).outcome,
                          list(s_values), rounds)
     batch = np.inf
     for _ in range(rounds):
@@ -133,7 +122,7 @@ def measure(spec: str, kind: str, n: int, *, cases: int, rounds: int,
         def reference(s: float) -> float:
             return reference_chain.simulate(chain, s).outcome
     picks = list(s_values[:: max(1, cases // reference_cases)])[:reference_cases]
-    ref_t, ref_v = _best(reference, picks, 1)
+    ref_t, ref_v = _best_times(reference, picks, 1)
     own = np.array([compiled.simulate(maneuver, s, zero).outcome for s in picks])
     ref_start = _process_seconds([sys.executable, "-c", _REFERENCE_START, str(ROOT), kind,
                                   str(n)], dict(os.environ))
