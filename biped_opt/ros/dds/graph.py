@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import threading
 from dataclasses import dataclass
 from typing import Any
 
@@ -129,6 +130,34 @@ class TopicEndpointInfo:
     node_namespace: str = "_NODE_NAMESPACE_UNKNOWN_"
 
 
+#: most endpoints one graph query reads (the buffers of a read are allocated for this many)
+MAX_ENDPOINTS = 16384
+
+
+def _read_off_main_thread(reader: Any, condition: Any) -> list[Any]:
+    """``reader.read`` of every sample ``condition`` selects, in a thread of its own when called
+    from the main thread: PyPI cyclonedds builds each built-in sample with Python calls, and a
+    signal handler that raises in one of them (Ctrl-C, SIGTERM as nodes install it) would come
+    out as a plain ``Exception("... errored.")``, the interrupt lost. Signal handlers run in the
+    main thread only, so there the interrupt ends the wait instead, as it should."""
+    if threading.current_thread() is not threading.main_thread():
+        return list(reader.read(N=MAX_ENDPOINTS, condition=condition))
+    box: dict[str, Any] = {}
+
+    def read() -> None:
+        try:
+            box["samples"] = list(reader.read(N=MAX_ENDPOINTS, condition=condition))
+        except BaseException as exc:
+            box["error"] = exc
+
+    worker = threading.Thread(target=read, name="biped_opt-graph-read", daemon=True)
+    worker.start()
+    worker.join()
+    if "error" in box:
+        raise box["error"]
+    return box["samples"]
+
+
 def _profile(qos: Any) -> Any:
     """The :class:`.qos.QoSProfile` of a discovered endpoint's DDS QoS."""
     from cyclonedds.core import Policy
@@ -181,7 +210,7 @@ class TopicDirectory:
     def _endpoints(self, kind: str) -> list[tuple[str, TopicEndpointInfo]]:
         reader, condition = self._readers[kind]
         out = []
-        for sample in reader.read(N=1_000_000, condition=condition):
+        for sample in _read_off_main_thread(reader, condition):
             topic, ros_type = sample.topic_name, ros_type_name(sample.type_name)
             if not topic.startswith("rt/") or ros_type is None:
                 continue
