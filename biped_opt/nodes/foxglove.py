@@ -20,8 +20,9 @@ ROS 2 Humble messages rosbags knows: ``std_msgs``, ``geometry_msgs``, ``tf2_msgs
   them again when a Foxglove client subscribes to such a channel later, so a client that
   connects after the fact still sees them; clients already subscribed then get them a second
   time, with their first log time (the SDK addresses a message to the whole server, not to one
-  client). A topic whose publishers' QoS change is subscribed again; one whose publishers are
-  all gone is closed.
+  client), and a channel's kept messages go out at most once per
+  :data:`REPLAY_MIN_INTERVAL_S` (later subscriptions wait for it). A topic whose publishers' QoS
+  change is subscribed again; one whose publishers are all gone is closed.
 
 The node runs its callbacks on one thread (``run_node``), which keeps each topic's messages in
 the order they came.
@@ -52,6 +53,7 @@ The server is read-only and bounded, whatever a client or a DDS peer sends:
 
 from __future__ import annotations
 
+import math
 import re
 import threading
 import time
@@ -81,8 +83,11 @@ QUEUE_DEPTH = 100
 #: messages of a transient-local topic kept for clients that subscribe later, and their bytes
 LATCHED_MESSAGES = 100
 LATCHED_BYTES = 16 << 20
-#: how often subscriptions of clients are answered with the kept messages [s]
+#: how often subscriptions of clients are answered with the kept messages [s], and how long a
+#: channel's kept messages wait before they go out again (a client that subscribes and
+#: unsubscribes in a loop cannot make the server resend them faster)
 REPLAY_PERIOD_S = 0.05
+REPLAY_MIN_INTERVAL_S = 1.0
 #: the longest host name or address accepted, and topic name served
 _HOST_MAX = 255
 _NAME_MAX = 256
@@ -156,6 +161,7 @@ class _Bridged:
     subscription: Any = None
     latched: deque[tuple[bytes, int]] | None = None
     latched_bytes: int = 0
+    replayed_at: float = -math.inf  #: when the kept messages last went out (monotonic) [s]
     lock: threading.Lock = field(default_factory=threading.Lock)
 
     def keep(self, data: bytes, log_time: int) -> None:
@@ -192,6 +198,10 @@ class _Listener(ServerListener):
         with self.lock:
             pending, self.pending = self.pending, set()
         return pending
+
+    def defer(self, channel_ids: set[int]) -> None:
+        with self.lock:
+            self.pending |= channel_ids
 
 
 class FoxgloveNode(ros.Node):
@@ -244,8 +254,9 @@ class FoxgloveNode(ros.Node):
                 context=self._context, message_backlog_size=BACKLOG)
         except Exception as exc:  # the SDK's error for an address it cannot bind
             text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            text = text.removeprefix("FoxgloveError: ")
             raise InvalidParameterError(
-                f"port: cannot listen on {host}:{port}: {text}") from None
+                f"host, port: cannot listen on {host}:{port}: {text}") from None
 
     # -- discovery ------------------------------------------------------------------------
     def bridged(self) -> dict[str, str]:
@@ -362,9 +373,16 @@ class FoxgloveNode(ros.Node):
             return
         with self._lock:
             entries = [e for e in self._bridged.values() if e.channel.id() in pending]
+        now, later = time.monotonic(), set()
         for entry in entries:
+            if now - entry.replayed_at < REPLAY_MIN_INTERVAL_S:
+                later.add(entry.channel.id())
+                continue
+            entry.replayed_at = now
             for data, log_time in entry.kept():
                 entry.channel.log(data, log_time=log_time)
+        if later:
+            self._listener.defer(later)
 
     # -- lifecycle ------------------------------------------------------------------------
     def destroy_node(self) -> None:

@@ -19,6 +19,7 @@ import subprocess
 import sys
 import threading
 import time
+import types
 from collections import deque
 from pathlib import Path
 
@@ -441,7 +442,8 @@ def _busy_port() -> socket.socket:
     ("topics:=[biped/state]", "foxglove: error: topics: 'biped/state' is not an absolute "
                               "topic name (/a/b)"),
     ("discovery_period:=0.0", "foxglove: error: discovery_period must be a number > 0, got 0.0"),
-    ("port:=BUSY", "foxglove: error: port: cannot listen on 127.0.0.1:BUSY: "),
+    ("port:=BUSY", "foxglove: error: host, port: cannot listen on 127.0.0.1:BUSY: Failed to "
+                   "bind port"),
 ])
 def test_a_bad_parameter_ends_the_node_with_status_2_and_one_line(domain_id, param, message):
     sock = _busy_port()
@@ -567,5 +569,48 @@ def test_topics_a_peer_names_or_types_badly_are_left_out(domain_id, capfd):
         assert "not serving '/9lives': not a topic name" in err
         assert "not serving /thing: type 'nosuch_pkg/msg/Thing' is not known" in err
         del writers
+    finally:
+        ros.try_shutdown(context=ctx)
+
+
+class _Recorded:
+    """A channel that records what is logged on it."""
+
+    def __init__(self) -> None:
+        self.logged: list[tuple[bytes, int]] = []
+
+    def id(self) -> int:
+        return 4242
+
+    def log(self, data: bytes, *, log_time: int) -> None:
+        self.logged.append((data, log_time))
+
+    def close(self) -> None:
+        pass
+
+
+def test_kept_messages_go_out_again_at_most_once_a_replay_interval(domain_id, monkeypatch):
+    """A client that subscribes over and over makes the bridge resend a transient-local topic's
+    kept messages once per interval, not once per subscription."""
+    monkeypatch.setattr(foxglove_node, "REPLAY_MIN_INTERVAL_S", 0.3)
+    ctx, bridge = _bridge_of(domain_id, topics=["/none"])
+    try:
+        channel = _Recorded()
+        entry = foxglove_node._Bridged(ros_type="std_msgs/msg/Header", channel=channel,
+                                       encode=bytes, latched=deque(maxlen=1))
+        entry.keep(b"kept", 7)
+        with bridge._lock:
+            bridge._bridged["/latched"] = entry
+        view = types.SimpleNamespace(id=channel.id(), topic="/latched")  # (as the SDK's)
+        for _ in range(5):  # five subscriptions within the interval: one replay
+            bridge._listener.on_subscribe(None, view)
+            bridge._replay()
+        assert channel.logged == [(b"kept", 7)]
+        time.sleep(0.35)  # then the subscriptions that waited get theirs, once
+        bridge._replay()
+        bridge._replay()
+        assert channel.logged == [(b"kept", 7)] * 2
+        with bridge._lock:
+            del bridge._bridged["/latched"]
     finally:
         ros.try_shutdown(context=ctx)
