@@ -167,7 +167,7 @@ def bridged():
 
 
 @pytest.fixture(scope="module")
-def session(bridged):
+def live(bridged):
     """One run played before any client connects, then a client subscribed to LIVE_TOPICS, then
     a second run at real time: (client, its lines, the run's reply, the first run's wall time)."""
     if _client_missing():
@@ -205,16 +205,16 @@ def session(bridged):
 # -- the protocol as a client sees it -----------------------------------------------------------
 
 @needs_client
-def test_the_server_is_read_only(session):
-    client = session[0]
+def test_the_server_is_read_only(live):
+    client = live[0]
     info = client.of("serverInfo")
     assert len(info) == 1 and info[0]["capabilities"] == []  # no publish, services, parameters
 
 
 @needs_client
 @pytest.mark.parametrize("topic", sorted(LIVE_TOPICS))
-def test_every_topic_is_advertised_as_ros2_and_decodes_with_its_schema(session, topic):
-    client = session[0]
+def test_every_topic_is_advertised_as_ros2_and_decodes_with_its_schema(live, topic):
+    client = live[0]
     [channel] = client.of("advertise", topic)
     assert channel == {"op": "advertise", "topic": topic, "encoding": "cdr",
                        "schemaName": LIVE_TOPICS[topic], "schemaEncoding": "ros2msg"}
@@ -227,8 +227,8 @@ def test_every_topic_is_advertised_as_ros2_and_decodes_with_its_schema(session, 
 
 
 @needs_client
-def test_states_are_the_simulators_samples(session):
-    client, reply, expected, _ = session
+def test_states_are_the_simulators_samples(live):
+    client, reply, expected, _ = live
     states = [m["data"] for m in client.of("message", "/biped/state")]
     samples = expected.samples
     at: dict[float, list[int]] = {}  # (an event's time has a sample before and one after it)
@@ -250,8 +250,8 @@ def test_states_are_the_simulators_samples(session):
 
 
 @needs_client
-def test_a_late_client_gets_the_contact_modes_kept_before_it_connected(session):
-    client, _reply, expected, before_client_ns = session
+def test_a_late_client_gets_the_contact_modes_kept_before_it_connected(live):
+    client, _reply, expected, before_client_ns = live
     modes = client.of("message", "/biped/contact_mode")
     n = len(expected.mode_sequence)
     kept = modes[:n]
