@@ -45,6 +45,7 @@ setup(
             "optimiser = biped_opt.nodes.optimiser:main",
             "recorder = biped_opt.nodes.recorder:main",
             "coordinator = biped_opt.nodes.coordinator:main",
+            "foxglove_bridge = biped_opt.nodes.foxglove:main",
         ],
     },
 )

@@ -6,7 +6,7 @@ import argparse
 
 from biped_opt.cli.args import input_file, path_arg
 
-NODES = ("simulator", "optimiser", "recorder", "coordinator")
+NODES = ("simulator", "optimiser", "recorder", "coordinator", "foxglove")
 
 
 def register(sub: argparse._SubParsersAction) -> None:

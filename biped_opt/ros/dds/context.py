@@ -116,6 +116,7 @@ class Context:
         self._graph_writer: DataWriter | None = None
         self._graph_topic: Topic | None = None
         self._services: graph.ServiceDirectory | None = None
+        self._topics: graph.TopicDirectory | None = None
         self.domain_id: int | None = None
         self.args: list[str] = []
 
@@ -171,6 +172,9 @@ class Context:
         if self._services is not None:
             self._services.delete()
             self._services = None
+        if self._topics is not None:
+            self._topics.delete()
+            self._topics = None
         writer, topic = self._graph_writer, self._graph_topic
         self._graph_writer = self._graph_topic = None
         guards, self._guards = list(self._guards), []
@@ -195,6 +199,13 @@ class Context:
             if self._services is None:
                 self._services = graph.ServiceDirectory(self.participant)
             return self._services.services()
+
+    def topic_directory(self) -> graph.TopicDirectory:
+        """Every topic on the domain and its endpoints (:class:`.graph.TopicDirectory`)."""
+        with self._lock:
+            if self._topics is None:
+                self._topics = graph.TopicDirectory(self.participant)
+            return self._topics
 
     def new_guard(self) -> GuardCondition:
         guard = GuardCondition(self.participant)

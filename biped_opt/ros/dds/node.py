@@ -301,6 +301,16 @@ class Node:
     def get_clock(self) -> Clock:
         return self._clock
 
+    def get_topic_names_and_types(self) -> list[tuple[str, list[str]]]:
+        """Every topic on the domain (with a publisher or a subscription) and its types, as
+        rclpy's (from DDS discovery)."""
+        return self.context.topic_directory().topics()
+
+    def get_publishers_info_by_topic(self, topic_name: str) -> list[Any]:
+        """The publishers of ``topic_name`` with their types and QoS, as rclpy's (from DDS
+        discovery; :class:`.graph.TopicEndpointInfo`)."""
+        return self.context.topic_directory().publishers(self._resolve(topic_name))
+
     def get_service_names_and_types(self) -> list[tuple[str, list[str]]]:
         """Every service on the domain and its types, as rclpy's (from DDS discovery)."""
         return self.context.service_names_and_types()
