@@ -5,8 +5,10 @@ For each system, in one run:
 - ``cold``: a new interpreter with an empty cache compiling the system and simulating once;
 - ``cached``: a new process running ``biped-opt simulate`` of it from that cache (what a user
   waits for at every later start);
-- ``per traj.``: the median over cases of the best of ``--rounds`` single ``simulate`` calls;
-- ``batch``: one ``simulate_batch`` of all cases, per case;
+- ``per traj.``: single ``simulate`` calls over all cases in a loop, per case (best of
+  ``--rounds`` loops);
+- ``batch``: one ``simulate_batch`` of all cases, per case (best of ``--rounds``), timed the same
+  way as the loop;
 - the SciPy comparator of the same system in the same run (``bench/system_reference.py`` with
   ``bench/walker_model.py`` for the walkers; the chain's reference of the user-system suite),
   its per-trajectory time and its start (a new interpreter importing SciPy and the model and
@@ -94,13 +96,26 @@ def measure(spec: str, kind: str, n: int, *, cases: int, rounds: int,
         cached = _process_seconds([sys.executable, "-m", "biped_opt.cli.main", "simulate",
                                    "--system", spec, "--maneuver", maneuver, "--s", "0.01"],
                                   env)
-    compiled = CompiledSystem(spec)
+        # (this process loads what the first one compiled)
+        before = os.environ.get("BIPED_OPT_CACHE")
+        os.environ["BIPED_OPT_CACHE"] = cache
+        try:
+            compiled = CompiledSystem(spec)
+        finally:
+            if before is None:
+                del os.environ["BIPED_OPT_CACHE"]
+            else:
+                os.environ["BIPED_OPT_CACHE"] = before
     d, ninputs = len(compiled.coordinates), len(compiled.inputs)
     s_values = np.linspace(-0.2, 0.2, cases)
     zero = np.zeros(ninputs)
     compiled.simulate(maneuver, 0.0, zero)  # (loaded and warm)
-    gen_t, gen_v = _best_times(lambda s: compiled.simulate(maneuver, s, zero).outcome,
-                         list(s_values), rounds)
+    loop = np.inf
+    for _ in range(rounds):
+        t0 = time.perf_counter()
+        for s in s_values:
+            compiled.simulate(maneuver, s, zero)
+        loop = min(loop, (time.perf_counter() - t0) / cases)
     batch = np.inf
     for _ in range(rounds):
         t0 = time.perf_counter()
@@ -126,7 +141,7 @@ def measure(spec: str, kind: str, n: int, *, cases: int, rounds: int,
     own = np.array([compiled.simulate(maneuver, s, zero).outcome for s in picks])
     ref_start = _process_seconds([sys.executable, "-c", _REFERENCE_START, str(ROOT), kind,
                                   str(n)], dict(os.environ))
-    per, ref = float(np.median(gen_t)), float(np.median(ref_t))
+    per, ref = float(loop), float(np.median(ref_t))
     return {"system": spec if kind == "walker" else "chain (user file)", "d": d,
             "modes": 2 ** len(compiled.constraints), "cold_s": cold, "cached_s": cached,
             "per_trajectory_s": per, "batch_per_trajectory_s": float(batch),
