@@ -101,6 +101,9 @@ def measure(spec: str, kind: str, n: int, *, cases: int, rounds: int,
         os.environ["BIPED_OPT_CACHE"] = cache
         try:
             compiled = CompiledSystem(spec)
+            warm = np.zeros((2, len(compiled.inputs)))
+            compiled.simulate_batch(maneuver, [0.0, 0.01], warm)  # (loaded while it is there)
+            compiled.simulate(maneuver, 0.0, warm[0])
         finally:
             if before is None:
                 del os.environ["BIPED_OPT_CACHE"]
