@@ -1,6 +1,6 @@
 """What a Foxglove layout shows, drawn with matplotlib from a recording.
 
-Foxglove is an application that does not run here; :func:`layout_preview` reads the layout file
+Foxglove is an application that does not run here; :func:`draw_layout` reads the layout file
 (``config/foxglove_layout.json``: Foxglove's ``configById`` and ``layout`` mosaic) and draws each
 of its panels, in the mosaic's proportions, from a recording read with
 :func:`biped_opt.record.reader.read_raw`:
@@ -41,7 +41,7 @@ from biped_opt.plots.figures import plt  # (its import selects the file backend)
 from biped_opt.record.reader import RawRecording, read_raw
 from biped_opt.ros.interfaces import load_interfaces
 
-__all__ = ["LayoutError", "layout_preview", "message_path", "mosaic", "FIGSIZE", "DPI"]
+__all__ = ["LayoutError", "draw_layout", "message_path", "mosaic", "FIGSIZE", "DPI"]
 
 NS = 1_000_000_000
 #: the picture: 16 x 9 inches at 100 dpi (1600 x 900 pixels)
@@ -363,6 +363,9 @@ def _draw_grid(ax: Any, layer: dict[str, Any]) -> None:
 # -- plots -----------------------------------------------------------------------------------------
 
 def _note(ax: Any, text: str) -> None:
+    """An empty panel saying why."""
+    ax.set_xticks([])
+    ax.set_yticks([])
     ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes, fontsize=9,
             color="0.4")
 
@@ -424,6 +427,8 @@ def _draw_transitions(axes: Sequence[Any], data: _Data, cfg: dict[str, Any], cur
     missing = _missing(data, [p["value"] for p in paths])
     if missing:
         _note(ax, f"no {', '.join(missing)} in the recording")
+        for a in axes[1:]:
+            a.set_visible(False)
         return
     end = (data.raw.messages[-1].log_time_ns - data.start_ns) / NS
     labels, names = [], {}
@@ -480,7 +485,7 @@ def _instant(data: _Data, at: tuple[float, float] | None) -> tuple[int, str]:
     return start + round(t * NS), f"th0 = {point.theta0:+.3g}, t = {t:.3f} of its run"
 
 
-def layout_preview(recording: str | Path, out: str | Path, *, layout: str | Path,
+def draw_layout(recording: str | Path, out: str | Path, *, layout: str | Path,
                    at: tuple[float, float] | None = None) -> Path:
     """Draw the panels of ``layout`` (a Foxglove layout file) from ``recording`` into the PNG
     ``out`` (:data:`FIGSIZE` at :data:`DPI`); ``at`` = (th0, t): the sweep point and time of
@@ -540,7 +545,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="the 3D panel's instant: a sweep point's th0 and a time in it")
     args = p.parse_args(argv)
     try:
-        path = layout_preview(args.recording, args.out, layout=args.layout,
+        path = draw_layout(args.recording, args.out, layout=args.layout,
                               at=tuple(args.at) if args.at else None)
     except BipedOptError as exc:
         p.exit(2, f"error: {exc}\n")

@@ -13,15 +13,17 @@ import pytest
 from matplotlib.image import imread
 
 from biped_opt.errors import BipedOptError
+from biped_opt.paper.biped import simulate
 from biped_opt.plots.layout_preview import (
     DPI,
     FIGSIZE,
     LayoutError,
-    layout_preview,
+    draw_layout,
     main,
     message_path,
     mosaic,
 )
+from biped_opt.record import SweepWriter
 from tests.record.test_scene_conventions import record_biped_sweep
 
 LAYOUT = Path(__file__).resolve().parents[2] / "config" / "foxglove_layout.json"
@@ -49,7 +51,7 @@ def _red_pixels(path: Path) -> int:
 
 def test_the_preview_is_a_png_of_the_expected_size(recording, tmp_path):
     path, trs = recording
-    out = layout_preview(path, tmp_path / "preview.png", layout=LAYOUT)
+    out = draw_layout(path, tmp_path / "preview.png", layout=LAYOUT)
     assert out == tmp_path / "preview.png"
     assert _png_size(out) == (round(FIGSIZE[0] * DPI), round(FIGSIZE[1] * DPI))
     image = imread(out)[:, :, :3]
@@ -64,12 +66,24 @@ def test_the_instant_shown_is_the_one_asked_for(recording, tmp_path):
     down (two red points: about twice the red of one)."""
     path, trs = recording
     th = min(trs, key=lambda v: abs(v - 0.05))  # (a sweep point with an event order)
-    air = layout_preview(path, tmp_path / "air.png", layout=LAYOUT, at=(th, 0.0))
+    air = draw_layout(path, tmp_path / "air.png", layout=LAYOUT, at=(th, 0.0))
     assert _red_pixels(air) == 0
-    one = layout_preview(path, tmp_path / "one.png", layout=LAYOUT)
-    both = layout_preview(path, tmp_path / "both.png", layout=LAYOUT,
+    one = draw_layout(path, tmp_path / "one.png", layout=LAYOUT)
+    both = draw_layout(path, tmp_path / "both.png", layout=LAYOUT,
                           at=(th, trs[th].t_final))
     assert 1.5 < _red_pixels(both) / _red_pixels(one) < 2.5
+
+
+def test_a_recording_without_the_scene_still_draws(tmp_path):
+    """A recording of states only (older files): the panels whose topics it lacks say so, the
+    state plots are drawn, no red contact point."""
+    path = tmp_path / "states.mcap"
+    with SweepWriter(path) as w:
+        tr = simulate("touchdown", 0.1, (2.0, 0.5, 0.0), sample_dt=0.05)
+        w.write_states(maneuver="touchdown", theta0=0.1, samples=tr.samples, stamp_offset_ns=0)
+    out = draw_layout(path, tmp_path / "states.png", layout=LAYOUT)
+    assert _png_size(out) == (round(FIGSIZE[0] * DPI), round(FIGSIZE[1] * DPI))
+    assert _red_pixels(out) == 0
 
 
 def test_the_panels_tile_the_figure_as_the_mosaic_says():
@@ -102,10 +116,10 @@ def test_bad_input_is_refused_in_one_line(recording, tmp_path, capsys):
     not_layout = tmp_path / "x.json"
     not_layout.write_text("[1, 2]")
     with pytest.raises(LayoutError) as err:
-        layout_preview(path, tmp_path / "x.png", layout=not_layout)
+        draw_layout(path, tmp_path / "x.png", layout=not_layout)
     assert "not a Foxglove layout" in str(err.value) and "\n" not in str(err.value)
     with pytest.raises(BipedOptError):
-        layout_preview(tmp_path / "missing.mcap", tmp_path / "x.png", layout=LAYOUT)
+        draw_layout(tmp_path / "missing.mcap", tmp_path / "x.png", layout=LAYOUT)
     assert not (tmp_path / "x.png").exists()
     with pytest.raises(SystemExit) as ex:
         main([str(tmp_path / "missing.mcap"), str(tmp_path / "y.png"), "--layout",
