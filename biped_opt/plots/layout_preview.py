@@ -13,8 +13,10 @@ of its panels, in the mosaic's proportions, from a recording read with
 - ``Plot``: every path over the time since the recording's start (``xAxisVal`` timestamp, with
   the instant of the 3D panel as the playback cursor) or against ``xAxisPath`` (``custom``: x
   and y values paired in order, as Foxglove pairs them);
-- ``StateTransitions``: every path as a band over time, a colour and a label per value (the
-  constant's name where the message defines one, as Foxglove labels it).
+- ``StateTransitions``: every path as a band over time, a colour per value, the values named in
+  a legend (by the message's constants where it defines them, as Foxglove labels them); below,
+  the same bands over the window the synced plots follow (``followingViewWidth``), since a
+  sweep's thousands of changes are only seen zoomed in.
 
 Message paths are Foxglove's ``/topic.field[index].field``. A topic the recording lacks leaves its
 panel with a note. ``python -m biped_opt.plots.layout_preview RECORDING OUT.png --layout
@@ -485,6 +487,37 @@ def _instant(data: _Data, at: tuple[float, float] | None) -> tuple[int, str]:
     return start + round(t * NS), f"th0 = {point.theta0:+.3g}, t = {t:.3f} of its run"
 
 
+def _draw_panel(fig: Any, rect: Rect, pid: str, panels: dict[str, Any], data: _Data,
+                instant: int, what: str) -> None:
+    """One panel of the layout in its rectangle of the figure (see the module docstring)."""
+    x, y, w, h = rect
+    cfg = panels.get(pid, {})
+    kind = pid.split("!")[0]
+    cursor = (instant - data.start_ns) / NS
+    # the panel's rectangle, less room for its axis labels and title
+    ax = fig.add_axes((x + 0.045 * min(w * 4, 1), 1 - y - h + 0.06 * min(h * 2.5, 1),
+                       w - 0.06 * min(w * 4, 1), h - 0.1 * min(h * 2.5, 1)))
+    ax.set_title(cfg.get("foxglovePanelTitle", kind), fontsize=9)
+    ax.tick_params(labelsize=7)
+    if kind == "3D":
+        _draw_scene(ax, data, cfg, instant, what)
+    elif kind == "Plot":
+        _draw_plot(ax, data, cfg, cursor)
+    elif kind == "StateTransitions":
+        width = max((float(c.get("followingViewWidth", 0)) for c in panels.values()
+                     if c.get("isSynced")), default=0.0)
+        axes = [ax]
+        if width and cfg.get("isSynced"):  # (room for the zoom below the whole)
+            box = ax.get_position()
+            ax.set_position((box.x0, box.y0 + 0.5 * box.height, box.width, 0.5 * box.height))
+            axes.append(fig.add_axes((box.x0, box.y0, box.width, 0.33 * box.height)))
+        _draw_transitions(axes, data, cfg, cursor, width)
+    else:
+        _note(ax, f"{kind} panel (not drawn here)")
+    ax.xaxis.label.set_fontsize(7)
+    ax.yaxis.label.set_fontsize(7)
+
+
 def draw_layout(recording: str | Path, out: str | Path, *, layout: str | Path,
                    at: tuple[float, float] | None = None) -> Path:
     """Draw the panels of ``layout`` (a Foxglove layout file) from ``recording`` into the PNG
@@ -498,33 +531,17 @@ def draw_layout(recording: str | Path, out: str | Path, *, layout: str | Path,
             from None
     data = _Data(read_raw(recording), load_interfaces().typestore)
     instant, what = _instant(data, at)
-    cursor = (instant - data.start_ns) / NS
     fig = plt.figure(figsize=FIGSIZE, dpi=DPI)
-    for pid, (x, y, w, h) in mosaic(tree).items():
-        cfg = panels.get(pid, {})
-        kind = pid.split("!")[0]
-        # the panel's rectangle, less room for its axis labels and title
-        ax = fig.add_axes((x + 0.045 * min(w * 4, 1), 1 - y - h + 0.06 * min(h * 2.5, 1),
-                           w - 0.06 * min(w * 4, 1), h - 0.1 * min(h * 2.5, 1)))
-        ax.set_title(cfg.get("foxglovePanelTitle", kind), fontsize=9)
-        ax.tick_params(labelsize=7)
-        if kind == "3D":
-            _draw_scene(ax, data, cfg, instant, what)
-        elif kind == "Plot":
-            _draw_plot(ax, data, cfg, cursor)
-        elif kind == "StateTransitions":
-            width = max((float(c.get("followingViewWidth", 0)) for c in panels.values()
-                         if c.get("isSynced")), default=0.0)
-            axes = [ax]
-            if width and cfg.get("isSynced"):  # (room for the zoom below the whole)
-                box = ax.get_position()
-                ax.set_position((box.x0, box.y0 + 0.5 * box.height, box.width, 0.5 * box.height))
-                axes.append(fig.add_axes((box.x0, box.y0, box.width, 0.33 * box.height)))
-            _draw_transitions(axes, data, cfg, cursor, width)
-        else:
-            _note(ax, f"{kind} panel (not drawn here)")
-        ax.xaxis.label.set_fontsize(7)
-        ax.yaxis.label.set_fontsize(7)
+    try:
+        for pid, rect in mosaic(tree).items():
+            try:
+                _draw_panel(fig, rect, pid, panels, data, instant, what)
+            except (AttributeError, KeyError, IndexError, TypeError, ValueError) as exc:
+                raise LayoutError(f"{layout}: panel {pid!r}: cannot draw it "
+                                  f"({type(exc).__name__}: {exc})") from None
+    except BaseException:
+        plt.close(fig)
+        raise
     fig.text(0.995, 0.003, f"matplotlib rendering of {Path(layout).name} from "
              f"{Path(recording).name} (Foxglove itself draws the same panels)",
              ha="right", va="bottom", fontsize=7, color="0.4")

@@ -118,6 +118,14 @@ def test_bad_input_is_refused_in_one_line(recording, tmp_path, capsys):
     with pytest.raises(LayoutError) as err:
         draw_layout(path, tmp_path / "x.png", layout=not_layout)
     assert "not a Foxglove layout" in str(err.value) and "\n" not in str(err.value)
+    # a path to a field the message does not have: which panel, in one line
+    spec = json.loads(LAYOUT.read_text())
+    spec["configById"]["Plot!body"]["paths"][0]["value"] = "/biped/state.qq[2]"
+    bad_path = tmp_path / "bad_path.json"
+    bad_path.write_text(json.dumps(spec))
+    with pytest.raises(LayoutError, match=r"panel 'Plot!body': cannot draw it") as err:
+        draw_layout(path, tmp_path / "x.png", layout=bad_path)
+    assert "qq" in str(err.value) and "\n" not in str(err.value)
     with pytest.raises(BipedOptError):
         draw_layout(tmp_path / "missing.mcap", tmp_path / "x.png", layout=LAYOUT)
     assert not (tmp_path / "x.png").exists()
