@@ -363,6 +363,16 @@ def test_markers_have_the_tables_types_ids_and_closed_form_geometry(rec):
         marker = {ns.split("/", 1)[1]: mks[0] for ns, mks in by_ns.items()}
         for item, (kind, frame) in items.items():
             assert marker[item].type == kind and marker[item].header.frame_id == frame, item
+        for mk in m.markers:
+            # what RViz needs to draw a marker: ADD, a unit quaternion (an all-zero one is the
+            # classic invisible marker), a positive scale, kept until replaced (lifetime 0)
+            o = mk.pose.orientation
+            assert mk.action == 0 and abs(o.x**2 + o.y**2 + o.z**2 + o.w**2 - 1) <= TOL
+            assert mk.scale.x > 0 and (mk.lifetime.sec, mk.lifetime.nanosec) == (0, 0)
+            if mk.type != ARROW:  # (an arrow is transparent while its constraint is free)
+                assert mk.color.a > 0
+            if mk.type == ARROW:  # shaft diameter, head diameter wider than the shaft
+                assert 0 < mk.scale.x < mk.scale.y
         ground = marker["ground"]
         assert (ground.scale.x, ground.scale.y, ground.scale.z) == (20.0, 2.0, 0.01)
         assert ground.pose.position.z + ground.scale.z / 2 == 0.0  # its top is z = 0
