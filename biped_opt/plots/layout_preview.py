@@ -16,7 +16,7 @@ of its panels, in the mosaic's proportions, from a recording read with
 - ``StateTransitions``: every path as a band over time, a colour per value, the values named in
   a legend (by the message's constants where it defines them, as Foxglove labels them); below,
   the same bands over the window the synced plots follow (``followingViewWidth``), since a
-  sweep's thousands of changes are only seen zoomed in.
+  sweep's hundreds of changes are only seen zoomed in.
 
 Message paths are Foxglove's ``/topic.field[index].field``. A topic the recording lacks leaves its
 panel with a note. ``python -m biped_opt.plots.layout_preview RECORDING OUT.png --layout
@@ -445,7 +445,7 @@ def _draw_transitions(axes: Sequence[Any], data: _Data, cfg: dict[str, Any], cur
                        color=_value_colour(values[i]))
         labels.append(p.get("label") or p["value"])
         names.update({v: names.get(v, "") for v in set(values)})
-    # one colour per value, as Foxglove colours the bands; a sweep has thousands of changes, so
+    # one colour per value, as Foxglove colours the bands; a sweep has hundreds of changes, so
     # the values' names (the message's constants, as Foxglove labels them) go in a legend
     handles = [Patch(color=_value_colour(v), label=f"{names[v]} ({v})" if names[v] else str(v))
                for v in sorted(names)]
