@@ -188,8 +188,10 @@ def _read_entry(entry: Path | None) -> tuple[dict[str, Any], ModuleType] | None:
                 return None
         name = facts["module"]
         path = cache_dir() / f"{name}.py"
+        scene = facts["scene"]["module"]
         with _LOCK:
-            if name not in _LOADED and not path.is_file():
+            if name not in _LOADED and not path.is_file() or \
+                    scene not in _LOADED and not (cache_dir() / f"{scene}.py").is_file():
                 return None
             return facts, _import(name, path)
     except (OSError, ValueError, KeyError, TypeError):

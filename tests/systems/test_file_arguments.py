@@ -101,3 +101,20 @@ def test_editing_the_helper_module_misses_the_start_index(ball):
     out = subprocess.run([sys.executable, "-c", code, spec], capture_output=True, text=True,
                          check=True, timeout=300)
     assert out.stdout.strip() == "0.6"
+
+
+def test_a_deleted_scene_module_is_made_again(ball):
+    # the start index names the scene's module beside the simulator's; with that file gone a
+    # new process derives the description again instead of failing when it draws
+    spec = f"{ball}:height=2"
+    compiled = CompiledSystem(spec)
+    assert compiled.scene.contact_names == ("floor",)
+    scenes = list((ball.parent / "cache" / "systems").glob("ball_scene_*.py"))
+    assert len(scenes) == 1
+    scenes[0].unlink()
+    code = ("import sys; from biped_opt.simulation.compiled import CompiledSystem; "
+            "print(CompiledSystem(sys.argv[1]).scene.contact_names)")
+    out = subprocess.run([sys.executable, "-c", code, spec], capture_output=True, text=True,
+                         check=True, timeout=300)
+    assert out.stdout.strip() == "('floor',)"
+    assert scenes[0].is_file()
