@@ -320,3 +320,21 @@ def test_simulator_in_a_subprocess_exits_cleanly_on_sigterm(domain_id):
               "/clock, /tf, /biped/markers, /robot_description")
     finally:
         proc.kill()
+
+
+def test_the_simulated_clock_runs_on_across_runs(graph, probe):
+    # ROS.md Sec. 6: each run starts where the previous one ended on the simulated clock, so
+    # stamps never go back; a run's samples are stamped start + t to the nanosecond
+    ends = []
+    for th in (0.1, -0.05, 0.1):
+        reply = call(probe, ros.srvs.Simulate, "/biped/simulate", maneuver="touchdown",
+                     theta0=th, inputs=[2.0, 0.5, 0.0], real_time_factor=0.0)
+        assert reply.success
+        stamps = [s.header.stamp.sec * NS + s.header.stamp.nanosec for s in reply.states]
+        start = stamps[0] - round(reply.states[0].t * NS)
+        assert all(abs(ns - start - round(s.t * NS)) <= 1 for ns, s in zip(stamps, reply.states))
+        if ends:
+            assert start >= ends[-1]  # (not before the previous run's end)
+            assert start - ends[-1] <= 1
+        ends.append(start + round(reply.t_final * NS))
+    assert ends[0] < ends[1] < ends[2]

@@ -39,9 +39,16 @@ BALL = textwrap.dedent('''
 ''')
 
 
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    """One cache for the module's tests: the ball's kernel is compiled once (the module's text
+    is the same in every test's folder)."""
+    return tmp_path_factory.mktemp("cache")
+
+
 @pytest.fixture
-def ball(tmp_path, monkeypatch):
-    monkeypatch.setenv("BIPED_OPT_CACHE", str(tmp_path / "cache"))
+def ball(tmp_path, monkeypatch, cache):
+    monkeypatch.setenv("BIPED_OPT_CACHE", str(cache))
     (tmp_path / "ball.py").write_text(BALL)
     (tmp_path / "restitution.py").write_text("GAMMA = 0.5\n")
     return tmp_path / "ball.py"
@@ -103,13 +110,13 @@ def test_editing_the_helper_module_misses_the_start_index(ball):
     assert out.stdout.strip() == "0.6"
 
 
-def test_a_deleted_scene_module_is_made_again(ball):
+def test_a_deleted_scene_module_is_made_again(ball, cache):
     # the start index names the scene's module beside the simulator's; with that file gone a
     # new process derives the description again instead of failing when it draws
     spec = f"{ball}:height=2"
     compiled = CompiledSystem(spec)
     assert compiled.scene.contact_names == ("floor",)
-    scenes = list((ball.parent / "cache" / "systems").glob("ball_scene_*.py"))
+    scenes = list((cache / "systems").glob("ball_scene_*.py"))
     assert len(scenes) == 1
     scenes[0].unlink()
     code = ("import sys; from biped_opt.simulation.compiled import CompiledSystem; "
