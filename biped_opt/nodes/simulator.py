@@ -227,7 +227,9 @@ class SimulatorNode(ros.Node):
     def start(
         self, maneuver: str, theta0: float, inputs: Any, real_time_factor: float,
         publish_now: bool = True,
-    ) -> Any:
+    ) -> tuple[Any, list[Any]]:
+        """Simulate a request and play it from the simulated clock's current time: the
+        trajectory and its state messages as stamped."""
         if not (convert.finite(real_time_factor) and real_time_factor >= 0):
             raise InvalidInputError(
                 f"real_time_factor must be >= 0 (0: as fast as possible), got {real_time_factor}"
@@ -261,7 +263,7 @@ class SimulatorNode(ros.Node):
             self._playback = playback
         if publish_now:
             self._on_tick()
-        return tr
+        return tr, states
 
     def _on_tick(self) -> None:
         again = None
@@ -293,25 +295,23 @@ class SimulatorNode(ros.Node):
     # -- service --------------------------------------------------------------------------
     def _on_simulate(self, request: Any, response: Any) -> Any:
         try:
-            tr = self.start(request.maneuver, request.theta0, request.inputs,
-                            request.real_time_factor)
+            # (the states as stamped: the reply carries what the topic carried)
+            tr, states = self.start(request.maneuver, request.theta0, request.inputs,
+                                    request.real_time_factor)
         except Exception as exc:  # bad request, or a bug: one refused request either way
             return refuse(self, "/biped/simulate", response, exc)
-        with self._lock:
-            states = list(self._playback.states) if self._playback else None
         if self.system is not None:
             response.success = tr.success
             response.message = "" if tr.success else \
                 f"simulation ended with status {tr.status.name}"
             response.contact_modes = [int(m) for m in tr.modes]
-            response.system_states = states if states is not None else \
-                convert.system_state_messages(tr, len(self.system.coordinates), 0)
+            response.system_states = states
         else:
             response.success = tr.success
             response.message = tr.message
             response.mode_sequence = [int(m) for m in tr.mode_sequence]
             response.contact_modes = list(response.mode_sequence)
-            response.states = states if states is not None else convert.state_messages(tr, 0)
+            response.states = states
         response.outcome = tr.outcome
         response.t_final = tr.t_final
         response.event_times = [float(t) for t in tr.event_times]
