@@ -94,7 +94,7 @@ class ServiceDirectory:
         """``[(name, [type, ...]), ...]`` sorted by name, as rclpy's
         ``Node.get_service_names_and_types``."""
         found: dict[str, set[str]] = {}
-        for sample in self._reader.read(N=1_000_000, condition=self._alive):
+        for sample in _read_off_main_thread(self._reader, self._alive):
             topic, type_name = sample.topic_name, sample.type_name
             if not (topic.startswith("rq/") and topic.endswith("Request")
                     and type_name.endswith("_Request_") and "::dds_::" in type_name):
