@@ -102,10 +102,26 @@ def _normaliser(system: System) -> Callable[[Any], Any]:
     by_name = {str(sym): sym for sym in (*system.q, *system.dq, *system.p, *system.u, system.s)}
     coords = dict(zip((str(c) for c in system.q), zip(system.q, system.dq)))
 
+    # the forces of 2^n modes repeat most entries (a leg's force where its input does not act):
+    # each distinct expression is rewritten once (equal expressions have equal rewrites)
+    memo: dict[Any, Any] = {}
+
     def normalise(expr: Any) -> Any:
         expr = sp.sympify(expr)
         if isinstance(expr, sp.MatrixBase):
             return expr.applyfunc(normalise)
+        try:
+            return memo[expr]
+        except (KeyError, TypeError):
+            pass
+        out = _rewrite(expr)
+        try:
+            memo[expr] = out
+        except TypeError:  # (an unhashable expression: not remembered)
+            pass
+        return out
+
+    def _rewrite(expr: Any) -> Any:
         subs: dict[Any, Any] = {}
         for d in expr.atoms(sp.Derivative):
             f = d.expr
@@ -136,8 +152,18 @@ def derive(system: System) -> DerivedSystem:
     config = set(system.q) | params
     state = config | set(system.dq) | inputs
 
+    used: dict[Any, set[sp.Symbol]] = {}  # free symbols of each distinct entry, found once
+
+    def free(expr: Any) -> set[sp.Symbol]:
+        expr = sp.sympify(expr)
+        if isinstance(expr, sp.MatrixBase):
+            return set().union(*(free(e) for e in expr))
+        if expr not in used:
+            used[expr] = expr.free_symbols
+        return used[expr]
+
     def check_symbols(item: str, expr: Any, allowed: set[sp.Symbol], what: str) -> None:
-        unknown = sorted(str(s) for s in sp.sympify(expr).free_symbols - allowed)
+        unknown = sorted(str(s) for s in free(expr) - allowed)
         if unknown:
             raise SystemDescriptionError(
                 f"{where}: {item}: uses {', '.join(unknown)}, which is not {what}")
