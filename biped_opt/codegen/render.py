@@ -375,10 +375,17 @@ def _gated(variants: dict[sp.Expr, list[int]], gates: dict[tuple[int, ...], sp.S
     whole = extra.pop(base, sp.S.Zero)  # terms added to the entry itself (a body torque)
     merged = base.xreplace({node: sp.Add(node, terms) for node, terms in extra.items()})
     merged = sp.Add(merged, whole)
-    for expr, masks in ordered:  # each mode's variant comes back exactly
+    # each mode's variant comes back exactly; the substitution depends only on the gates the
+    # merged entry holds, so each of their 0/1 patterns is substituted once (not once per mode)
+    present = [(key, g) for key, g in gates.items() if merged.has(g)]
+    back: dict[tuple[bool, ...], sp.Expr] = {}
+    for expr, masks in ordered:
         for mask in masks:
-            values = {g: sp.S.One if mask in key else sp.S.Zero for key, g in gates.items()}
-            if merged.xreplace(values) != expr:
+            pattern = tuple(mask in key for key, _g in present)
+            if pattern not in back:
+                back[pattern] = merged.xreplace(
+                    {g: sp.S.One if on else sp.S.Zero for (_k, g), on in zip(present, pattern)})
+            if back[pattern] != expr:
                 return None
     return merged
 
