@@ -181,9 +181,15 @@ def test_no_request_can_take_a_node_down(graph, probe, capfd, service, srv):
     assert "Traceback" not in err and "x" * 100 not in err
 
 
+@pytest.mark.alone  # (see the docstring)
 def test_eight_concurrent_clients_get_their_own_replies(graph, probe):
     """8 clients x 100 calls in flight together: every call is answered, once, with the answer
-    to its own request. No request is ever sent twice: a reply not there within 30 s is lost."""
+    to its own request. No request is ever sent twice: a reply not there within 30 s is lost.
+
+    Run alone: twice in clean-clone runs of the whole suite on two workers, and once in a
+    loaded local run, one client's first call went unanswered, with no reply dropped by the
+    service's wait for its reader (no warning logged); alone it has not failed. The cause is
+    not found; a failure now reports what the client still waits for."""
     angles = np.linspace(-0.2, 0.2, 9)
     expected = {}
     for th in angles:  # fill the cache, and know each angle's answer
@@ -203,7 +209,10 @@ def test_eight_concurrent_clients_get_their_own_replies(graph, probe):
             future = client.call_async(request)
             future.add_done_callback(lambda _f, done=done: done.set())
             if not done.wait(30.0):
-                errors.append(f"client {k} call {i}: no reply within 30 s")
+                with client._pending_lock:
+                    pending = sorted(client._pending)
+                errors.append(f"client {k} call {i}: no reply within 30 s (still pending: "
+                              f"{pending}, matched server: {client.service_is_ready()})")
                 return
             r = future.result()
             if (r.value, tuple(np.asarray(r.policy))) != expected[th]:
