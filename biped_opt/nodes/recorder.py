@@ -349,7 +349,6 @@ class RecorderNode(ros.Node):
                 or not convert.finite(rate) or rate < 0:
             raise InvalidParameterError(
                 f"scene_rate_hz must be a number >= 0 (0: every sample), got {rate!r}")
-        self._scene_rate = float(rate)
         try:
             compiled = compiled_with(spec)
             scene = compiled.scene
@@ -360,7 +359,8 @@ class RecorderNode(ros.Node):
         if scene.empty:
             return None
         return SceneMessages(load_interfaces().typestore, scene,
-                             list(compiled.parameters.values()), len(compiled.coordinates))
+                             list(compiled.parameters.values()), len(compiled.coordinates),
+                             float(rate))
 
     def _sweep(self, writer: SweepWriter, req: SweepRequest, grid: Any,
                record_point: Callable[[float, int], tuple[bool, float]],
@@ -427,8 +427,7 @@ class RecorderNode(ros.Node):
         )
         writer.write_states(maneuver=maneuver, theta0=th, samples=samples, stamp_offset_ns=offset)
         if scene is not None:
-            writer.write_scene(scene, samples=samples, stamp_offset_ns=offset,
-                               rate=self._scene_rate)
+            writer.write_scene(scene, samples=samples, stamp_offset_ns=offset)
         modes = [int(m) for m in np.asarray(reply.mode_sequence)]
         times = [0.0, *[float(t) for t in np.asarray(reply.event_times)]]
         for t, mode in zip(times, modes):
@@ -479,8 +478,7 @@ class RecorderNode(ros.Node):
         writer.write_system_states(maneuver=maneuver, s=s, samples=samples, ndof=ndof,
                                    stamp_offset_ns=offset)
         if scene is not None:
-            writer.write_scene(scene, samples=samples, stamp_offset_ns=offset,
-                               rate=self._scene_rate)
+            writer.write_scene(scene, samples=samples, stamp_offset_ns=offset)
         point = {
             "header": _header_fields(offset, writer.system["system"]), "maneuver": maneuver,
             "theta0": s, "optimal": req.optimal, "policy": policy, "value": value,

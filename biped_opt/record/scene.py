@@ -64,11 +64,13 @@ ARROW_SCALE = (0.015, 0.035, 0.04)  # shaft diameter, head diameter, head length
 
 class SceneMessages:
     """CDR of the scene topics for the samples of runs of one system (see the module
-    docstring); ``parameters``: the parameter values, in their declared order."""
+    docstring); ``parameters``: the parameter values, in their declared order; ``rate``: how
+    many samples per unit of simulation time are shown (:meth:`shown`; 0: every one)."""
 
     def __init__(self, typestore: Any, scene: Scene, parameters: npt.ArrayLike,
-                 ndof: int) -> None:
+                 ndof: int, rate: float = 0.0) -> None:
         self.typestore = typestore
+        self.rate = float(rate)
         self.scene = scene
         self.parameters = np.asarray(parameters, dtype=np.float64)
         self.ndof = int(ndof)
@@ -153,12 +155,12 @@ class SceneMessages:
             keep &= fresh
         return np.flatnonzero(keep)
 
-    def messages(self, samples: npt.NDArray[np.float64], stamp_offset_ns: int,
-                 rate: float = 0.0) -> tuple[npt.NDArray[np.int64], dict[str, list[bytes]]]:
+    def messages(self, samples: npt.NDArray[np.float64], stamp_offset_ns: int
+                 ) -> tuple[npt.NDArray[np.int64], dict[str, list[bytes]]]:
         """The stamps (``stamp_offset_ns`` + t) of the shown rows of ``samples``
-        (:meth:`shown` at ``rate``) and the CDR of ``/clock``, ``/tf`` and the markers at each
-        of them."""
-        rows = samples[self.shown(samples, rate)]
+        (:meth:`shown` at :attr:`rate`) and the CDR of ``/clock``, ``/tf`` and the markers at
+        each of them."""
+        rows = samples[self.shown(samples, self.rate)]
         d = self.ndof
         stamps = stamp_offset_ns + np.round(rows[:, 0] * NS).astype(np.int64)
         sec, nsec = stamps // NS, stamps % NS

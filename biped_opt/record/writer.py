@@ -374,12 +374,12 @@ class SweepWriter:
         return self._add_batch("/biped/system_state", layout.serialize(msgs), stamps)
 
     def write_scene(self, scene: SceneMessages, *, samples: npt.NDArray[np.float64],
-                    stamp_offset_ns: int, rate: float = 0.0) -> int:
+                    stamp_offset_ns: int) -> int:
         """``/clock``, ``/tf`` and the markers of one trajectory's samples (the columns of
         :meth:`write_system_states`), stamped ``stamp_offset_ns`` + t; the number of samples
-        shown (:meth:`SceneMessages.messages`, at ``rate`` per unit of simulation time; 0:
-        every sample). The topics must be among the recording's."""
-        stamps, out = scene.messages(samples, stamp_offset_ns, rate)
+        shown (:meth:`SceneMessages.messages`, at the scene's rate). The topics must be among
+        the recording's."""
+        stamps, out = scene.messages(samples, stamp_offset_ns)
         for topic, data in out.items():
             self._add_batch(topic, data, stamps)
         return len(stamps)
