@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 
 from biped_opt.cli.args import float_in_range, int_in_range
@@ -35,24 +34,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def func(args: argparse.Namespace) -> int:
+    from biped_opt.cli.signals import stop_requested
     from biped_opt.record.reader import read_raw
     from biped_opt.record.replay import Player
 
     raw = read_raw(args.file, topics=args.topics)
     player = Player(raw, rate=args.rate, loop=args.loop, topics=args.topics,
                     domain_id=args.domain_id, delay=args.delay)
-    span = raw.time_range_ns
-    seconds = (span[1] - span[0]) * 1e-9 if span else 0.0
-    print(f"replaying {raw.path}: {len(raw.messages)} messages on {len(player.topics)} topics, "
-          f"{seconds:.3f} s recorded, rate {args.rate:g}{', looping' if args.loop else ''}",
-          flush=True)
-    if not raw.complete:
-        print(f"note: {raw.note}", flush=True)
-    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
-    try:
+    # a signal at any moment from here on, while the player still sets up the graph too, stops
+    # the replay where the player looks: no KeyboardInterrupt inside DDS set-up
+    with stop_requested() as stop:
+        stop.defer(player.stop)
+        span = raw.time_range_ns
+        seconds = (span[1] - span[0]) * 1e-9 if span else 0.0
+        print(f"replaying {raw.path}: {len(raw.messages)} messages on {len(player.topics)} "
+              f"topics, {seconds:.3f} s recorded, rate {args.rate:g}"
+              f"{', looping' if args.loop else ''}", flush=True)
+        if not raw.complete:
+            print(f"note: {raw.note}", flush=True)
         stats = player.run()
-    finally:
-        signal.signal(signal.SIGTERM, previous)
     state = "stopped" if stats.interrupted else "finished"
     counts = ", ".join(f"{t} {n}" for t, n in stats.published.items())
     print(f"{state} after {stats.seconds:.2f} s, {stats.loops} complete pass(es): {counts}; "
