@@ -34,6 +34,9 @@ os.environ.pop("CYCLONEDDS_URI", None)
 
 # compiled system modules go to the checkout's own cache (a fresh clone compiles them afresh)
 os.environ.setdefault("BIPED_OPT_CACHE", str(Path(__file__).resolve().parents[1] / ".cache"))
+# no ahead-of-time kernels (biped_opt.codegen.aot) in the background of every compile and cached
+# start: each costs seconds of a core; tests/codegen/test_aot.py builds and checks them
+os.environ.setdefault("BIPED_OPT_AOT", "0")
 
 _DOMAIN_COUNTER = itertools.count()
 #: the 232 usable domain ids in blocks: each test process holds one block (an flock, released

@@ -26,7 +26,8 @@ import sys
 from pathlib import Path
 from types import ModuleType
 
-__all__ = ["SIGNATURES", "STEP_SIGNATURE", "signatures", "start", "step_first", "main"]
+__all__ = ["SIGNATURES", "STEP_SIGNATURE", "signatures", "start", "step_first", "load_module",
+           "main"]
 
 #: the kernel's calls, by callee: argument types in Numba's signature syntax (A: a C-contiguous
 #: float array, F: the interpolant's 2-D coefficients; i8 mode, code, guard index; f8 scalars)
@@ -84,7 +85,8 @@ def start(path: Path, module_name: str) -> subprocess.Popen | None:
         return None  # (no process to spare: the first one compiles everything itself)
 
 
-def _load(path: Path, module_name: str) -> ModuleType:
+def load_module(path: Path, module_name: str) -> ModuleType:
+    """Import the generated module at ``path`` as ``module_name`` (here, in a second process)."""
     # under the first process's name: Numba's cached code refers to its module by name
     spec = importlib.util.spec_from_file_location(module_name, path)
     assert spec is not None and spec.loader is not None
@@ -96,9 +98,15 @@ def _load(path: Path, module_name: str) -> ModuleType:
 
 def main(argv: list[str] | None = None) -> int:
     path, module_name = (sys.argv[1:] if argv is None else argv)[:2]
-    module = _load(Path(path), module_name)
+    module = load_module(Path(path), module_name)
     for fn, sig in signatures().items():
         getattr(module, fn).compile(sig)
+    # then the kernel ahead of time, for later starts (biped_opt.codegen.aot): after the event
+    # functions, which the first process waits for
+    from biped_opt.codegen import aot
+
+    if aot._compiler():
+        aot.build_once(module, Path(path).parent, Path(path).stem)
     return 0
 
 

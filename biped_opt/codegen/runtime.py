@@ -7,51 +7,14 @@ simulation layer (:mod:`biped_opt.simulation`) turns the codes into its result t
 
 from __future__ import annotations
 
-import enum
 import math
 
 import numba as nb
 
 from biped_opt._jit import HOT_PATH
+from biped_opt.codegen.status import EVENT_CONTACT, EVENT_TERMINAL, Status
 
 __all__ = ["EVENT_CONTACT", "EVENT_TERMINAL", "Status", "sincos"]
-
-
-#: kind of an event row: a contact event, or the terminal one (read by the compiled kernel)
-EVENT_CONTACT = 1
-EVENT_TERMINAL = 2
-
-
-class Status(enum.IntEnum):
-    """How a simulation ended (the codes the compiled kernel returns). Only ``OK`` is a
-    success."""
-
-    OK = 0
-    HORIZON = 1
-    MAX_EVENTS = 2
-    INCONSISTENT = 3
-    APEX_IN_CONTACT = 4
-    STEP_FAILURE = 5
-    CONSTRAINT_VIOLATED = 6
-
-    @property
-    def message(self) -> str:
-        return _STATUS_MESSAGES[self]
-
-
-_STATUS_MESSAGES = {
-    Status.OK: "the maneuver reached its terminal event",
-    Status.HORIZON: "the time horizon was reached before the terminal event",
-    Status.MAX_EVENTS: "the maximum number of contact events was reached",
-    Status.INCONSISTENT: "inconsistent contact: no contact mode satisfies the complementarity "
-    "conditions (in each, a foot in contact would need a negative reaction force or a released "
-    "one would accelerate into the ground), or a foot in the air went through the ground right "
-    "after it was released",
-    Status.APEX_IN_CONTACT: "the body reached its apex while a foot was still on the ground",
-    Status.STEP_FAILURE: "the integrator's step size underflowed or it took too many steps",
-    Status.CONSTRAINT_VIOLATED: "a constraint was found more than 1e-9 below its surface at an "
-    "event: the trajectory is not a solution",
-}
 
 
 # Taylor coefficients of sin and cos. On |x| <= pi/4 the first omitted terms (x^17/17!, x^18/18!)

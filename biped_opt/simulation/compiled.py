@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from biped_opt.codegen import precompile
+from biped_opt.codegen import aot, precompile
 from biped_opt.errors import InvalidInputError, InvalidParameterError
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
 from biped_opt.simulation.scene import Scene
@@ -95,6 +95,55 @@ def _import(name: str, path: Path) -> ModuleType:
         spec.loader.exec_module(module)
         _LOADED[name] = module
     return _LOADED[name]
+
+
+#: the generated module's constants a start from the index needs before (or without) the
+#: module itself: array layouts, the kernel's cfg indices, each maneuver's initial mode
+_AHEAD_CONSTANTS = ("NSTATE", "NCON", "SAMPLE_WIDTH", "EVENT_WIDTH", "INITIAL_MODE", "CFG_SIZE",
+                    "CFG_T_END", "CFG_MAX_EVENTS", "CFG_RTOL", "CFG_ATOL", "CFG_H_MAX",
+                    "CFG_SAMPLE_DT", "CFG_TOUCHED_DOWN")
+
+
+def _constants(module: ModuleType) -> dict[str, Any]:
+    """:data:`_AHEAD_CONSTANTS` of a generated module, as JSON values."""
+    return {k: np.asarray(getattr(module, k)).tolist() for k in _AHEAD_CONSTANTS}
+
+
+def _prepare_source(text: str) -> str:
+    """The source of ``prepare_parameters`` in a generated module's text (plain Python of NumPy
+    and math, see render._Hoisted), up to the next top-level statement."""
+    start = text.index("\ndef prepare_parameters(") + 1
+    lines = text[start:].split("\n")
+    end = next(i for i, line in enumerate(lines[1:], 1) if line and not line[0].isspace())
+    return "\n".join(lines[:end])
+
+
+class _AheadModule:
+    """A generated module seen through its ahead-of-time kernel (:mod:`biped_opt.codegen.aot`):
+    the constants the index keeps, ``prepare_parameters`` read from the module's text, and
+    ``simulate_maneuver`` from the extension. Any other attribute imports the module itself
+    (and with it Numba) when first read."""
+
+    def __init__(self, name: str, path: Path, constants: Mapping[str, Any],
+                 extension: ModuleType) -> None:
+        self._name, self._path = name, path
+        for key, value in constants.items():
+            setattr(self, key, np.array(value, dtype=np.int64) if isinstance(value, list)
+                    else value)
+        self.FROM_S = np.empty(0)
+        self.simulate_maneuver = extension.simulate_maneuver
+        namespace: dict[str, Any] = {"np": np, "math": math}
+        exec(compile(_prepare_source(path.read_text()), str(path), "exec"), namespace)
+        self.prepare_parameters = namespace["prepare_parameters"]
+
+    def __getattr__(self, attr: str) -> Any:  # (only for what __init__ did not set)
+        if attr.startswith("__"):
+            raise AttributeError(attr)
+        with _LOCK:
+            module = _import(self._name, self._path)
+        value = getattr(module, attr)
+        setattr(self, attr, value)  # (found directly from now on)
+        return value
 
 
 def _scene_for(system: System) -> dict[str, Any]:
@@ -177,8 +226,11 @@ def _start_entry(spec: object) -> Path | None:
     return cache_dir() / "start" / f"{key}.json"
 
 
-def _read_entry(entry: Path | None) -> tuple[dict[str, Any], ModuleType] | None:
-    """The facts and the module an index entry names, if both are there."""
+def _read_entry(entry: Path | None, *, ahead: bool = False
+                ) -> tuple[dict[str, Any], ModuleType | _AheadModule] | None:
+    """The facts and the module an index entry names, if both are there. ``ahead``: the module
+    through its ahead-of-time kernel where that is built (else its build is started and the
+    module imported as usual)."""
     if entry is None:
         return None
     try:
@@ -193,6 +245,11 @@ def _read_entry(entry: Path | None) -> tuple[dict[str, Any], ModuleType] | None:
             if name not in _LOADED and not path.is_file() or \
                     scene not in _LOADED and not (cache_dir() / f"{scene}.py").is_file():
                 return None
+            if ahead and "constants" in facts:
+                extension = aot.load(cache_dir(), name)
+                if extension is not None:
+                    return facts, _AheadModule(name, path, facts["constants"], extension)
+                aot.start(path, _MODULE_PREFIX + name, name)
             return facts, _import(name, path)
     except (OSError, ValueError, KeyError, TypeError):
         return None  # absent or unreadable: derive and render instead
@@ -206,7 +263,7 @@ def _digest(path: Path) -> str | None:
         return None
 
 
-def kernel_config(module: ModuleType, options: SimulatorOptions, sample_dt: float = 0.0,
+def kernel_config(module: Any, options: SimulatorOptions, sample_dt: float = 0.0,
                   touched_down: bool = False) -> Array:
     """The ``cfg`` vector a generated module's kernel takes (layout: its CFG_* indices).
     ``touched_down``: the trajectory continues after a touchdown, so a terminal event armed
@@ -226,8 +283,11 @@ def kernel_config(module: ModuleType, options: SimulatorOptions, sample_dt: floa
 def cached_module(system: str | Path) -> ModuleType | None:
     """The compiled module of a library system or system file when the index names it (read
     without deriving anything), else None."""
-    found = _read_entry(_start_entry(system))
-    return None if found is None else found[1]
+    found = _read_entry(_start_entry(system))  # (ahead=False: the module itself)
+    if found is None:
+        return None
+    assert isinstance(found[1], ModuleType)
+    return found[1]
 
 
 def _write_entry(entry: Path, facts: dict[str, Any]) -> None:
@@ -246,8 +306,10 @@ class CompiledSystem:
         self._spec = system
         self._system: System | None = None
         self._derived: DerivedSystem | None = None
+        #: the generated module (or its ahead-of-time view, on a start from the index)
+        self.module: Any = None
         entry = _start_entry(system)
-        cached = _read_entry(entry)
+        cached = _read_entry(entry, ahead=True)
         if cached is None:
             facts = self._build(system)
             if entry is not None and _start_entry(system) == entry:  # (not edited meanwhile)
@@ -290,6 +352,7 @@ class CompiledSystem:
                             for m in derived.maneuvers.values()],
                 "ranges": [list(m.description.s_range) for m in derived.maneuvers.values()],
                 "coordinates": list(system.coordinate_names), "scene": _scene_for(system),
+                "constants": _constants(self.module),
                 "depends": [[str(p), _digest(p)] for p in system.reads[1:]]}
 
     @property

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from biped_opt.codegen.runtime import EVENT_TERMINAL, Status
+from biped_opt.codegen.status import EVENT_TERMINAL, Status
 
 __all__ = ["BatchResult", "Event", "Segment", "Status", "Trajectory", "constraint_names"]
 

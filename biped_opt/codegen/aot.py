@@ -1,0 +1,174 @@
+"""The kernel of a generated module compiled ahead of time, for starts without Numba.
+
+A cached start of a system (``biped-opt simulate --system NAME``) needs one call of the kernel,
+``simulate_maneuver``. Through Numba that call first sets up Numba's compiler and target
+(importing Numba and SciPy, ~1 s) only to load machine code from its cache. :func:`build` compiles
+the same function of the same generated module, with its callees, once more with ``numba.pycc``
+into a CPython extension beside the module (``<name>_aot<suffix>``); a later start imports that
+extension (a few milliseconds) and NumPy, and nothing of Numba.
+
+It is the same source compiled for the same arithmetic: no fast-math in either, so the two give
+bit-identical trajectories (``tests/codegen/test_aot.py`` checks it, at coincident events too).
+The extension targets the generic x86-64/AArch64 CPU, so a cache shared between machines stays
+safe to load. ``numba.pycc`` is marked "pending deprecation" since Numba 0.57 with no replacement
+yet; Numba is pinned, and without it (or without a C compiler) every start simply loads through
+Numba. Everything else of a system (batches, the variational equations, the derivatives)
+keeps using the Numba-compiled module.
+
+:func:`start` runs the build in a detached process: after a cold compile, and from a cached start
+that finds no extension (a cache from before, or a build that was interrupted). A lock file keeps
+it to one build per module. ``BIPED_OPT_AOT=0`` turns it off; then every start loads through
+Numba, as before. Run as ``python -m biped_opt.codegen.aot PATH MODULE_NAME NAME``.
+"""
+
+from __future__ import annotations
+
+import importlib.machinery
+import importlib.util
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+from types import ModuleType
+
+from biped_opt.codegen.precompile import load_module
+
+__all__ = ["SIGNATURE", "enabled", "extension_path", "load", "build", "build_once", "start",
+           "main"]
+
+#: ``simulate_maneuver``'s types: (status, t_f, mode_f, events, samples, nfev, steps, rejected,
+#: outcome) from (p, code, s, u, cfg, samples, events, y_out, y0, mode0)
+SIGNATURE = ("Tuple((i8, f8, i8, i8, i8, i8, i8, i8, f8))(f8[::1], i8, f8, f8[::1], f8[::1], "
+             "f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], i8)")
+#: the exported function
+EXPORTED = "simulate_maneuver"
+#: a lock older than this belongs to a build that died [s]
+STALE_LOCK_S = 1800.0
+
+
+def enabled() -> bool:
+    return os.environ.get("BIPED_OPT_AOT", "1") != "0"
+
+
+def extension_path(folder: Path, name: str) -> Path:
+    """Where the extension of the generated module ``name`` lives."""
+    return folder / f"{name}_aot{importlib.machinery.EXTENSION_SUFFIXES[0]}"
+
+
+def load(folder: Path, name: str) -> ModuleType | None:
+    """The extension of module ``name``, or None when it is not there (or does not load)."""
+    path = extension_path(folder, name)
+    if not enabled() or not path.is_file():
+        return None
+    module_name = f"{name}_aot"
+    if module_name in sys.modules:
+        return sys.modules[module_name]
+    spec = importlib.util.spec_from_file_location(module_name, path)
+    if spec is None or spec.loader is None:
+        return None
+    try:
+        module = importlib.util.module_from_spec(spec)  # (an extension loads here)
+        spec.loader.exec_module(module)
+    except ImportError:
+        return None  # (a broken file: the caller loads through Numba)
+    if not callable(getattr(module, EXPORTED, None)):
+        return None
+    sys.modules[module_name] = module
+    return module
+
+
+def build(module: ModuleType, folder: Path, name: str) -> Path:
+    """Compile ``module.simulate_maneuver`` (with its callees) into the extension of ``name``
+    in ``folder``: built in a temporary directory, then renamed into place."""
+    with warnings.catch_warnings():  # (pycc is "pending deprecation": see the module doc)
+        warnings.simplefilter("ignore")
+        from numba.pycc import CC
+
+    target = extension_path(folder, name)
+    with tempfile.TemporaryDirectory(dir=folder, prefix=f".{name}_aot.") as work:
+        cc = CC(f"{name}_aot")
+        cc.output_dir = work
+        cc.verbose = False
+        cc.export(EXPORTED, SIGNATURE)(getattr(module, EXPORTED).py_func)
+        cc.compile()
+        made = Path(work) / target.name
+        os.replace(made, target)
+    return target
+
+
+def _compiler() -> bool:
+    """A C compiler to link the extension with (numba.pycc calls the platform's)."""
+    return shutil.which("cc") is not None or shutil.which("gcc") is not None
+
+
+def _lock(folder: Path, name: str) -> Path:
+    return folder / f".{name}_aot.lock"
+
+
+def _take_lock(lock: Path) -> bool:
+    """Create ``lock`` (False when a live build holds it)."""
+    for _attempt in range(2):
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600)
+        except FileExistsError:
+            try:
+                if time.time() - lock.stat().st_mtime < STALE_LOCK_S:
+                    return False
+                lock.unlink()  # (a build that died long ago)
+            except FileNotFoundError:
+                pass
+            continue
+        os.close(fd)
+        return True
+    return False
+
+
+def start(path: Path, module_name: str, name: str) -> subprocess.Popen | None:
+    """Build the extension of the module at ``path`` (imported as ``module_name``) in a detached
+    process, unless it exists, a build is under way, or builds are off."""
+    folder = path.parent
+    if not enabled() or extension_path(folder, name).is_file() or not _compiler():
+        return None
+    lock = _lock(folder, name)
+    if not _take_lock(lock):
+        return None
+    try:
+        return subprocess.Popen(
+            [sys.executable, "-m", "biped_opt.codegen.aot", str(path), module_name, name],
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            start_new_session=True)
+    except OSError:
+        lock.unlink(missing_ok=True)
+        return None
+
+
+def build_once(module: ModuleType, folder: Path, name: str) -> Path | None:
+    """:func:`build` unless it is off, done, or under way in another process (the lock)."""
+    if not enabled() or extension_path(folder, name).is_file():
+        return None
+    lock = _lock(folder, name)
+    if not _take_lock(lock):
+        return None
+    try:
+        return build(module, folder, name)
+    finally:
+        lock.unlink(missing_ok=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    path_text, module_name, name = (sys.argv[1:] if argv is None else argv)[:3]
+    path = Path(path_text)
+    lock = _lock(path.parent, name)  # (taken by start())
+    try:
+        build(load_module(path, module_name), path.parent, name)
+    finally:
+        lock.unlink(missing_ok=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,149 @@
+"""The kernel compiled ahead of time (biped_opt/codegen/aot.py): the same trajectories, bit for
+bit, as the Numba-compiled module, and a cached start that imports neither Numba, SymPy nor
+SciPy."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from biped_opt.codegen import aot
+from biped_opt.simulation.compiled import (
+    _MODULE_PREFIX,
+    CompiledSystem,
+    _AheadModule,
+    cache_dir,
+    cached_module,
+    kernel_config,
+)
+
+ROOT = Path(__file__).resolve().parents[2]
+
+# (system, maneuver, inputs, s values): each maneuver's coincidence of events at s = 0 (both
+# feet, or both ends of the bar, at once) and 1e-9 on either side (the bar's ends then land
+# within the simulator's 1e-9 s of each other: one simultaneous event), 1e-8 on either side for
+# the bar (two events, in either order: the outcome flips), plus ordinary values
+CASES = [
+    ("rocking_bar", "drop", None, [-0.1, -1e-8, -1e-9, 0.0, 1e-9, 1e-8, 0.05]),
+    ("biped", "touchdown", (0.1, -0.2, 0.05), [-0.2, -1e-9, 0.0, 1e-9, 0.1]),
+    ("biped", "liftoff", (2.0, 1.5, 0.3), [-0.1, -1e-9, 0.0, 1e-9, 0.15]),
+]
+
+
+@pytest.fixture(scope="module")
+def built(request):
+    """The ahead-of-time extension of each system's module, built in this process (once per
+    module: later runs find it in the cache)."""
+    os.environ["BIPED_OPT_AOT"] = "1"
+    request.addfinalizer(lambda: os.environ.__setitem__("BIPED_OPT_AOT", "0"))
+    out = {}
+    for name in ("rocking_bar", "biped"):
+        c = CompiledSystem(name)
+        module = cached_module(name)  # (the module itself, not a view of it)
+        assert module is not None
+        stem = module.__name__[len(_MODULE_PREFIX):]
+        aot.build_once(module, cache_dir(), stem)
+        out[name] = (c, module, aot.load(cache_dir(), stem))
+        assert out[name][2] is not None
+    return out
+
+
+def _run(fn, c, module, code, s, u, sample_dt):
+    options = c.maneuver_options(c.maneuvers[code])
+    cfg = kernel_config(module, options, sample_dt)
+    samples = np.zeros((int(options.t_end / sample_dt) + 200, module.SAMPLE_WIDTH)) if sample_dt \
+        else np.empty((0, module.SAMPLE_WIDTH))
+    events = np.zeros((options.max_events + 1, module.EVENT_WIDTH))
+    y_out = np.zeros(module.NSTATE)
+    result = fn(c.prepared, code, s, u, cfg, samples, events, y_out, np.empty(0), 0)
+    return result, y_out, events[: result[3]], samples[: result[4]]
+
+
+@pytest.mark.parametrize("sample_dt", [0.0, 0.01])
+@pytest.mark.parametrize(("system", "maneuver", "inputs", "ss"), CASES)
+def test_same_trajectories_bit_for_bit(built, system, maneuver, inputs, ss, sample_dt):
+    # the same source, no fast-math in either compile: every event time, state, sample and
+    # counter must be equal exactly, not to a tolerance
+    c, module, extension = built[system]
+    code = c.code(maneuver)
+    u = c.input_vector(inputs)
+    outcomes = []
+    for s in ss:
+        jit = _run(module.simulate_maneuver, c, module, code, s, u, sample_dt)
+        ahead = _run(extension.simulate_maneuver, c, module, code, s, u, sample_dt)
+        assert ahead[0] == jit[0]
+        for a, b in zip(ahead[1:], jit[1:]):
+            np.testing.assert_array_equal(a, b)
+        assert jit[0][0] == 0  # (status OK: a real trajectory, not an early stop)
+        outcomes.append(jit[0][-1])
+    if system == "rocking_bar":  # the cases straddle the coincidence: the outcome flips sign
+        assert outcomes[1] * outcomes[5] < 0 and outcomes[2:5] == [0.0] * 3
+
+
+def test_a_start_from_the_index_uses_the_extension_and_loads_the_rest_on_demand(built):
+    c = CompiledSystem("rocking_bar")
+    assert isinstance(c.module, _AheadModule)
+    tr = c.simulate("drop", 0.05, sample_dt=0.01)
+    ref = built["rocking_bar"][0].simulate("drop", 0.05, sample_dt=0.01)
+    assert tr.outcome == ref.outcome and tr.status == ref.status
+    np.testing.assert_array_equal(tr.samples, ref.samples)
+    # what the extension does not have comes from the module itself: a batch, the sizes
+    batch = c.simulate_batch("drop", np.array([0.05, -0.05]))
+    np.testing.assert_array_equal(batch.outcome, [ref.outcome, -ref.outcome])
+    assert c.module.NDOF == 3
+
+
+_HEAVY = """
+import json, sys
+from biped_opt.cli.main import main
+status = main(sys.argv[1:])
+heavy = sorted(m for m in sys.modules if m.split(".")[0] in ("numba", "sympy", "scipy", "llvmlite"))
+print(json.dumps({"status": status, "heavy": heavy}))
+"""
+
+
+@pytest.mark.parametrize("args", [
+    ["simulate", "--system", "rocking_bar", "--maneuver", "drop", "--s", "0.05"],
+    ["simulate", "--maneuver", "touchdown", "--theta0", "1e-9", "--u1", "0.1"],
+])
+def test_a_cached_cli_start_imports_no_numba_sympy_or_scipy(built, args):
+    def run(ahead: str):
+        env = dict(os.environ, BIPED_OPT_AOT=ahead,
+                   PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+        done = subprocess.run([sys.executable, "-c", _HEAVY, *args], env=env, text=True,
+                              capture_output=True, timeout=300, check=False)
+        assert done.returncode == 0, done.stderr
+        return done.stdout.splitlines()
+
+    ahead, jit = run("1"), run("0")
+    report = json.loads(ahead[-1])
+    assert report == {"status": 0, "heavy": []}
+    assert "numba" in json.loads(jit[-1])["heavy"]  # (the check can fail: without, it loads)
+    assert ahead[:-1] == jit[:-1]  # the same printout, every digit
+
+
+def test_a_broken_extension_is_ignored(built, tmp_path, monkeypatch):
+    monkeypatch.setenv("BIPED_OPT_AOT", "1")
+    path = aot.extension_path(tmp_path, "nothing_0123")
+    path.write_bytes(b"not a shared object")
+    assert aot.load(tmp_path, "nothing_0123") is None
+    monkeypatch.setenv("BIPED_OPT_AOT", "0")
+    stem = built["rocking_bar"][1].__name__[len(_MODULE_PREFIX):]
+    assert aot.load(cache_dir(), stem) is None  # (turned off: not even a built one is used)
+
+
+def test_one_build_per_module_and_a_dead_builds_lock_expires(tmp_path):
+    lock = tmp_path / ".x_aot.lock"
+    assert aot._take_lock(lock)
+    assert not aot._take_lock(lock)  # a live build holds it
+    old = time.time() - aot.STALE_LOCK_S - 60
+    os.utime(lock, (old, old))
+    assert aot._take_lock(lock)  # its builder died long ago
+
