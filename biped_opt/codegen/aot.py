@@ -38,7 +38,7 @@ from types import ModuleType
 from biped_opt.codegen.precompile import load_module
 
 __all__ = ["SIGNATURE", "enabled", "extension_path", "load", "build", "build_once", "start",
-           "main"]
+           "wait_built", "main"]
 
 #: ``simulate_maneuver``'s types: (status, t_f, mode_f, events, samples, nfev, steps, rejected,
 #: outcome) from (p, code, s, u, cfg, samples, events, y_out, y0, mode0)
@@ -157,6 +157,17 @@ def build_once(module: ModuleType, folder: Path, name: str) -> Path | None:
         return build(module, folder, name)
     finally:
         lock.unlink(missing_ok=True)
+
+
+def wait_built(folder: Path, name: str, timeout: float) -> bool:
+    """Wait until the extension of ``name`` is there (True), no build of it is under way any
+    more, or ``timeout`` [s] has passed (False)."""
+    deadline = time.monotonic() + timeout
+    while not extension_path(folder, name).is_file():
+        if not _lock(folder, name).exists() or time.monotonic() >= deadline:
+            return extension_path(folder, name).is_file()
+        time.sleep(0.2)
+    return True
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -86,16 +86,6 @@ CFG_SIZE = 7
 FROM_S = np.empty(0)
 
 
-@nb.njit("void(f8[::1], i8, f8[::1], i8, f8[::1], f8[::1], i8, f8[::1], i8)", **HOT_PATH)
-def _field_at(p, mode, y, yo, u, out, off, lam, lo):
-    """The vector field as a call, for the paths outside the step (the start, events, samples,
-    the dense output's extra stages): each inlined copy of it costs compile time (~0.5 s for
-    the biped), a call only a few nanoseconds, and these run a few times per trajectory. The
-    explicit signature compiles it once: called with the literal offsets of the dense stages,
-    Numba would otherwise compile one specialisation per offset."""
-    vector_field(p, mode, y, yo, u, out, off, lam, lo)
-
-
 @nb.njit(**HOT_PATH)
 def _inverse_eighth_root(err):
     return 1.0 / math.sqrt(math.sqrt(math.sqrt(err)))

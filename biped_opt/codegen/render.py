@@ -1325,18 +1325,46 @@ def render(derived: DerivedSystem) -> str:
                          probe="probe_stage", nlam=max(n, 1), registers=True, nguards=n + 1,
                          probe_head="p, mode, u, term_sign", dense_rhs="_field_at")
     step = step[step.index("\nSTRIDE = ") + 1:]
-    expanded = {}
-    if inline_field:
-        # the vector field with its sines and cosines expanded (one pass over the small
-        # text), then expanded into the step
-        expanded["vector_field"] = _expand("\n".join(field_lines),
-                                           {"_sincos": _sincos_source()}, invariant=set(),
-                                           tag="s")
+    # the vector field with its sines and cosines expanded (one pass over its text): expanded
+    # further into the step's stages, or the body of the called field
+    field_text = _expand("\n".join(field_lines), {"_sincos": _sincos_source()},
+                         invariant=set(), tag="s")
+    expanded = {"vector_field": field_text} if inline_field else {}
     expanded["probe_stage"] = "\n".join(_prune(probe))
     step = _expand(step, expanded, invariant={"p", "u", "mode", "term_sign"})
     body = KERNEL_BODY.read_text()
     body = body[body.index("\n# --- kernel ---\n") + 1:]
-    return text + "\n\n" + step + "\n\n" + body
+    return (text + "\n\n" + step + "\n\n" + _field_at(None if inline_field else field_text)
+            + "\n\n" + body)
+
+
+#: the called vector field's types (its explicit signature: see :func:`_field_at`)
+FIELD_SIGNATURE = "void(f8[::1], i8, f8[::1], i8, f8[::1], f8[::1], i8, f8[::1], i8)"
+
+
+def _field_at(field_text: str | None) -> str:
+    """``_field_at``: the vector field as a call, for the paths outside the step (the start,
+    events, samples, the dense output's extra stages) and, for a field too large to write out,
+    for the step's stages too. A small field is inlined into it (by Numba: one copy); a large
+    one *is* its body (``field_text``: the field with its sines and cosines written out), since
+    Numba's inlining of a large function into a small one costs more than compiling the
+    function itself (a planar chain with d = 9: 11.8 of the 29.5 s this function took). The
+    explicit signature compiles it once: called with the literal offsets of the dense stages,
+    Numba would otherwise compile one specialisation per offset."""
+    head = [f'@nb.njit("{FIELD_SIGNATURE}", **HOT_PATH)',
+            "def _field_at(p, mode, y, yo, u, out, off, lam, lo):",
+            '    """The vector field as a call (biped_opt.codegen.render._field_at)."""']
+    if field_text is None:
+        return "\n".join([*head, "    vector_field(p, mode, y, yo, u, out, off, lam, lo)"]) + "\n"
+    tree = ast.parse(field_text)
+    fn = next(node for node in tree.body if isinstance(node, ast.FunctionDef))
+    statements = fn.body
+    if statements and isinstance(statements[0], ast.Expr) \
+            and isinstance(statements[0].value, ast.Constant):
+        statements = statements[1:]  # (the field's docstring)
+    lines = field_text.split("\n")
+    body = lines[statements[0].lineno - 1:fn.end_lineno]
+    return "\n".join([*head, *body]).rstrip() + "\n"
 
 
 def source_key(text: str) -> str:

@@ -49,7 +49,8 @@ def built(request):
         module = cached_module(name)  # (the module itself, not a view of it)
         assert module is not None
         stem = module.__name__[len(_MODULE_PREFIX):]
-        aot.build_once(module, cache_dir(), stem)
+        if aot.build_once(module, cache_dir(), stem) is None:  # (built, or being built by
+            aot.wait_built(cache_dir(), stem, 600.0)  # the compile's second process)
         out[name] = (c, module, aot.load(cache_dir(), stem))
         assert out[name][2] is not None
     return out
