@@ -1,4 +1,4 @@
-"""The systems that ship with biped_opt (SYSTEMS.md Secs. 2-3), each a short description."""
+"""The systems that ship with biped_opt (SYSTEMS.md Secs. 2-3a), each a short description."""
 
 from __future__ import annotations
 
