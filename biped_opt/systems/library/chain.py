@@ -33,9 +33,9 @@ __all__ = ["chain", "LINKS", "MAX_SEGMENTS", "chain_coordinates"]
 PARAMETERS = {"mb": 1.0, "ml": 0.5, "lb": 0.3, "leg": 0.5, "k": 20.0, "rest": 0.9, "g": 1.0}
 #: more links per leg: each leg's links from the hip outwards, (mass, length, spring, rest
 #: angle of the hinge at its inner end); link 1's are ml, leg, k, rest, link j's ml<j>, leg<j>,
-#: k<j>, rest<j>. Chosen so that the drop over its whole range ends with 1-4 impacts, never in a
-#: Zeno cascade of a foot, and the fastest mode in flight stays at 67, 97, 138 rad/s (one
-#: link: 45)
+#: k<j>, rest<j>. Chosen so that the drop ends after 1-4 impacts, never in a foot's Zeno
+#: cascade, at each s of a 17-point grid over its range (9 points for four links), and the
+#: fastest mode in flight stays at 67, 97, 138 rad/s (one link: 45)
 LINKS: dict[int, tuple[tuple[float, float, float, float], ...]] = {
     2: ((0.5, 0.35, 20.0, 0.9), (0.5, 0.35, 10.0, 0.2)),
     3: ((0.5, 0.25, 20.0, 0.9), (0.6, 0.25, 10.0, 0.2), (0.8, 0.2, 10.0, 0.2)),
@@ -56,6 +56,10 @@ def chain_coordinates(segments: int) -> list[str]:
     return ["x", "z", "th"] + [f"{JOINTS[j]}{i}" for j in range(segments) for i in (1, 2)]
 
 
+# (the parameters in the order of PARAMETERS, the further links' after them)
+_ORDER = {k: i for i, k in enumerate(PARAMETERS)}
+
+
 def _parameters(segments: int) -> dict[str, float]:
     if segments == 1:
         return dict(PARAMETERS)
@@ -65,10 +69,6 @@ def _parameters(segments: int) -> dict[str, float]:
         out.update({f"ml{tail}": mass, f"leg{tail}": length, f"k{tail}": spring,
                     f"rest{tail}": rest})
     return dict(sorted(out.items(), key=lambda kv: _ORDER.get(kv[0], len(_ORDER))))
-
-
-# (the parameters in the order of PARAMETERS, the further links' after them)
-_ORDER = {k: i for i, k in enumerate(PARAMETERS)}
 
 
 def chain(segments: int = 1, *, name: str | None = None) -> System:
