@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import sympy as sp
 
+from biped_opt.errors import InvalidInputError
 from biped_opt.simulation.compiled import compile_system
 from biped_opt.simulation.energy import DRIFT_TOLERANCE, energy_drift
 from biped_opt.systems import load_system
@@ -55,6 +56,16 @@ def test_bad_chain_sizes_are_refused():
             chain(segments)
     with pytest.raises(SystemDescriptionError, match=r"chain5\|7\|9\|11"):
         load_system("chain6")
+
+
+def test_nodes_take_the_chain_names():
+    """A request's system field: chainD is a library name like walkerN, an unknown one is
+    refused with the library's names listed."""
+    from biped_opt.nodes.sources import Sources
+
+    assert Sources().system("system", "chain9") == "chain9"
+    with pytest.raises(InvalidInputError, match=r"unknown system 'chain8'.*chain5\|7\|9\|11"):
+        Sources().system("system", "chain8")
 
 
 @pytest.mark.parametrize("segments", [1, 2, 3])
