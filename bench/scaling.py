@@ -10,17 +10,20 @@ For each system, in one run:
 - ``batch``: one ``simulate_batch`` of all cases, per case (best of ``--rounds``), timed the same
   way as the loop;
 - the SciPy comparator of the same system in the same run (``bench/system_reference.py`` with
-  ``bench/walker_model.py`` for the walkers; the chain's reference of the user-system suite),
+  ``bench/walker_model.py`` for the walkers; ``tests/simulation/user/reference_chain.py``, an
+  independent derivation of the chains' equations, for the chains),
   its per-trajectory time and its start (a new interpreter importing SciPy and the model and
   simulating once), and each figure above as a ratio to the comparator's (below 1: faster);
 - ``max |err|``: the largest outcome difference from the comparator over its cases.
 
 Systems: the walker with n = 2, 3, 4, 6, 8, 10 legs (d = 3 + 2n, a diagonal M, 2^n contact
-modes; ``--legs``) and the planar chain of ``tests/simulation/user/chain.py`` (d = 5, a dense
-configuration-dependent M). Cold compiles of the larger walkers take minutes; ``--legs 2 3 4``
-gives a quick table.
+modes; ``--legs``, none with a bare ``--legs``) and the library's planar chains ``chain5``,
+``chain7``, ``chain9``, ``chain11`` (d = 3 + 2 links per leg, a dense configuration-dependent M,
+two feet; ``--chains``, default 5; ``--no-chain`` leaves them out). Cold compiles of the larger
+walkers and chains take minutes; ``--legs 2 3 4`` gives a quick table.
 
-    python bench/scaling.py [--legs 2 3 4 6 8 10] [--no-chain] [--cases 20] [--json]
+    python bench/scaling.py [--legs 2 3 4 6 8 10] [--chains 5 7 9] [--no-chain] [--cases 20]
+                            [--json]
 """
 
 from __future__ import annotations
@@ -42,7 +45,8 @@ import numpy as np  # noqa: E402
 
 from bench.systems_bench import _best_times  # noqa: E402
 
-CHAIN = ROOT / "tests" / "simulation" / "user" / "chain.py"
+#: the library's chains by their number of coordinates
+CHAINS = (5, 7, 9, 11)
 
 _COLD = """
 import sys, time
@@ -64,7 +68,7 @@ if kind == "walker":
     system_reference.simulate(Walker(n, "coupled"), "touchdown", 0.01, [0.0] * (n + 1))
 else:
     from tests.simulation.user import reference_chain
-    reference_chain.simulate(reference_chain.Chain(), 0.01)
+    reference_chain.simulate(reference_chain.Chain(n), 0.01)
 print(time.perf_counter() - t0)
 """
 
@@ -152,7 +156,7 @@ def measure(spec: str, kind: str, n: int, *, cases: int, rounds: int,
     else:
         from tests.simulation.user import reference_chain
 
-        chain = reference_chain.Chain()
+        chain = reference_chain.Chain(n)
 
         def reference(s: float) -> float:
             return reference_chain.simulate(chain, s).outcome
@@ -162,7 +166,7 @@ def measure(spec: str, kind: str, n: int, *, cases: int, rounds: int,
     ref_start = _process_seconds([sys.executable, "-c", _REFERENCE_START, str(ROOT), kind,
                                   str(n)], dict(os.environ))
     per, ref = float(loop), float(np.median(ref_t))
-    return {"system": spec if kind == "walker" else "chain (user file)", "d": d,
+    return {"system": spec, "d": d,
             "modes": 2 ** len(compiled.constraints), "cold_s": cold, "cached_s": cached,
             "per_trajectory_s": per, "batch_per_trajectory_s": float(batch),
             "reference_per_trajectory_s": ref, "reference_start_s": ref_start,
@@ -193,7 +197,9 @@ def table(rows: list[dict[str, Any]]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--legs", type=int, nargs="+", default=[2, 3, 4, 6, 8, 10])
+    ap.add_argument("--legs", type=int, nargs="*", default=[2, 3, 4, 6, 8, 10])
+    ap.add_argument("--chains", type=int, nargs="*", default=[5], choices=CHAINS,
+                    metavar="D", help=f"chains by d ({', '.join(map(str, CHAINS))})")
     ap.add_argument("--no-chain", action="store_true")
     ap.add_argument("--cases", type=int, default=20)
     ap.add_argument("--rounds", type=int, default=3)
@@ -201,8 +207,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     plan = [(f"walker{n}", "walker", n) for n in args.legs]
-    if not args.no_chain:
-        plan.append((str(CHAIN), "chain", 0))
+    if not args.no_chain:  # (n: links per leg)
+        plan += [(f"chain{d}", "chain", (d - 3) // 2) for d in args.chains]
     rows = []
     for spec, kind, n in plan:
         rows.append(measure(spec, kind, n, cases=args.cases, rounds=args.rounds,

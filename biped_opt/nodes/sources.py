@@ -85,11 +85,11 @@ def name_of(source: str) -> str:
 
 
 def _in_library(name: str) -> bool:
-    """Whether ``name`` is a library system (``walkerN[_law]`` included)."""
-    from biped_opt.systems.files import WALKER
+    """Whether ``name`` is a library system (``walkerN[_law]`` and ``chainD`` included)."""
+    from biped_opt.systems.files import CHAIN, WALKER
     from biped_opt.systems.library import LIBRARY
 
-    return name in LIBRARY or WALKER.match(name) is not None
+    return name in LIBRARY or WALKER.match(name) is not None or CHAIN.match(name) is not None
 
 
 def _beside(text: str) -> bool:
@@ -197,6 +197,7 @@ class Sources:
     def system(self, field: str, text: str) -> str:
         """What :func:`biped_opt.control.problems.describe` loads for the system name ``text``:
         the library name itself or the absolute path of ``<dir>/<name>.py``."""
+        from biped_opt.systems.files import LIBRARY_PATTERNS
         from biped_opt.systems.library import LIBRARY
 
         name = check_name(field, text)
@@ -211,7 +212,7 @@ class Sources:
                  if self.system_paths else "and this node has no system_paths")
         raise InvalidInputError(
             f"{field}: unknown system {quoted(name)}: not a library system "
-            f"({', '.join(LIBRARY)}, walkerN[_coupled|_decoupled]) {where}")
+            f"({', '.join(LIBRARY)}, {LIBRARY_PATTERNS}) {where}")
 
     def problem_file(self, field: str, text: str) -> Path | None:
         """``<dir>/<name>.yaml`` (.yml, .py) of the problem name ``text``, or None."""

@@ -24,12 +24,16 @@ from typing import Any
 from biped_opt.errors import InvalidInputError, quoted
 from biped_opt.system_spec import FACTORY, parse_file_spec
 from biped_opt.systems.description import System, SystemDescriptionError
-from biped_opt.systems.library import LIBRARY, walker
+from biped_opt.systems.library import LIBRARY, chain, walker
 
-__all__ = ["load_system", "WALKER"]
+__all__ = ["load_system", "WALKER", "CHAIN", "LIBRARY_PATTERNS"]
 
 #: library names of walkers with n legs and an input law: walker4, walker3_decoupled
 WALKER = re.compile(r"^walker(?P<n>[1-9][0-9]?)(?:_(?P<law>coupled|decoupled))?$")
+#: library names of planar chains by their number of coordinates d = 3 + 2 segments: chain7
+CHAIN = re.compile(r"^chain(?P<d>5|7|9|11)$")
+#: the library's names beyond LIBRARY's, for messages
+LIBRARY_PATTERNS = "walkerN[_coupled|_decoupled], chain5|7|9|11"
 
 
 def load_system(spec: str | Path | System) -> System:
@@ -42,6 +46,9 @@ def load_system(spec: str | Path | System) -> System:
     match = WALKER.match(text)
     if match:
         return walker(int(match["n"]), match["law"] or "coupled")
+    match = CHAIN.match(text)
+    if match:
+        return chain((int(match["d"]) - 3) // 2)
     try:
         file = parse_file_spec(text)
     except InvalidInputError as exc:
@@ -49,7 +56,7 @@ def load_system(spec: str | Path | System) -> System:
     if file is None:
         raise SystemDescriptionError(
             f"unknown system {quoted(text)}: neither a library system "
-            f"({', '.join(LIBRARY)}, walkerN[_coupled|_decoupled]) nor a .py file")
+            f"({', '.join(LIBRARY)}, {LIBRARY_PATTERNS}) nor a .py file")
     path = file.path
     if not path.is_file():
         raise SystemDescriptionError(f"{path}: no such system file")
