@@ -35,10 +35,8 @@ import warnings
 from pathlib import Path
 from types import ModuleType
 
-from biped_opt.codegen.precompile import load_module
-
 __all__ = ["SIGNATURE", "enabled", "extension_path", "load", "build", "build_once", "start",
-           "wait_built", "main"]
+           "wait_built", "load_module", "main"]
 
 #: ``simulate_maneuver``'s types: (status, t_f, mode_f, events, samples, nfev, steps, rejected,
 #: outcome) from (p, code, s, u, cfg, samples, events, y_out, y0, mode0)
@@ -144,6 +142,17 @@ def start(path: Path, module_name: str, name: str) -> subprocess.Popen | None:
     except OSError:
         lock.unlink(missing_ok=True)
         return None
+
+
+def load_module(path: Path, module_name: str) -> ModuleType:
+    """Import the generated module at ``path`` as ``module_name`` (in a second process)."""
+    # under the first process's name: Numba's cached code refers to its module by name
+    spec = importlib.util.spec_from_file_location(module_name, path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[module_name] = module
+    spec.loader.exec_module(module)
+    return module
 
 
 def build_once(module: ModuleType, folder: Path, name: str) -> Path | None:

@@ -19,15 +19,16 @@ Run as ``python -m biped_opt.codegen.precompile PATH MODULE_NAME``.
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import subprocess
 import sys
 from pathlib import Path
 from types import ModuleType
 
-__all__ = ["SIGNATURES", "STEP_SIGNATURE", "signatures", "start", "step_first", "load_module",
-           "main"]
+from biped_opt.codegen import aot
+from biped_opt.codegen.aot import load_module
+
+__all__ = ["SIGNATURES", "STEP_SIGNATURE", "signatures", "start", "step_first", "main"]
 
 #: the kernel's calls, by callee: argument types in Numba's signature syntax (A: a C-contiguous
 #: float array, F: the interpolant's 2-D coefficients; i8 mode, code, guard index; f8 scalars)
@@ -85,17 +86,6 @@ def start(path: Path, module_name: str) -> subprocess.Popen | None:
         return None  # (no process to spare: the first one compiles everything itself)
 
 
-def load_module(path: Path, module_name: str) -> ModuleType:
-    """Import the generated module at ``path`` as ``module_name`` (here, in a second process)."""
-    # under the first process's name: Numba's cached code refers to its module by name
-    spec = importlib.util.spec_from_file_location(module_name, path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[module_name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 def main(argv: list[str] | None = None) -> int:
     path, module_name = (sys.argv[1:] if argv is None else argv)[:2]
     module = load_module(Path(path), module_name)
@@ -103,8 +93,6 @@ def main(argv: list[str] | None = None) -> int:
         getattr(module, fn).compile(sig)
     # then the kernel ahead of time, for later starts (biped_opt.codegen.aot): after the event
     # functions, which the first process waits for
-    from biped_opt.codegen import aot
-
     if aot._compiler():
         aot.build_once(module, Path(path).parent, Path(path).stem)
     return 0
