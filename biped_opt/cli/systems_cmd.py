@@ -85,5 +85,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"{r['name']:<18} {r['d']:>2} {r['n']:>2}  {', '.join(r['inputs']):<22} "
               f"{maneuvers}")
     print("\nwalkerN[_coupled|_decoupled] gives the walker with N legs (walker: 3, coupled); "
+          "chain5|7|9|11 the planar chain with that many coordinates (chain: 5); "
           "a path to a .py file gives your own system (README: Your own system).")
     return 0
