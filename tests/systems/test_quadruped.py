@@ -33,19 +33,25 @@ def description():
 
 
 @cache
-def numeric():
-    """The description's M, forces, feet heights and energy as NumPy functions of
-    (q, q'), at the default parameters (lambdified with common subexpressions)."""
+def evaluator():
+    """The description's M, forces (no foot in contact), feet heights, their Jacobian and the
+    energy at (q, q') and the default parameters: one NumPy function with their common
+    subexpressions shared (the energy's kinetic part reuses M's)."""
     s = description()
     values = {sym: s.defaults[str(sym)] for sym in s.p}
-    args = [list(s.q), list(s.dq)]
-
-    def fn(expr):
-        return sp.lambdify(args, sp.Matrix(expr).xreplace(values), "numpy", cse=True)
-
     feet = sp.Matrix(list(s.constraints.values()))
-    return (fn(s.mass_matrix), fn(s.forces(frozenset())), fn(feet),
-            fn(feet.jacobian(sp.Matrix(s.q))), fn(sp.Matrix([s.energy])))
+    items = [s.mass_matrix, sp.Matrix(s.forces(frozenset())), feet,
+             feet.jacobian(sp.Matrix(s.q)), sp.Matrix([s.energy])]
+    return sp.lambdify([list(s.q), list(s.dq)], [m.xreplace(values) for m in items], "numpy",
+                       cse=True)
+
+
+def evaluate(q, dq):
+    """(M, forces, feet, Da, energy) of the description at (q, q'), as float arrays."""
+    M, f, feet, Da, energy = evaluator()(q, dq)
+    return (np.array(M, dtype=float), np.array(f, dtype=float).ravel(),
+            np.array(feet, dtype=float).ravel(), np.array(Da, dtype=float),
+            float(np.array(energy, dtype=float).ravel()[0]))
 
 
 def states(count):
@@ -70,10 +76,9 @@ def test_mass_matrix_is_symmetric_positive_definite_and_the_reference_s():
     largest entry: both evaluate the same numbers in different orders)."""
     s = description()
     assert (s.mass_matrix - s.mass_matrix.T).is_zero_matrix
-    mass = numeric()[0]
     ref = reference.Quadruped()
     for q, _dq in states(4):
-        M = np.array(mass(q, np.zeros(D)), dtype=float)
+        M = evaluate(q, np.zeros(D))[0]
         expected = ref.mass(q)
         assert np.linalg.eigvalsh(M).min() > 1e-4  # the lightest rod's inertia is ~1e-3
         np.testing.assert_allclose(M, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
@@ -83,34 +88,29 @@ def test_forces_are_the_reference_s():
     """Kane's forcing plus the hinges' springs equals the reference's gravity, springs and
     Newton-Euler velocity products at random states (velocity products are O(|q'|^2) ~ 10,
     the tolerance 1e-10 of the largest force)."""
-    forces = numeric()[1]
     ref = reference.Quadruped()
     for q, dq in states(4):
-        f = np.array(forces(q, dq), dtype=float).ravel()
+        f = evaluate(q, dq)[1]
         expected = ref.dynamics(np.concatenate([q, dq]))[1]
         np.testing.assert_allclose(f, expected, rtol=0, atol=1e-10 * np.abs(expected).max())
 
 
 def test_feet_and_their_jacobian_are_the_reference_s():
-    _m, _f, feet, jacobian, _e = numeric()
     ref = reference.Quadruped()
     for q, dq in states(3):
         _M, _F, heights, Da, _rate = ref.dynamics(np.concatenate([q, dq]))
-        np.testing.assert_allclose(np.array(feet(q, dq), dtype=float).ravel(), heights,
-                                   rtol=0, atol=1e-14)
-        np.testing.assert_allclose(np.array(jacobian(q, dq), dtype=float), Da, rtol=0,
-                                   atol=1e-14)
+        _m, _f, feet, jacobian, _e = evaluate(q, dq)
+        np.testing.assert_allclose(feet, heights, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(jacobian, Da, rtol=0, atol=1e-14)
 
 
 def test_energy_is_kinetic_from_m_plus_the_reference_s_potential():
     """The declared energy is q'^T M q' / 2 plus a potential of q alone (so it is consistent
     with M), and equals the reference's energy."""
-    mass, _f, _feet, _da, energy = numeric()
     ref = reference.Quadruped()
     for q, dq in states(3):
-        E = float(np.array(energy(q, dq)).ravel()[0])
-        M = np.array(mass(q, dq), dtype=float)
-        at_rest = float(np.array(energy(q, np.zeros(D))).ravel()[0])
+        M, _f, _feet, _da, E = evaluate(q, dq)
+        at_rest = evaluate(q, np.zeros(D))[4]
         assert E == pytest.approx(at_rest + dq @ M @ dq / 2, rel=1e-13, abs=1e-13)
         assert E == pytest.approx(ref.energy(np.concatenate([q, dq])), rel=1e-12)
 
@@ -129,7 +129,7 @@ def test_the_reference_conserves_energy_and_falls_rigidly():
                     rtol=reference.RTOL, atol=reference.ATOL)
     assert abs(ref.energy(sol.y[:, -1]) - ref.energy(y)) < 1e-10 * ref.energy(y)
     level = reference.simulate(ref, 0.0, max_events=1)
-    t, down, _up = level.events[0]
+    t, down, _up, _after = level.events[0]
     assert sorted(down) == [0, 1, 2, 3]
     assert t == pytest.approx(math.sqrt(2 * PARAMETERS["drop"] / PARAMETERS["g"]), abs=1e-12)
 
@@ -154,13 +154,35 @@ def compiled():
     return CompiledSystem("quadruped")
 
 
+#: a foot this slow (m/s) at an event is at rest on the ground to rounding
+GRAZING = 1e-9
+
+
 def assert_agrees(tr, ref, where):
-    """Same status, the same touchdowns and liftoffs in the same order, event times and the
-    outcome within TOL."""
+    """Same status, the same touchdowns and liftoffs in the same order with the same modes after
+    them, event times and the outcome within TOL.
+
+    A foot that lifted off a little above the ground (the feet of a merged impact land within
+    the 1e-9 band, not at 0) hovers there at rest to rounding; when the next event comes, the
+    sign of its rounding-level rate decides whether it joins the event as a touchdown, is
+    released at once and changes nothing. Such grazing touchdowns (rate below GRAZING, the foot
+    not in the mode after) are left out on both sides."""
     assert tr.status.name == ref.status, f"{where}: {tr.status.name} vs {ref.status}"
-    ours = [(frozenset(j for j in range(4) if e.mask_entered >> j & 1),
-             frozenset(j for j in range(4) if e.mask_left >> j & 1)) for e in tr.contact_events]
-    theirs = [(down, up) for _t, down, up in ref.events]
+    robot = reference.Quadruped()
+
+    def feet(mask):
+        return frozenset(j for j in range(4) if mask >> j & 1)
+
+    def landed(down, after, state):
+        rates = robot.dynamics(state)[3] @ state[D:]
+        return frozenset(j for j in down if j in after or abs(rates[j]) > GRAZING)
+
+    ours = [(landed(feet(e.mask_entered), feet(e.mask_after), e.state_before),
+             feet(e.mask_left), feet(e.mask_after)) for e in tr.contact_events]
+    theirs = [(landed(down, after, e.state_before), up, after)
+              for (_t, down, up, after), e in zip(ref.events, tr.contact_events)]
+    assert len(ref.events) == len(tr.contact_events), f"{where}: {len(tr.contact_events)} " \
+        f"events, reference {len(ref.events)}"
     assert ours == theirs, f"{where}: events {ours}, reference {theirs}"
     np.testing.assert_allclose([e.t for e in tr.contact_events], ref.times, rtol=0, atol=TOL,
                                err_msg=where)
@@ -206,5 +228,5 @@ def test_four_feet_land_together_at_th0_zero():
     for th0 in (-1e-6, 1e-6):
         split = reference.simulate(ref, th0)
         assert_agrees(compiled().simulate("drop", th0), split, f"th0 = {th0}")
-        orders.append([sorted(down) for _t, down, _up in split.events if down])
+        orders.append([sorted(down) for _t, down, *_rest in split.events if down])
     assert orders[0][0] != orders[1][0]

@@ -236,8 +236,11 @@ class Outcome:
     t_final: float
     y_final: np.ndarray
     outcome: float
-    #: (time, feet that touched down, feet that lifted off)
-    events: list[tuple[float, frozenset[int], frozenset[int]]] = field(default_factory=list)
+    #: (time, feet that touched down, feet that lifted off, the mode after the event: a foot
+    #: that lands while complementarity lets it leave at once is among the first, not in the
+    #: last)
+    events: list[tuple[float, frozenset[int], frozenset[int], frozenset[int]]] = \
+        field(default_factory=list)
     #: min | |g| / BAND - 1 | over the closing guards near zero at the contact events
     band_margin: float = math.inf
     #: the state just before and just after the first impact
@@ -245,7 +248,7 @@ class Outcome:
 
     @property
     def times(self) -> list[float]:
-        return [t for t, _d, _u in self.events]
+        return [t for t, *_rest in self.events]
 
 
 def simulate(robot: Quadruped, th0: float, *, band: float = BAND, max_events: int = 16,
@@ -316,7 +319,7 @@ def simulate(robot: Quadruped, th0: float, *, band: float = BAND, max_events: in
             if j in down | up and abs(after) <= REARM:
                 armed[j] = False
         y, t = y_hit, t_hit
-        out.events.append((t, frozenset(down), frozenset(up | (new - mode))))
+        out.events.append((t, frozenset(down), frozenset(up), mode))
         if len(out.events) >= max_events:
             out.status, out.t_final, out.y_final, out.outcome = "MAX_EVENTS", t, y, y[D + 5]
             return out
