@@ -203,6 +203,20 @@ def test_drop_against_the_reference(th0):
 
 
 @slow
+@pytest.mark.xfail(strict=True, reason="the kernel ends INCONSISTENT: a foot released at rest "
+                   "after its plastic landing (its rate -5e-16, approaching by rounding) hops "
+                   "0.12 ms, 3e-10 high, and the watch of a released constraint does not find "
+                   "a point above the ground in that step (SYSTEMS.md Sec. 5, 'Disarming')")
+def test_a_released_foot_s_short_hop():
+    """th0 = 0.11: the front left foot lands at t = 0.1060647, is released at once (it would
+    pull in contact), hops and lands again 0.116 ms later; the reference follows it with short
+    steps while the foot sits at zero."""
+    ref = reference.simulate(reference.Quadruped(), 0.11)
+    assert [sorted(down) for _t, down, *_rest in ref.events][2:4] == [[0], [0]]
+    assert_agrees(compiled().simulate("drop", 0.11), ref, "th0 = 0.11")
+
+
+@slow
 def test_energy_holds_in_flight():
     """Nothing dissipates before the first touchdown: the reference's energy of the
     simulator's samples stays within 1e-9 of its scale (~31 J)."""
@@ -230,3 +244,27 @@ def test_four_feet_land_together_at_th0_zero():
         assert_agrees(compiled().simulate("drop", th0), split, f"th0 = {th0}")
         orders.append([sorted(down) for _t, down, *_rest in split.events if down])
     assert orders[0][0] != orders[1][0]
+
+
+@slow
+def test_the_scene_is_the_reference_s_pose():
+    """The looks in 3-D: at a random pose the frames' positions and rotations (the rear half's
+    rpy recovered from its rotation by atan2 and asin) and the contact points are the
+    reference's to rounding."""
+    system = compiled()
+    ref = reference.Quadruped()
+    q = ref.initial(0.0)[:D] + np.random.default_rng(RNG_SEED).uniform(-0.8, 0.8, D)
+    state = system.scene.evaluate(q[None], np.array(list(PARAMETERS.values())))
+    bodies, feet = ref.tree(q, np.zeros(D))
+    poses = {"base_link": bodies[0].centre, "rear_link": bodies[1].centre,
+             **{f"{leg}_foot": foot for leg, foot in zip(reference.LEGS, feet)}}
+    assert set(system.scene.frames) == set(poses)
+    for k, name in enumerate(system.scene.frames):
+        x, y, z, w = state.quaternions[0, k]
+        rotation = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                             [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                             [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+        np.testing.assert_allclose(state.positions[0, k], poses[name].o, rtol=0, atol=1e-14)
+        if not name.endswith("_foot"):  # (feet are balls: no orientation declared)
+            np.testing.assert_allclose(rotation, poses[name].R, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(state.contacts[0], [f.o for f in feet], rtol=0, atol=1e-14)

@@ -174,7 +174,7 @@ def quadruped() -> System:
         initial[sq[f"{leg}_hip"]] = p.phi
         initial[sq[f"{leg}_knee"]] = -2 * p.phi
     s.maneuver("drop", initial=initial, terminal=-s.dq[2], outcome=s.dq[5],
-               armed_after="touchdown", s_range=(-0.2, 0.2),
+               armed_after="touchdown", s_range=(-0.1, 0.1),
                description="from rest in the standing posture, feet `drop` above the ground, "
                            "roll th0 and pitch th0 / 2, to the spine's lowest point after the "
                            "first touchdown; outcome: the roll rate")

@@ -39,6 +39,7 @@ from scipy.integrate import solve_ivp
 BAND = 1e-9  # contact guards this close to zero and closing flip together
 REARM = 1e-10  # a flipped guard counts again once farther than this from zero
 RTOL, ATOL = 1e-12, 1e-13
+HOP_STEP = 1e-5  # the longest step while a foot or a reaction sits at zero after an event
 
 PARAMETERS = {"m_trunk": 3.0, "L": 0.15, "w": 0.1, "h_trunk": 0.08, "m_thigh": 0.6,
               "m_shank": 0.3, "l1": 0.2, "l2": 0.2, "r_leg": 0.02, "k_spine": 60.0,
@@ -262,12 +263,24 @@ def simulate(robot: Quadruped, th0: float, *, band: float = BAND, max_events: in
     t = 0.0
     out = Outcome("HORIZON", t_end, y, math.nan)
 
+    def guard_value(j, yy):
+        if j in mode:
+            return robot.accelerations(yy, mode)[1][j]
+        return robot.feet(yy)[j]
+
     def guard(j):
-        def g(_t, yy):
-            if j in mode:
-                return robot.accelerations(yy, mode)[1][j]
-            return robot.feet(yy)[j]
-        g.terminal, g.direction = True, -1
+        """An armed guard's event: it falls through 0. A disarmed one's (it sits at zero after
+        an event): it rises through 2 REARM, where it is armed again, so that a foot released
+        at rest is followed however short its hop (it starts at zero to rounding, a sign change
+        that solve_ivp would not see)."""
+        if armed[j]:
+            def g(_t, yy):
+                return guard_value(j, yy)
+            g.terminal, g.direction = True, -1
+        else:
+            def g(_t, yy):
+                return guard_value(j, yy) - 2 * REARM
+            g.terminal, g.direction = True, 1
         return g
 
     def nadir(_t, yy):
@@ -276,21 +289,26 @@ def simulate(robot: Quadruped, th0: float, *, band: float = BAND, max_events: in
     nadir.terminal, nadir.direction = True, -1
     while t < t_end:
         events = [guard(j) for j in range(4)] + ([nadir] if touched else [])
+        # short steps while a guard is disarmed: a hop of a released foot can be a fraction of
+        # a millisecond, and solve_ivp sees a root only as a sign change between step ends
         sol = solve_ivp(robot.field(mode), (t, t_end), y, method="DOP853", rtol=RTOL,
-                        atol=ATOL, events=events, dense_output=True)
+                        atol=ATOL, events=events, dense_output=True,
+                        max_step=np.inf if all(armed) else HOP_STEP)
         hits = [(te[0], j) for j, te in enumerate(sol.t_events) if len(te)]
         if not hits:
             out.y_final = sol.y[:, -1]
             return out
         t_hit, first = min(hits)
-        # a disarmed guard (a foot that has just lifted off) counts once it is clear of zero
+        # a disarmed guard must not sink below its surface without rising first
         probe = sol.sol(np.linspace(t, t_hit, 401))
         for j in range(4):
-            if not armed[j]:
-                values = [guard(j)(0, probe[:, i]) for i in range(probe.shape[1])]
-                armed[j] = bool(max(values) > REARM)
-                if j == first and max(values) <= 2 * REARM:
-                    raise ReferenceError("a guard returns to zero within the re-arming distance")
+            if not armed[j] and min(guard_value(j, probe[:, i])
+                                    for i in range(probe.shape[1])) < -BAND:
+                raise ReferenceError("a released foot sinks without rising first")
+        if first < 4 and not armed[first]:
+            armed[first] = True  # (risen clear of zero: watched from here)
+            y, t = sol.sol(t_hit), t_hit
+            continue
         y_hit = sol.sol(t_hit)
         if first == 4:
             out.status, out.t_final, out.y_final = "OK", t_hit, y_hit
