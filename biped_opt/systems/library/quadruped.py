@@ -31,6 +31,9 @@ roll rate there.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import sympy as sp
 from sympy.physics import mechanics as me
 
@@ -182,14 +185,17 @@ def quadruped() -> System:
     return s
 
 
-def _rpy(world: me.ReferenceFrame, frame: me.ReferenceFrame, to_plain) -> tuple:
+def _rpy(world: me.ReferenceFrame, frame: me.ReferenceFrame,
+         to_plain: Callable[[Any], Any]) -> tuple[Any, Any, Any]:
     """Fixed-axis roll, pitch, yaw of ``frame`` in ``world`` (R = Rz(yaw) Ry(pitch) Rx(roll),
     the columns of R being the frame's axes in world components)."""
     r = world.dcm(frame).applyfunc(to_plain)
     return (sp.atan2(r[2, 1], r[2, 2]), sp.asin(-r[2, 0]), sp.atan2(r[1, 0], r[0, 0]))
 
 
-def _looks(s: System, world, frames, hips, feet, to_plain, world_point) -> None:
+def _looks(s: System, world: me.ReferenceFrame, frames: dict[str, me.ReferenceFrame],
+           hips: dict[str, me.Point], feet: dict[str, tuple[me.Point, me.Point]],
+           to_plain: Callable[[Any], Any], world_point: Callable[[me.Point], Any]) -> None:
     """How it looks (SYSTEMS.md Sec. 6): each trunk half a box in its own frame
     (``base_link``: the front half, ``rear_link``), each leg a line hip-knee-foot and each
     foot a ball in frame ``<leg>_foot``."""
