@@ -85,11 +85,11 @@ def name_of(source: str) -> str:
 
 
 def _in_library(name: str) -> bool:
-    """Whether ``name`` is a library system (``walkerN[_law]`` and ``chainD`` included)."""
-    from biped_opt.systems.files import CHAIN, WALKER
-    from biped_opt.systems.library import LIBRARY
+    """Whether ``name`` is a library system (``walkerN[_law]``, ``chainD``, ``quadruped``
+    included)."""
+    from biped_opt.systems.files import library_size
 
-    return name in LIBRARY or WALKER.match(name) is not None or CHAIN.match(name) is not None
+    return library_size(name) is not None
 
 
 def _beside(text: str) -> bool:
@@ -147,18 +147,19 @@ class SystemLimits:
                 f"max_legs and max_coordinates must be >= 1, got {self.max_legs}, "
                 f"{self.max_coordinates}")
 
-    def check_walker(self, field: str, name: str) -> None:
-        """A library walker's size from its name alone (nothing built yet)."""
-        from biped_opt.systems.files import WALKER
+    def check_library(self, field: str, name: str) -> None:
+        """A library system's size from its name alone (nothing built yet: building the
+        quadruped's description alone takes a minute)."""
+        from biped_opt.systems.files import library_size
 
-        match = WALKER.match(name)
-        if match is None:
+        size = library_size(name)
+        if size is None:
             return
-        legs = int(match["n"])
-        if legs > self.max_legs or 3 + 2 * legs > self.max_coordinates:
+        legs, coordinates = size
+        if legs > self.max_legs or coordinates > self.max_coordinates:
             raise InvalidInputError(
-                f"{field}: {name} has {legs} legs and {3 + 2 * legs} coordinates; this node "
-                f"serves at most {self.max_legs} legs and {self.max_coordinates} coordinates "
+                f"{field}: {name} has {legs} constraints and {coordinates} coordinates; this "
+                f"node serves at most {self.max_legs} and {self.max_coordinates} "
                 "(parameters max_legs, max_coordinates)")
 
     def check(self, field: str, system: System) -> None:
@@ -202,7 +203,7 @@ class Sources:
 
         name = check_name(field, text)
         if _in_library(name):
-            self.limits.check_walker(field, name)
+            self.limits.check_library(field, name)
             return name
         for folder in self.system_paths:
             path = folder / f"{name}.py"
@@ -231,7 +232,8 @@ class Sources:
                       ) -> Names:
         """A request's names (``system`` "": the biped; ``maneuver`` None: a study's, which
         names no compile), and what can be checked of them on a library system without
-        compiling anything (its description is cheap to build): the problem declared or a file
+        compiling anything (its description is cheap to build; not the quadruped's, which waits
+        for the compiler like a file's): the problem declared or a file
         of system_paths, else the maneuver. Refuses at once what a compile would only refuse
         later, so that names no compile can serve never reach the compile queue. Returns them
         resolved, for :meth:`problem`."""
@@ -240,10 +242,15 @@ class Sources:
         if maneuver is not None:
             check_name("maneuver", maneuver, "maneuver")
         source = self.system("system", system) if system else "biped"
+        from biped_opt.systems.library import BY_NAME
+
         names = Names(source=source if system else "", problem=problem,
-                      maneuver=maneuver or "", checked=Path(source).suffix != ".py")
+                      maneuver=maneuver or "",
+                      checked=Path(source).suffix != ".py" and source not in BY_NAME)
         if not names.checked:
-            return names  # (a file's description runs its code: that waits for the compiler)
+            # a file's description runs its code, and a library system built only when named
+            # takes a minute to describe: either waits for the compiler, never the service
+            return names
         described = self.describe("system", source)
         if problem:
             if problem not in described.problems and self._problem_path(problem) is None:
@@ -352,7 +359,7 @@ class Sources:
                 raise InvalidInputError(
                     f"problem: {path.name}: system: a study's problem file names a library "
                     f"system or a file beside it (x.py), got {quoted(text)}")
-            self.limits.check_walker(f"problem: {path.name}: system", text)
+            self.limits.check_library(f"problem: {path.name}: system", text)
         return source, str(path)
 
 

@@ -24,16 +24,30 @@ from typing import Any
 from biped_opt.errors import InvalidInputError, quoted
 from biped_opt.system_spec import FACTORY, parse_file_spec
 from biped_opt.systems.description import System, SystemDescriptionError
-from biped_opt.systems.library import LIBRARY, chain, walker
+from biped_opt.systems.library import BY_NAME, LIBRARY, SIZES, chain, walker
 
-__all__ = ["load_system", "WALKER", "CHAIN", "LIBRARY_PATTERNS"]
+__all__ = ["load_system", "library_size", "WALKER", "CHAIN", "LIBRARY_PATTERNS"]
 
 #: library names of walkers with n legs and an input law: walker4, walker3_decoupled
 WALKER = re.compile(r"^walker(?P<n>[1-9][0-9]?)(?:_(?P<law>coupled|decoupled))?$")
 #: library names of planar chains by their number of coordinates d = 3 + 2 segments: chain7
 CHAIN = re.compile(r"^chain(?P<d>5|7|9|11)$")
 #: the library's names beyond LIBRARY's, for messages
-LIBRARY_PATTERNS = "walkerN[_coupled|_decoupled], chain5|7|9|11"
+LIBRARY_PATTERNS = "walkerN[_coupled|_decoupled], chain5|7|9|11, quadruped"
+
+
+def library_size(name: str) -> tuple[int, int] | None:
+    """(constraints, coordinates) of the library system ``name`` from its name alone (nothing
+    is built), or None when ``name`` is no library system."""
+    if name in SIZES:
+        return SIZES[name]
+    match = WALKER.match(name)
+    if match:
+        return int(match["n"]), 3 + 2 * int(match["n"])
+    match = CHAIN.match(name)
+    if match:
+        return 2, int(match["d"])
+    return None
 
 
 def load_system(spec: str | Path | System) -> System:
@@ -43,6 +57,8 @@ def load_system(spec: str | Path | System) -> System:
     text = str(spec)
     if text in LIBRARY:
         return LIBRARY[text]()
+    if text in BY_NAME:
+        return BY_NAME[text]()
     match = WALKER.match(text)
     if match:
         return walker(int(match["n"]), match["law"] or "coupled")

@@ -86,7 +86,7 @@ def test_a_broken_system_file_is_one_line(tmp_path, capsys, name):
      "--input must look like NAME=VALUE"),
     (["--system", "rocking_bar", "--maneuver", "drop", "--s", "0", "--param", "k=2"],
      "unknown parameter 'k'"),
-    (["--system", "quadruped", "--maneuver", "trot", "--s", "0"], "unknown system 'quadruped'"),
+    (["--system", "hexapod", "--maneuver", "trot", "--s", "0"], "unknown system 'hexapod'"),
     (["--maneuver", "touchdown", "--s", "0"], "--s: only with --system"),
     (["--maneuver", "touchdown"], "--theta0 is required"),
 ])

@@ -19,13 +19,40 @@ BAR_PROBLEM = "maneuver: drop\ndecisions: {u_th: [-0.5, 0.5]}\n"
     (("rocking_bar", "../p.yaml", "drop"), "problem: '../p.yaml' is not a problem name"),
     (("rocking_bar", "", "a b"), "maneuver: 'a b' is not a maneuver name"),
     (("bar.py", "", "drop"), "system: 'bar.py' is not a system name"),
-    (("walker9", "", "touchdown"), "system: walker9 has 9 legs and 21 coordinates; this node "
-                                   "serves at most 6 legs"),
+    (("walker9", "", "touchdown"), "system: walker9 has 9 constraints and 21 coordinates; "
+                                   "this node serves at most 6 and 16"),
+    (("chain11", "", "drop"), "system: chain11 has 2 constraints and 11 coordinates; this "
+                              "node serves at most 6 and 8"),
+    (("quadruped", "", "drop"), "system: quadruped has 4 constraints and 20 coordinates; this "
+                                "node serves at most 6 and 16"),
 ])
-def test_a_request_naming_what_no_compile_can_serve_is_refused(names, message):
+def test_a_request_naming_what_no_compile_can_serve_is_refused(names, message, monkeypatch):
+    # sizes come from the name alone: building the quadruped's description takes a minute, so
+    # none is built (a factory that raises proves it)
+    from biped_opt.systems import library
+
+    def never(*_args, **_kwargs):
+        raise AssertionError("a description was built")
+
+    monkeypatch.setitem(library.BY_NAME, "quadruped", never)
+    limits = SystemLimits(max_coordinates=8) if names[0] == "chain11" else SystemLimits()
     with pytest.raises(InvalidInputError) as err:
-        Sources().check_request(*names)
+        Sources(limits=limits).check_request(*names)
     assert str(err.value).startswith(message), err.value
+
+
+def test_a_library_system_built_only_when_named_waits_for_the_compiler(monkeypatch):
+    """Within the limits, the quadruped's name passes the service's check unbuilt, as a file's
+    does: its description (a minute of Kane's method) is the compiler process's work."""
+    from biped_opt.systems import library
+
+    def never(*_args, **_kwargs):
+        raise AssertionError("a description was built")
+
+    monkeypatch.setitem(library.BY_NAME, "quadruped", never)
+    names = Sources(limits=SystemLimits(max_coordinates=20)).check_request(
+        "quadruped", "", "drop")
+    assert (names.source, names.checked) == ("quadruped", False)
 
 
 def test_a_work_item_names_no_maneuver_and_a_served_request_passes():
@@ -47,7 +74,7 @@ def test_a_study_problem_file_names_a_library_system_or_a_file_beside_it(tmp_pat
                                                 r"problem file names a library system"):
         sources.study("rocking_bar", "far")
     with pytest.raises(InvalidInputError, match=r"^problem: large.yaml: system: walker5 has 5 "
-                                                r"legs"):
+                                                r"constraints"):
         sources.study("rocking_bar", "large")
     with pytest.raises(InvalidInputError, match=r"declares no problem 'none' \(problems: drop\) "
                                                 r"and system_paths has no such file$"):

@@ -237,8 +237,8 @@ def test_a_broken_system_file_is_one_clear_error(tmp_path, text, message):
 def test_an_unknown_system_is_named(tmp_path):
     from biped_opt.systems import load_system
 
-    with pytest.raises(SystemDescriptionError, match="unknown system 'quadruped'"):
-        load_system("quadruped")
+    with pytest.raises(SystemDescriptionError, match="unknown system 'hexapod'"):
+        load_system("hexapod")
     with pytest.raises(SystemDescriptionError, match="no such system file"):
         load_system(str(tmp_path / "none.py"))
 

@@ -1,4 +1,4 @@
-"""The systems that ship with biped_opt (SYSTEMS.md Secs. 2-3a), each a short description."""
+"""The systems that ship with biped_opt (SYSTEMS.md Secs. 2-3b), each a short description."""
 
 from __future__ import annotations
 
@@ -7,10 +7,11 @@ from collections.abc import Callable
 from biped_opt.systems.description import System
 from biped_opt.systems.library.biped import biped
 from biped_opt.systems.library.chain import chain
+from biped_opt.systems.library.quadruped import quadruped
 from biped_opt.systems.library.rocking_bar import rocking_bar
 from biped_opt.systems.library.walker import walker
 
-__all__ = ["LIBRARY", "biped", "chain", "rocking_bar", "walker"]
+__all__ = ["LIBRARY", "BY_NAME", "SIZES", "biped", "chain", "quadruped", "rocking_bar", "walker"]
 
 #: name -> factory of the library's systems (the walker with its defaults: n = 3, coupled; the
 #: chain with one link per leg)
@@ -19,4 +20,20 @@ LIBRARY: dict[str, Callable[[], System]] = {
     "walker": walker,
     "rocking_bar": rocking_bar,
     "chain": chain,
+}
+
+#: library systems built only when named: the quadruped's description alone takes about a
+#: minute (Kane's method in 3-D), too long for every listing of the library
+BY_NAME: dict[str, Callable[[], System]] = {
+    "quadruped": quadruped,
+}
+
+#: (constraints, coordinates) of the fixed-size library systems, known without building them
+#: (a node checks a request's system against its limits before anything is built)
+SIZES: dict[str, tuple[int, int]] = {
+    "biped": (2, 7),
+    "walker": (3, 9),
+    "rocking_bar": (2, 3),
+    "chain": (2, 5),
+    "quadruped": (4, 20),
 }

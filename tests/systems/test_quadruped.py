@@ -1,0 +1,270 @@
+"""The library's quadruped (SYSTEMS.md Sec. 3) against an independent reference.
+
+``tests/simulation/user/reference_quadruped.py`` computes M(q), the forces and the feet's
+kinematics numerically by a recursive Newton-Euler pass over the kinematic tree and imports
+nothing from biped_opt; the library's description gets them from SymPy's Kane's method. The
+symbolic description is checked point by point against it without compiling anything (building
+the description takes about a minute). The compiled simulator is compared with the reference's
+solve_ivp only when ``BIPED_OPT_SLOW_TESTS=1``: a cold compile of the quadruped takes many
+minutes on a two-core machine (SYSTEMS.md Sec. 3), far more than the whole suite may spend on
+one system.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from functools import cache
+
+import numpy as np
+import pytest
+import sympy as sp
+
+from biped_opt.systems.library.quadruped import PARAMETERS, quadruped
+from tests.simulation.user import reference_quadruped as reference
+
+D = 20
+RNG_SEED = 25
+
+
+@cache
+def description():
+    return quadruped()
+
+
+@cache
+def evaluator():
+    """The description's M, forces (no foot in contact), feet heights, their Jacobian and the
+    energy at (q, q') and the default parameters: one NumPy function with their common
+    subexpressions shared (the energy's kinetic part reuses M's)."""
+    s = description()
+    values = {sym: s.defaults[str(sym)] for sym in s.p}
+    feet = sp.Matrix(list(s.constraints.values()))
+    items = [s.mass_matrix, sp.Matrix(s.forces(frozenset())), feet,
+             feet.jacobian(sp.Matrix(s.q)), sp.Matrix([s.energy])]
+    return sp.lambdify([list(s.q), list(s.dq)], [m.xreplace(values) for m in items], "numpy",
+                       cse=True)
+
+
+def evaluate(q, dq):
+    """(M, forces, feet, Da, energy) of the description at (q, q'), as float arrays."""
+    M, f, feet, Da, energy = evaluator()(q, dq)
+    return (np.array(M, dtype=float), np.array(f, dtype=float).ravel(),
+            np.array(feet, dtype=float).ravel(), np.array(Da, dtype=float),
+            float(np.array(energy, dtype=float).ravel()[0]))
+
+
+def states(count):
+    """Random states around the standing posture, angles within about a radian."""
+    rng = np.random.default_rng(RNG_SEED)
+    rest = reference.Quadruped().initial(0.0)
+    for _ in range(count):
+        y = rest + np.concatenate([rng.uniform(-0.8, 0.8, D), rng.uniform(-2, 2, D)])
+        yield y[:D], y[D:]
+
+
+def test_the_description_is_the_issue_s_size():
+    s = description()
+    assert len(s.q) == 20 and len(s.constraints) == 4
+    assert s.defaults == {**PARAMETERS}
+    assert list(s.maneuvers) == ["drop"]
+
+
+def test_mass_matrix_is_symmetric_positive_definite_and_the_reference_s():
+    """M is symmetric term by term (derive checks it symbolically); at random q it is positive
+    definite and equals the reference's sum of m Jv^T Jv + Jw^T I Jw to rounding (1e-12 of its
+    largest entry: both evaluate the same numbers in different orders)."""
+    s = description()
+    assert (s.mass_matrix - s.mass_matrix.T).is_zero_matrix
+    ref = reference.Quadruped()
+    for q, _dq in states(4):
+        M = evaluate(q, np.zeros(D))[0]
+        expected = ref.mass(q)
+        assert np.linalg.eigvalsh(M).min() > 1e-4  # the lightest rod's inertia is ~1e-3
+        np.testing.assert_allclose(M, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+
+
+def test_forces_are_the_reference_s():
+    """Kane's forcing plus the hinges' springs equals the reference's gravity, springs and
+    Newton-Euler velocity products at random states (velocity products are O(|q'|^2) ~ 10,
+    the tolerance 1e-10 of the largest force)."""
+    ref = reference.Quadruped()
+    for q, dq in states(4):
+        f = evaluate(q, dq)[1]
+        expected = ref.dynamics(np.concatenate([q, dq]))[1]
+        np.testing.assert_allclose(f, expected, rtol=0, atol=1e-10 * np.abs(expected).max())
+
+
+def test_feet_and_their_jacobian_are_the_reference_s():
+    ref = reference.Quadruped()
+    for q, dq in states(3):
+        _M, _F, heights, Da, _rate = ref.dynamics(np.concatenate([q, dq]))
+        _m, _f, feet, jacobian, _e = evaluate(q, dq)
+        np.testing.assert_allclose(feet, heights, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(jacobian, Da, rtol=0, atol=1e-14)
+
+
+def test_energy_is_kinetic_from_m_plus_the_reference_s_potential():
+    """The declared energy is q'^T M q' / 2 plus a potential of q alone (so it is consistent
+    with M), and equals the reference's energy."""
+    ref = reference.Quadruped()
+    for q, dq in states(3):
+        M, _f, _feet, _da, E = evaluate(q, dq)
+        at_rest = evaluate(q, np.zeros(D))[4]
+        assert E == pytest.approx(at_rest + dq @ M @ dq / 2, rel=1e-13, abs=1e-13)
+        assert E == pytest.approx(ref.energy(np.concatenate([q, dq])), rel=1e-12)
+
+
+def test_the_reference_conserves_energy_and_falls_rigidly():
+    """The reference itself: in flight from a random velocity the energy holds to 1e-10 of its
+    scale (the velocity products are right, DOP853 at rtol 1e-12); from rest in the posture the
+    springs are slack and the robot falls as one body, so at th0 = 0 all four feet land at once
+    at t = sqrt(2 drop / g), the fall's closed form."""
+    from scipy.integrate import solve_ivp
+
+    ref = reference.Quadruped()
+    y = ref.initial(0.1)
+    y[D:] = np.random.default_rng(RNG_SEED).uniform(-2, 2, D)
+    sol = solve_ivp(ref.field(frozenset()), (0, 0.05), y, method="DOP853",
+                    rtol=reference.RTOL, atol=reference.ATOL)
+    assert abs(ref.energy(sol.y[:, -1]) - ref.energy(y)) < 1e-10 * ref.energy(y)
+    level = reference.simulate(ref, 0.0, max_events=1)
+    t, down, _up, _after = level.events[0]
+    assert sorted(down) == [0, 1, 2, 3]
+    assert t == pytest.approx(math.sqrt(2 * PARAMETERS["drop"] / PARAMETERS["g"]), abs=1e-12)
+
+
+# -- the compiled simulator against the reference ------------------------------------------------
+
+slow = pytest.mark.skipif(
+    os.environ.get("BIPED_OPT_SLOW_TESTS") != "1",
+    reason="compiles the quadruped (many minutes cold); set BIPED_OPT_SLOW_TESTS=1")
+
+#: event times and outcomes: the reference (rtol 1e-12) and the simulator (rtol 1e-11) follow
+#: the same trajectory through several impacts and liftoffs; 1e-8 leaves room for the
+#: integrators' global errors over ~0.2 s and none for a wrong event (a wrong impact changes
+#: the roll rate by O(1))
+TOL = 1e-8
+
+
+@cache
+def compiled():
+    from biped_opt.simulation.compiled import CompiledSystem
+
+    return CompiledSystem("quadruped")
+
+
+#: a foot this slow (m/s) at an event is at rest on the ground to rounding
+GRAZING = 1e-9
+
+
+def assert_agrees(tr, ref, where):
+    """Same status, the same touchdowns and liftoffs in the same order with the same modes after
+    them, event times and the outcome within TOL.
+
+    A foot that lifted off a little above the ground (the feet of a merged impact land within
+    the 1e-9 band, not at 0) hovers there at rest to rounding; when the next event comes, the
+    sign of its rounding-level rate decides whether it joins the event as a touchdown, is
+    released at once and changes nothing. Such grazing touchdowns (rate below GRAZING, the foot
+    not in the mode after) are left out on both sides."""
+    assert tr.status.name == ref.status, f"{where}: {tr.status.name} vs {ref.status}"
+    robot = reference.Quadruped()
+
+    def feet(mask):
+        return frozenset(j for j in range(4) if mask >> j & 1)
+
+    def landed(down, after, state):
+        rates = robot.dynamics(state)[3] @ state[D:]
+        return frozenset(j for j in down if j in after or abs(rates[j]) > GRAZING)
+
+    ours = [(landed(feet(e.mask_entered), feet(e.mask_after), e.state_before),
+             feet(e.mask_left), feet(e.mask_after)) for e in tr.contact_events]
+    theirs = [(landed(down, after, e.state_before), up, after)
+              for (_t, down, up, after), e in zip(ref.events, tr.contact_events)]
+    assert len(ref.events) == len(tr.contact_events), f"{where}: {len(tr.contact_events)} " \
+        f"events, reference {len(ref.events)}"
+    assert ours == theirs, f"{where}: events {ours}, reference {theirs}"
+    np.testing.assert_allclose([e.t for e in tr.contact_events], ref.times, rtol=0, atol=TOL,
+                               err_msg=where)
+    assert tr.outcome == pytest.approx(ref.outcome, rel=0, abs=TOL), where
+    assert tr.t_final == pytest.approx(ref.t_final, rel=0, abs=TOL), where
+
+
+@slow
+@pytest.mark.parametrize("th0", [0.05, -0.12])
+def test_drop_against_the_reference(th0):
+    ref = reference.simulate(reference.Quadruped(), th0)
+    tr = compiled().simulate("drop", th0)
+    assert_agrees(tr, ref, f"th0 = {th0}")
+    before, after = ref.first_impact
+    first = tr.contact_events[0]
+    np.testing.assert_allclose(first.state_before, before, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(first.state_after, after, rtol=0, atol=1e-9)
+
+
+@slow
+@pytest.mark.xfail(strict=True, reason="the kernel ends INCONSISTENT: a foot released at rest "
+                   "after its plastic landing (its rate -5e-16, approaching by rounding) hops "
+                   "0.12 ms, 3e-10 high, and the watch of a released constraint does not find "
+                   "a point above the ground in that step (SYSTEMS.md Sec. 5, 'Disarming')")
+def test_a_released_foot_s_short_hop():
+    """th0 = 0.11: the front left foot lands at t = 0.1060647, is released at once (it would
+    pull in contact), hops and lands again 0.116 ms later; the reference follows it with short
+    steps while the foot sits at zero."""
+    ref = reference.simulate(reference.Quadruped(), 0.11)
+    assert [sorted(down) for _t, down, *_rest in ref.events][2:4] == [[0], [0]]
+    assert_agrees(compiled().simulate("drop", 0.11), ref, "th0 = 0.11")
+
+
+@slow
+def test_energy_holds_in_flight():
+    """Nothing dissipates before the first touchdown: the reference's energy of the
+    simulator's samples stays within 1e-9 of its scale (~31 J)."""
+    ref = reference.Quadruped()
+    tr = compiled().simulate("drop", 0.1, sample_dt=0.002)
+    flight = tr.samples[tr.samples[:, 0] < tr.contact_events[0].t]
+    assert len(flight) > 20
+    energy = np.array([ref.energy(row[1:1 + 2 * D]) for row in flight])
+    assert np.ptp(energy) < 1e-9 * abs(energy[0])
+
+
+@slow
+def test_four_feet_land_together_at_th0_zero():
+    """At th0 = 0 the fall is level: one impact of all four feet; within 1e-9 of it the feet
+    are within the simultaneity band and still land in one impact, and 1e-6 away they land
+    one by one, in orders that differ on the two sides."""
+    ref = reference.Quadruped()
+    for th0 in (0.0, -1e-9, 1e-9):
+        level = reference.simulate(ref, th0)
+        assert sorted(level.events[0][1]) == [0, 1, 2, 3]
+        assert_agrees(compiled().simulate("drop", th0), level, f"th0 = {th0}")
+    orders = []
+    for th0 in (-1e-6, 1e-6):
+        split = reference.simulate(ref, th0)
+        assert_agrees(compiled().simulate("drop", th0), split, f"th0 = {th0}")
+        orders.append([sorted(down) for _t, down, *_rest in split.events if down])
+    assert orders[0][0] != orders[1][0]
+
+
+@slow
+def test_the_scene_is_the_reference_s_pose():
+    """The looks in 3-D: at a random pose the frames' positions and rotations (the rear half's
+    rpy recovered from its rotation by atan2 and asin) and the contact points are the
+    reference's to rounding."""
+    system = compiled()
+    ref = reference.Quadruped()
+    q = ref.initial(0.0)[:D] + np.random.default_rng(RNG_SEED).uniform(-0.8, 0.8, D)
+    state = system.scene.evaluate(q[None], np.array(list(PARAMETERS.values())))
+    bodies, feet = ref.tree(q, np.zeros(D))
+    poses = {"base_link": bodies[0].centre, "rear_link": bodies[1].centre,
+             **{f"{leg}_foot": foot for leg, foot in zip(reference.LEGS, feet)}}
+    assert set(system.scene.frames) == set(poses)
+    for k, name in enumerate(system.scene.frames):
+        x, y, z, w = state.quaternions[0, k]
+        rotation = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                             [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                             [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+        np.testing.assert_allclose(state.positions[0, k], poses[name].o, rtol=0, atol=1e-14)
+        if not name.endswith("_foot"):  # (feet are balls: no orientation declared)
+            np.testing.assert_allclose(rotation, poses[name].R, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(state.contacts[0], [f.o for f in feet], rtol=0, atol=1e-14)
