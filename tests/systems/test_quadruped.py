@@ -6,7 +6,7 @@ nothing from biped_opt; the library's description gets them from SymPy's Kane's 
 symbolic description is checked point by point against it without compiling anything (building
 the description takes about a minute). The compiled simulator is compared with the reference's
 solve_ivp only when ``BIPED_OPT_SLOW_TESTS=1``: a cold compile of the quadruped takes many
-minutes on a two-core machine (SYSTEMS.md Sec. 3), far more than the whole suite may spend on
+minutes on a two-core machine (SYSTEMS.md Sec. 3b), far more than the whole suite may spend on
 one system.
 """
 

@@ -1,4 +1,4 @@
-"""A 3-D quadruped with point feet (SYSTEMS.md Sec. 3): d = 20 coordinates, n = 4 feet.
+"""A 3-D quadruped with point feet (SYSTEMS.md Sec. 3b): d = 20 coordinates, n = 4 feet.
 
 The trunk is two rigid halves joined by a two-axis spine. The spine joint sits at (x, y, z); the
 front half's orientation is yaw, pitch, roll (body-fixed Z, Y, X: URDF's rpy of the front half);
