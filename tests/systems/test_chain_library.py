@@ -17,8 +17,8 @@ from biped_opt.errors import InvalidInputError
 from biped_opt.simulation.compiled import compile_system
 from biped_opt.simulation.energy import DRIFT_TOLERANCE, energy_drift
 from biped_opt.systems import load_system
-from biped_opt.systems.files import library_size
 from biped_opt.systems.description import SystemDescriptionError
+from biped_opt.systems.files import library_size
 from biped_opt.systems.library.chain import chain
 from tests.simulation.test_user_suite import EDGE, USER, assert_agrees
 from tests.simulation.user import reference_chain
