@@ -125,14 +125,20 @@ def _take_lock(lock: Path) -> bool:
     return False
 
 
-def start(path: Path, module_name: str, name: str) -> subprocess.Popen | None:
-    """Build the extension of the module at ``path`` (imported as ``module_name``) in a detached
-    process, unless it exists, a build is under way, or builds are off."""
-    folder = path.parent
-    if not enabled() or extension_path(folder, name).is_file() or not _compiler():
+def _claim(folder: Path, name: str) -> Path | None:
+    """The build lock of module ``name``, taken; None when builds are off, no C compiler is
+    there, the extension exists, or another build holds the lock."""
+    if not enabled() or not _compiler() or extension_path(folder, name).is_file():
         return None
     lock = _lock(folder, name)
-    if not _take_lock(lock):
+    return lock if _take_lock(lock) else None
+
+
+def start(path: Path, module_name: str, name: str) -> subprocess.Popen | None:
+    """Build the extension of the module at ``path`` (imported as ``module_name``) in a detached
+    process, unless :func:`_claim` says no."""
+    lock = _claim(path.parent, name)
+    if lock is None:
         return None
     try:
         return subprocess.Popen(
@@ -156,11 +162,9 @@ def load_module(path: Path, module_name: str) -> ModuleType:
 
 
 def build_once(module: ModuleType, folder: Path, name: str) -> Path | None:
-    """:func:`build` unless it is off, done, or under way in another process (the lock)."""
-    if not enabled() or extension_path(folder, name).is_file():
-        return None
-    lock = _lock(folder, name)
-    if not _take_lock(lock):
+    """:func:`build` here, unless :func:`_claim` says no."""
+    lock = _claim(folder, name)
+    if lock is None:
         return None
     try:
         return build(module, folder, name)

@@ -3,10 +3,11 @@
 :mod:`biped_opt.codegen.render` appends the code below the ``# --- kernel ---`` marker to each
 system's module, after the system's own functions (``vector_field``, ``reaction``, ``apply_impact``,
 ``guard_value``, ``constraint_rates``, ``terminal_value``, ``outcome_value``, ``initial_state``)
-and its DOP853 step; those names, and ``NSTATE``, ``NCON``, ``NGUARDS``, ``WORKSPACE``,
-``TERM_AFTER_TOUCHDOWN``, ``FINAL_MODE``, ``INITIAL_MODE`` (and, imported there, ``Status``,
-``EVENT_CONTACT``, ``EVENT_TERMINAL``), are defined there, which is why this
-file is not imported itself (ruff's undefined-name check is off for it).
+and its DOP853 step and ``_field_at`` (the field as a call); those names, and ``NSTATE``,
+``NCON``, ``NGUARDS``, ``WORKSPACE``, ``TERM_AFTER_TOUCHDOWN``, ``FINAL_MODE``,
+``INITIAL_MODE`` (and, imported there, ``Status``, ``EVENT_CONTACT``, ``EVENT_TERMINAL``), are
+defined there, which is why this file is not imported itself (ruff's undefined-name check is
+off for it).
 
 The algorithm: an adaptive Dormand-Prince 8(5,3) integrator with its 7th-order dense output
 (Hairer, Norsett and Wanner, *Solving ODEs I*, Sec. II.10; the step is the unrolled code of

@@ -93,8 +93,7 @@ def main(argv: list[str] | None = None) -> int:
         getattr(module, fn).compile(sig)
     # then the kernel ahead of time, for later starts (biped_opt.codegen.aot): after the event
     # functions, which the first process waits for
-    if aot._compiler():
-        aot.build_once(module, Path(path).parent, Path(path).stem)
+    aot.build_once(module, Path(path).parent, Path(path).stem)
     return 0
 
 

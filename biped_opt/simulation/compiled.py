@@ -146,6 +146,10 @@ class _AheadModule:
         return value
 
 
+#: the ahead-of-time views made in this process, by module name (one per module, as _LOADED)
+_AHEAD: dict[str, _AheadModule] = {}
+
+
 def _scene_for(system: System) -> dict[str, Any]:
     """Render the scene module of ``system`` into the cache (named by a hash of its text, like
     the simulator's) and the facts a :class:`~biped_opt.simulation.scene.Scene` reads."""
@@ -245,10 +249,14 @@ def _read_entry(entry: Path | None, *, ahead: bool = False
             if name not in _LOADED and not path.is_file() or \
                     scene not in _LOADED and not (cache_dir() / f"{scene}.py").is_file():
                 return None
-            if ahead and "constants" in facts:
-                extension = aot.load(cache_dir(), name)
-                if extension is not None:
-                    return facts, _AheadModule(name, path, facts["constants"], extension)
+            if ahead and name not in _LOADED and "constants" in facts:
+                # (a module this process imported already is used as it is)
+                if name not in _AHEAD:
+                    extension = aot.load(cache_dir(), name)
+                    if extension is not None:
+                        _AHEAD[name] = _AheadModule(name, path, facts["constants"], extension)
+                if name in _AHEAD:
+                    return facts, _AHEAD[name]
                 aot.start(path, _MODULE_PREFIX + name, name)
             return facts, _import(name, path)
     except (OSError, ValueError, KeyError, TypeError):

@@ -88,7 +88,16 @@ def test_same_trajectories_bit_for_bit(built, system, maneuver, inputs, ss, samp
         assert outcomes[1] * outcomes[5] < 0 and outcomes[2:5] == [0.0] * 3
 
 
-def test_a_start_from_the_index_uses_the_extension_and_loads_the_rest_on_demand(built):
+def test_a_start_from_the_index_uses_the_extension_and_loads_the_rest_on_demand(built,
+                                                                               monkeypatch):
+    from biped_opt.simulation import compiled
+
+    # a process that has imported the module uses it as it is
+    assert not isinstance(CompiledSystem("rocking_bar").module, _AheadModule)
+    # one that has not (as a new process: the module forgotten here) gets the extension's view
+    stem = built["rocking_bar"][1].__name__[len(_MODULE_PREFIX):]
+    monkeypatch.delitem(compiled._LOADED, stem)
+    monkeypatch.setattr(compiled, "_AHEAD", {})
     c = CompiledSystem("rocking_bar")
     assert isinstance(c.module, _AheadModule)
     tr = c.simulate("drop", 0.05, sample_dt=0.01)
