@@ -153,22 +153,18 @@ class SystemLimits:
         from biped_opt.systems.files import library_size
 
         size = library_size(name)
-        if size is None:
-            return
-        legs, coordinates = size
+        if size is not None:
+            self._check_size(field, name, *size)
+
+    def check(self, field: str, system: System) -> None:
+        """A described system's size, before it is derived."""
+        self._check_size(field, system.name, len(system.constraints), len(system.q))
+
+    def _check_size(self, field: str, name: str, legs: int, coordinates: int) -> None:
         if legs > self.max_legs or coordinates > self.max_coordinates:
             raise InvalidInputError(
                 f"{field}: {name} has {legs} constraints and {coordinates} coordinates; this "
                 f"node serves at most {self.max_legs} and {self.max_coordinates} "
-                "(parameters max_legs, max_coordinates)")
-
-    def check(self, field: str, system: System) -> None:
-        """A described system's size, before it is derived."""
-        legs, coordinates = len(system.constraints), len(system.q)
-        if legs > self.max_legs or coordinates > self.max_coordinates:
-            raise InvalidInputError(
-                f"{field}: {system.name} has {legs} constraints and {coordinates} coordinates; "
-                f"this node serves at most {self.max_legs} and {self.max_coordinates} "
                 "(parameters max_legs, max_coordinates)")
 
 

@@ -105,3 +105,14 @@ def test_checked_names_are_resolved_once_and_the_compile_checks_only_what_needs_
     with pytest.raises(InvalidInputError, match=r"^maneuver: problem drop is on maneuver 'drop', "
                                                 r"not 'hop'"):
         sources.problem(names)
+
+
+@pytest.mark.parametrize("name", ["biped", "walker", "rocking_bar", "chain", "walker2", "chain7"])
+def test_sizes_by_name_are_the_descriptions(name):
+    """The sizes a node checks before building anything are the built descriptions' (the
+    quadruped's: tests/systems/test_quadruped.py)."""
+    from biped_opt.systems import load_system
+    from biped_opt.systems.files import library_size
+
+    system = load_system(name)
+    assert library_size(name) == (len(system.constraints), len(system.q))

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 import sympy as sp
 
+from biped_opt.systems.files import library_size
 from biped_opt.systems.library.quadruped import PARAMETERS, quadruped
 from tests.simulation.user import reference_quadruped as reference
 
@@ -66,6 +67,8 @@ def states(count):
 def test_the_description_is_the_issue_s_size():
     s = description()
     assert len(s.q) == 20 and len(s.constraints) == 4
+    # (the size a node checks by name, before building anything)
+    assert library_size("quadruped") == (len(s.constraints), len(s.q))
     assert s.defaults == {**PARAMETERS}
     assert list(s.maneuvers) == ["drop"]
 
