@@ -15,6 +15,7 @@ $(STAMP): requirements.txt requirements-dev.txt constraints.txt setup.py
 	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt \
 		-r requirements-dev.txt -c constraints.txt
 	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
+	$(PY) -m biped_opt.codegen.kernel
 	touch $(STAMP)
 
 demo: $(STAMP)

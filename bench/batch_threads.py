@@ -49,7 +49,8 @@ def measure(name: str, cases: int, rounds: int) -> dict[str, float]:
     u = c.input_vector(inputs)
     c.simulate(maneuver, 0.0, u)
     c.simulate_batch(maneuver, s[:2], u)  # (compiled or loaded before timing)
-    kernel = c.module.simulate_batch_kernel
+    shared, sv = c.shared_kernel()
+    kernel = shared.simulate_batch_kernel
 
     given = tuple(u.tolist())  # (a tuple: the single call's quick input check)
 
@@ -65,7 +66,7 @@ def measure(name: str, cases: int, rounds: int) -> dict[str, float]:
         n = s.size
         opts = c.maneuver_options(maneuver)
         compiled_systems.run_batch(
-            kernel, n, (c.prepared, c.code(maneuver), s, np.tile(u, (n, 1)), c._cfg(opts, 0.0),
+            kernel, n, (c.prepared, sv, c.code(maneuver), s, np.tile(u, (n, 1)), c._cfg(opts, 0.0),
                         np.zeros((n, opts.max_events + 1, m.EVENT_WIDTH)),
                         np.zeros((n, m.NSTATE)), np.zeros(n), np.zeros((n, 8))), threads=1)
 

@@ -3,12 +3,16 @@
 A cached start of a system (``biped-opt simulate --system NAME``) needs one call of the kernel,
 ``simulate_maneuver``. Through Numba that call first sets up Numba's compiler and target
 (importing Numba and SciPy, ~1 s) only to load machine code from its cache. :func:`build` compiles
-the same function of the same generated module, with its callees, once more with ``numba.pycc``
-into a CPython extension beside the module (``<name>_aot<suffix>``); a later start imports that
-extension (a few milliseconds) and NumPy, and nothing of Numba.
+the kernel's source (:mod:`biped_opt.codegen.kernel`, below its marker) together with the
+system's generated module, its calls of the system's functions bound directly
+(:func:`biped_opt.codegen.abi.direct_binding`) instead of through addresses, with
+``numba.pycc`` into a CPython extension beside the module (``<name>_aot_<kernel key><suffix>``:
+a new kernel source is a new file); a later start imports that extension (a few milliseconds)
+and NumPy, and nothing of Numba.
 
-It is the same source compiled for the same arithmetic: no fast-math in either, so the two give
-bit-identical trajectories (``tests/codegen/test_aot.py`` checks it, at coincident events too).
+It is the same source compiled for the same arithmetic: no fast-math in either, so the
+extension and the shared kernel give bit-identical trajectories (``tests/codegen/test_aot.py``
+checks it, at coincident events too).
 The extension targets the generic x86-64/AArch64 CPU, so a cache shared between machines stays
 safe to load. ``numba.pycc`` is marked "pending deprecation" since Numba 0.57 with no replacement
 yet; Numba is pinned, and without it (or without a C compiler) every start simply loads through
@@ -23,6 +27,7 @@ Numba, as before. Run as ``python -m biped_opt.codegen.aot PATH MODULE_NAME NAME
 
 from __future__ import annotations
 
+import hashlib
 import importlib.machinery
 import importlib.util
 import os
@@ -39,9 +44,9 @@ __all__ = ["SIGNATURE", "enabled", "extension_path", "load", "build", "build_onc
            "wait_built", "load_module", "main"]
 
 #: ``simulate_maneuver``'s types: (status, t_f, mode_f, events, samples, nfev, steps, rejected,
-#: outcome) from (p, code, s, u, cfg, samples, events, y_out, y0, mode0)
-SIGNATURE = ("Tuple((i8, f8, i8, i8, i8, i8, i8, i8, f8))(f8[::1], i8, f8, f8[::1], f8[::1], "
-             "f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], i8)")
+#: outcome) from (p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
+SIGNATURE = ("Tuple((i8, f8, i8, i8, i8, i8, i8, i8, f8))(f8[::1], i8[::1], i8, f8, f8[::1], "
+             "f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], i8)")
 #: the exported function
 EXPORTED = "simulate_maneuver"
 #: a lock older than this belongs to a build that died [s]
@@ -52,9 +57,23 @@ def enabled() -> bool:
     return os.environ.get("BIPED_OPT_AOT", "1") != "0"
 
 
+_KERNEL = Path(__file__).with_name("kernel.py")
+_KEY: list[str] = []
+
+
+def kernel_key() -> str:
+    """A hash of the kernel's source and of the table it calls through (part of an extension's
+    name: an extension built from another kernel is never loaded)."""
+    if not _KEY:
+        digest = hashlib.sha256(_KERNEL.read_bytes())
+        digest.update(_KERNEL.with_name("abi.py").read_bytes())
+        _KEY.append(digest.hexdigest()[:12])
+    return _KEY[0]
+
+
 def extension_path(folder: Path, name: str) -> Path:
     """Where the extension of the generated module ``name`` lives."""
-    return folder / f"{name}_aot{importlib.machinery.EXTENSION_SUFFIXES[0]}"
+    return folder / f"{name}_aot_{kernel_key()}{importlib.machinery.EXTENSION_SUFFIXES[0]}"
 
 
 def load(folder: Path, name: str) -> ModuleType | None:
@@ -62,7 +81,7 @@ def load(folder: Path, name: str) -> ModuleType | None:
     path = extension_path(folder, name)
     if not enabled() or not path.is_file():
         return None
-    module_name = f"{name}_aot"
+    module_name = path.name.split(".")[0]
     if module_name in sys.modules:
         return sys.modules[module_name]
     spec = importlib.util.spec_from_file_location(module_name, path)
@@ -79,16 +98,40 @@ def load(folder: Path, name: str) -> ModuleType | None:
     return module
 
 
-def build(module: ModuleType, folder: Path, name: str) -> Path:
-    """Compile ``module.simulate_maneuver`` (with its callees) into the extension of ``name``
-    in ``folder``: built in a temporary directory, then renamed into place."""
+#: what the kernel's source needs besides the system's module (the engine's own header, which
+#: binds its calls through addresses, is not part of it)
+_KERNEL_IMPORTS = """
+from biped_opt.codegen.abi import (CFG_ATOL, CFG_H_MAX, CFG_MAX_EVENTS, CFG_RTOL,  # noqa
+    CFG_SAMPLE_DT, CFG_T_END, CFG_TOUCHED_DOWN, MANEUVER_WIDTH, SV_GUARDS, SV_NCON, SV_NSTATE,
+    SV_WORKSPACE)
+from biped_opt.codegen.status import EVENT_CONTACT, EVENT_TERMINAL, Status  # noqa
+"""
+
+
+def kernel_source(module_text: str) -> str:
+    """A system's generated module with the kernel compiled into it: the module, the kernel's
+    calls bound directly to its functions, and the kernel's source below its marker."""
+    from biped_opt.codegen.abi import direct_binding
+
+    body = _KERNEL.read_text()
+    body = body[body.index("\n# --- kernel ---\n") + 1:]
+    return "\n\n".join([module_text.rstrip(), _KERNEL_IMPORTS, direct_binding(), body])
+
+
+def build(path: Path, name: str) -> Path:
+    """Compile the kernel with the generated module at ``path`` (:func:`kernel_source`) into the
+    extension of ``name`` beside it: built in a temporary directory, then renamed into place."""
     with warnings.catch_warnings():  # (pycc is "pending deprecation": see the module doc)
         warnings.simplefilter("ignore")
         from numba.pycc import CC
 
+    folder = path.parent
     target = extension_path(folder, name)
     with tempfile.TemporaryDirectory(dir=folder, prefix=f".{name}_aot.") as work:
-        cc = CC(f"{name}_aot")
+        source = Path(work) / f"{name}_with_kernel.py"
+        source.write_text(kernel_source(path.read_text()))
+        module = load_module(source, f"biped_opt_ahead_{name}")
+        cc = CC(target.name.split(".")[0])
         cc.output_dir = work
         cc.verbose = False
         cc.export(EXPORTED, SIGNATURE)(getattr(module, EXPORTED).py_func)
@@ -161,13 +204,13 @@ def load_module(path: Path, module_name: str) -> ModuleType:
     return module
 
 
-def build_once(module: ModuleType, folder: Path, name: str) -> Path | None:
+def build_once(path: Path, name: str) -> Path | None:
     """:func:`build` here, unless :func:`_claim` says no."""
-    lock = _claim(folder, name)
+    lock = _claim(path.parent, name)
     if lock is None:
         return None
     try:
-        return build(module, folder, name)
+        return build(path, name)
     finally:
         lock.unlink(missing_ok=True)
 
@@ -184,11 +227,11 @@ def wait_built(folder: Path, name: str, timeout: float) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    path_text, module_name, name = (sys.argv[1:] if argv is None else argv)[:3]
+    path_text, _module_name, name = (sys.argv[1:] if argv is None else argv)[:3]
     path = Path(path_text)
     lock = _lock(path.parent, name)  # (taken by start())
     try:
-        build(load_module(path, module_name), path.parent, name)
+        build(path, name)
     finally:
         lock.unlink(missing_ok=True)
     return 0

@@ -40,6 +40,7 @@ step's initial state.
 import math
 
 import numba as nb
+import numpy as np
 
 {imports}
 
@@ -68,6 +69,41 @@ def _assign(lhs: str, head: str, coefs: np.ndarray, stride: int, indent: str) ->
     return [*lines, f"{indent})"]
 
 
+def _at_new_point(rhs: str, xs: int, kf: int, n: int, nguards: int, nlam: int) -> list[str]:
+    """The step's field at the new point (slot 12), the probe values kept in registers stored
+    (``nguards`` of them), the reactions, and the error sums' start: the same in both forms."""
+    return [f"    {rhs}(p, mode, W, {xs}, u, W, {kf}, W, {kf + n})",
+            *(f"    probe[{i}] = c{i}" for i in range(nguards)),
+            *(f"    lam[{j}] = W[{kf + n + j}]" for j in range(nlam)),
+            "    # embedded 5th- and 3rd-order error estimates, combined as in Hairer's dop853",
+            "    err5 = 0.0",
+            "    err3 = 0.0"]
+
+
+def _error_end_and_dense_head(n: int, ys: int) -> list[str]:
+    """The end of the step (the error norm, as in Hairer's dop853) and the start of
+    ``dense_coefficients``, the same in both forms."""
+    return [
+        "        inv = 1.0 / scale",
+        "        e5 *= inv",
+        "        e3 *= inv",
+        "        err5 += e5 * e5",
+        "        err3 += e3 * e3",
+        "    if err5 == 0.0 and err3 == 0.0:",
+        "        return 0.0",
+        f"    return abs(h) * err5 / math.sqrt((err5 + 0.01 * err3) * {n})",
+        "",
+        "",
+        "@nb.njit(**HOT_PATH)",
+        "def dense_coefficients(p, mode, u, y, f, h, W, y_new, f_new, F):",
+        '    """Coefficients F (7, n) of the 7th-order interpolant on the step just taken from y',
+        "    (W holds its stages; three more are evaluated), in the form SciPy's Dop853DenseOutput",
+        '    evaluates."""',
+        f"    for i in range({n}):",
+        f"        W[{ys} + i] = y[i]",
+    ]
+
+
 def render(
     n: int,
     *,
@@ -79,6 +115,7 @@ def render(
     nguards: int = 3,
     probe_head: str = "mode, term_sign",
     dense_rhs: str | None = None,
+    loop: bool = False,
 ) -> str:
     """Source of the generated module for state dimension ``n``.
 
@@ -98,7 +135,17 @@ def render(
     probe's arguments before the state (a generated system's passes ``p, mode, u, term_sign``).
     ``dense_rhs``: the vector field the dense output's three extra stages call (default
     ``rhs``); a function that is not inlined saves compile time on this rarely taken path.
+
+    ``loop=True``: the stages as one loop over the tableau's nonzero coefficients (module
+    constants) instead of twelve written-out copies, for a vector field that is called rather
+    than inlined. Each combination adds the same terms in the same order as the written-out
+    form, so both give the same numbers to the last bit; the loop costs the compiler one copy
+    of the stage (and of the inlined probe) instead of twelve, and costs a step the loop's
+    index arithmetic, which is small beside twelve calls of a large field.
     """
+    if loop:
+        return _render_loop(n, imports=imports, rhs=rhs, probe=probe, nlam=nlam,
+                            nguards=nguards, probe_head=probe_head, dense_rhs=dense_rhs or rhs)
     A, B, C = _tableau.A, _tableau.B, _tableau.C
     E3, E5, D = _tableau.E3, _tableau.E5, _tableau.D
     st = n + nlam
@@ -145,15 +192,7 @@ def render(
     w("    # the 8th-order solution and its derivative (slot 12, the next step's f)")
     w(f"    for i in range({n}):")
     out.extend(_assign(stage, start, B, st, "        "))
-    w(f"    {rhs}(p, mode, W, {xs}, u, W, {kf}, W, {kf + n})")
-    if registers:
-        for i in range(nguards):
-            w(f"    probe[{i}] = c{i}")
-    for j in range(nlam):
-        w(f"    lam[{j}] = W[{kf + n + j}]")
-    w("    # embedded 5th- and 3rd-order error estimates, combined as in Hairer's dop853")
-    w("    err5 = 0.0")
-    w("    err3 = 0.0")
+    out.extend(_at_new_point(rhs, xs, kf, n, nguards if registers else 0, nlam))
     w(f"    for i in range({n}):")
     w(f"        yi = W[{xs} + i]")
     w("        y_new[i] = yi")
@@ -161,23 +200,7 @@ def render(
     w(f"        scale = atol + rtol * max(abs(W[{ys} + i]), abs(yi))")
     out.extend(_assign("e5", "", E5, st, "        "))
     out.extend(_assign("e3", "", E3, st, "        "))
-    w("        inv = 1.0 / scale")
-    w("        e5 *= inv")
-    w("        e3 *= inv")
-    w("        err5 += e5 * e5")
-    w("        err3 += e3 * e3")
-    w("    if err5 == 0.0 and err3 == 0.0:")
-    w("        return 0.0")
-    w(f"    return abs(h) * err5 / math.sqrt((err5 + 0.01 * err3) * {n})")
-    w("")
-    w("")
-    w("@nb.njit(**HOT_PATH)")
-    w("def dense_coefficients(p, mode, u, y, f, h, W, y_new, f_new, F):")
-    w('    """Coefficients F (7, n) of the 7th-order interpolant on the step just taken from y')
-    w("    (W holds its stages; three more are evaluated), in the form SciPy's Dop853DenseOutput")
-    w('    evaluates."""')
-    w(f"    for i in range({n}):")
-    w(f"        W[{ys} + i] = y[i]")
+    out.extend(_error_end_and_dense_head(n, ys))
     for s in range(NSTAGES + 1, 16):
         w(f"    # dense stage {s}, c = {_literal(C[s])}")
         w(f"    for i in range({n}):")
@@ -192,3 +215,111 @@ def render(
         out.extend(_assign(f"F[{3 + r}, i]", "h * ", D[r], st, "        "))
     return "\n".join(out) + "\n"
 
+
+
+def _sparse(rows: list[np.ndarray]) -> tuple[list[int], list[int], list[float]]:
+    """CSR form of ``rows`` (row starts, column indices and values of the nonzero entries)."""
+    starts, cols, vals = [0], [], []
+    for row in rows:
+        for r, c in enumerate(row):
+            if c != 0.0:
+                cols.append(r)
+                vals.append(float(c))
+        starts.append(len(cols))
+    return starts, cols, vals
+
+
+def _table(name: str, values: list[int] | list[float], kind: str) -> str:
+    body = ", ".join(repr(v) for v in values)
+    return f"{name} = np.array([{body}], dtype=np.{kind})"
+
+
+def _combination(target: str, head: str, row: str, n: int, indent: str) -> list[str]:
+    """Loop source of ``target[i] = head(sum over the nonzero coefficients of STAGE row
+    ``row`` of coef * K_r[i])`` for i < n, the terms added in the written-out form's order. The
+    offsets of the K_r (STAGE_OFF) are unsigned, as is the index added to them: a signed index
+    that the compiler cannot prove non-negative gets Python's negative-index wraparound on
+    every read (walker8's trajectory: 172 us with it, 100 us without)."""
+    return [
+        f"{indent}a0 = STAGE_START[{row}]",
+        f"{indent}a1 = STAGE_START[{row} + 1]",
+        f"{indent}for i in range({n}):",
+        f"{indent}    ui = np.uint64(i)",
+        f"{indent}    acc = STAGE_VAL[a0] * W[STAGE_OFF[a0] + ui]",
+        f"{indent}    for k in range(a0 + 1, a1):",
+        f"{indent}        acc += STAGE_VAL[k] * W[STAGE_OFF[k] + ui]",
+        f"{indent}    {target} = {head}(acc)",
+    ]
+
+
+def _render_loop(n: int, *, imports: str, rhs: str, probe: str, nlam: int, nguards: int,
+                 probe_head: str, dense_rhs: str) -> str:
+    """:func:`render`'s ``loop=True`` form (see there)."""
+    A, B, C = _tableau.A, _tableau.B, _tableau.C
+    E3, E5, D = _tableau.E3, _tableau.E5, _tableau.D
+    st = n + nlam
+    xs, ys, kf = 16 * st, 17 * st, st * NSTAGES
+    out = [_HEADER.format(n=n, slots=f"STRIDE = {n} + {nlam} floats", stride=st,
+                          imports=imports)]
+    w = out.append
+    # row s < 16 of STAGE: stage s's coefficients (A[s]); row 16: B; rows 17-20: D; 21-22: E5, E3
+    rows = [A[s, :s] for s in range(16)] + [B] + [D[r] for r in range(4)] + [E5, E3]
+    starts, cols, vals = _sparse(rows)
+    w("# the tableau's nonzero coefficients row by row (CSR: a row's entries are k = START[row]")
+    w("# .. START[row + 1] - 1, coefficient VAL[k] of the stage derivative at W[OFF[k]:]): rows")
+    w("# 0-15 the stages, 16 the 8th-order weights, 17-20 the dense output's, 21-22 the 5th- and")
+    w("# 3rd-order error estimates")
+    w(_table("STAGE_START", starts, "int64"))
+    w(_table("STAGE_OFF", [st * c for c in cols], "uint64"))
+    w(_table("STAGE_VAL", vals, "float64"))
+    w(_table("STAGE_C", [float(c) for c in C[:16]], "float64"))
+    w("")
+    w("")
+    w("@nb.njit(**HOT_PATH)")
+    w("def step(p, mode, u, term_sign, y, f, h, W, y_new, f_new, lam, rtol, atol, probe):")
+    w('    """One DOP853 step of size h from (y, f = dy/dt at y) in mode ``mode``: the')
+    w("    stages as a loop (biped_opt.codegen.dop853.render, ``loop=True``). Writes y_new,")
+    w("    f_new (also slot 12 of W) and lam (reactions at y_new); returns the scaled error")
+    w("    norm (accept when < 1). probe[i] receives the smallest stage abscissa at which")
+    w('    guard i was <= 0 on a stage state (2.0 if none)."""')
+    cs = ", ".join(f"c{i}" for i in range(nguards))
+    for i in range(nguards):
+        w(f"    c{i} = 2.0")
+    w(f"    for i in range({n}):")
+    w("        W[i] = f[i]")
+    w(f"        W[{ys} + i] = y[i]")
+    w(f"    for s in range(1, {NSTAGES}):")
+    out.extend(_combination(f"W[{xs} + i]", f"W[{ys} + i] + h * ", "s", n, "        "))
+    w(f"        {rhs}(p, mode, W, {xs}, u, W, {st} * s, W, {st} * s + {n})")
+    w(f"        {cs} = {probe}(")
+    w(f"            {probe_head}, W, {xs}, W, {st} * s + {n}, STAGE_C[s], {cs}")
+    w("        )")
+    w("    # the 8th-order solution and its derivative (slot 12, the next step's f)")
+    out.extend(_combination(f"W[{xs} + i]", f"W[{ys} + i] + h * ", "16", n, "    "))
+    out.extend(_at_new_point(rhs, xs, kf, n, nguards, nlam))
+    w("    e5s, e5e = STAGE_START[21], STAGE_START[22]")
+    w("    e3s, e3e = STAGE_START[22], STAGE_START[23]")
+    w(f"    for i in range({n}):")
+    w(f"        yi = W[{xs} + i]")
+    w("        y_new[i] = yi")
+    w(f"        f_new[i] = W[{kf} + i]")
+    w(f"        scale = atol + rtol * max(abs(W[{ys} + i]), abs(yi))")
+    w("        ui = np.uint64(i)")
+    w("        e5 = STAGE_VAL[e5s] * W[STAGE_OFF[e5s] + ui]")
+    w("        for k in range(e5s + 1, e5e):")
+    w("            e5 += STAGE_VAL[k] * W[STAGE_OFF[k] + ui]")
+    w("        e3 = STAGE_VAL[e3s] * W[STAGE_OFF[e3s] + ui]")
+    w("        for k in range(e3s + 1, e3e):")
+    w("            e3 += STAGE_VAL[k] * W[STAGE_OFF[k] + ui]")
+    out.extend(_error_end_and_dense_head(n, ys))
+    w(f"    for s in range({NSTAGES + 1}, 16):")
+    out.extend(_combination(f"W[{xs} + i]", f"W[{ys} + i] + h * ", "s", n, "        "))
+    w(f"        {dense_rhs}(p, mode, W, {xs}, u, W, {st} * s, W, {st} * s + {n})")
+    w(f"    for i in range({n}):")
+    w("        dy = y_new[i] - y[i]")
+    w("        F[0, i] = dy")
+    w("        F[1, i] = h * f[i] - dy")
+    w("        F[2, i] = 2.0 * dy - h * (f_new[i] + f[i])")
+    w("    for r in range(4):")
+    out.extend(_combination("F[3 + r, i]", "h * ", "17 + r", n, "        "))
+    return "\n".join(out) + "\n"

@@ -1,13 +1,15 @@
-"""The event-driven kernel of every generated system module (MODEL.md Sec. 3, SYSTEMS.md Sec. 1).
+"""The event-driven kernel, one for every system (MODEL.md Sec. 3, SYSTEMS.md Sec. 1).
 
-:mod:`biped_opt.codegen.render` appends the code below the ``# --- kernel ---`` marker to each
-system's module, after the system's own functions (``vector_field``, ``reaction``, ``apply_impact``,
-``guard_value``, ``constraint_rates``, ``terminal_value``, ``outcome_value``, ``initial_state``)
-and its DOP853 step and ``_field_at`` (the field as a call); those names, and ``NSTATE``,
-``NCON``, ``NGUARDS``, ``WORKSPACE``, ``TERM_AFTER_TOUCHDOWN``, ``FINAL_MODE``,
-``INITIAL_MODE`` (and, imported there, ``Status``, ``EVENT_CONTACT``, ``EVENT_TERMINAL``), are
-defined there, which is why this file is not imported itself (ruff's undefined-name check is
-off for it).
+The kernel reaches a system only through the system vector ``sv`` (biped_opt.codegen.abi):
+the addresses of the system's compiled functions (``_field_at``, ``step``,
+``dense_coefficients``, ``apply_impact``, ``constraint_rates``, ``guard_value``,
+``guard_values``, ``initial_state``, ``outcome_value``, ``reaction``), which it calls through
+the ``sys_*`` bindings below, and the system's table (state length, constraints, maneuvers,
+which guards are one state component). So this module is compiled once per installation and
+kept in Numba's cache beside it, and a new system compiles only its own functions. The code
+below the ``# --- kernel ---`` marker is also compiled, ahead of time, into one module with a
+system's functions (biped_opt.codegen.aot), its ``sys_*`` calls then bound directly
+(:func:`biped_opt.codegen.abi.direct_binding`): one source for both.
 
 The algorithm: an adaptive Dormand-Prince 8(5,3) integrator with its 7th-order dense output
 (Hairer, Norsett and Wanner, *Solving ODEs I*, Sec. II.10; the step is the unrolled code of
@@ -30,10 +32,170 @@ Layouts: ``events[k] = [t, kind, touchdown_mask, liftoff_mask, mode_before, mode
 y_before (2d), y_after (2d)]``; ``samples[k] = [t, y (2d), mode, lambda (n)]``.
 """
 
-import math  # noqa: F401  (used by the generated module this text is appended to)
+from __future__ import annotations
 
-import numba as nb  # noqa: F401
-import numpy as np  # noqa: F401
+import math
+
+import numba as nb
+import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils, errors
+from numba.extending import intrinsic
+
+from biped_opt._jit import HOT_PATH
+from biped_opt.codegen import abi
+from biped_opt.codegen.abi import (
+    CFG_ATOL,
+    CFG_H_MAX,
+    CFG_MAX_EVENTS,
+    CFG_RTOL,
+    CFG_SAMPLE_DT,
+    CFG_T_END,
+    CFG_TOUCHED_DOWN,
+    INDEX,
+    MANEUVER_WIDTH,
+    SV_GUARDS,
+    SV_NCON,
+    SV_NSTATE,
+    SV_WORKSPACE,
+)
+from biped_opt.codegen.status import EVENT_CONTACT, EVENT_TERMINAL, Status
+
+#: the digest of the table (biped_opt.codegen.abi) this file's calls were written for: Numba's
+#: cache of this module is keyed on this file alone, so a change of the table must change it
+ABI = "5f73d6523e8cda3d"
+if abi.digest() != ABI:
+    raise ImportError(f"biped_opt.codegen.kernel was written for the system table {ABI}, "
+                      f"biped_opt.codegen.abi is {abi.digest()}: update both together")
+
+
+def _lowered(context, builder, ty, value):
+    """(LLVM types, values) of one argument as a system function takes it: an array as its
+    data pointer and its shape, an integer as int64, a float as double."""
+    if isinstance(ty, types.Array):
+        array = cgutils.create_struct_proxy(ty)(context, builder, value=value)
+        double_ptr = ir.DoubleType().as_pointer()
+        shape = cgutils.unpack_tuple(builder, array.shape, ty.ndim)
+        return ([double_ptr] + [ir.IntType(64)] * ty.ndim,
+                [builder.bitcast(array.data, double_ptr), *shape])
+    if isinstance(ty, types.Integer):
+        return [ir.IntType(64)], [context.cast(builder, value, ty, types.int64)]
+    return [ir.DoubleType()], [context.cast(builder, value, ty, types.float64)]
+
+
+_KINDS = {"A": types.Array(types.float64, 1, "C"), "F": types.Array(types.float64, 2, "C"),
+          "i": types.int64, "f": types.float64}
+
+
+@intrinsic
+def _call(typingctx, name, address, *args):
+    """``_call(name, address, *args)``: call the system function ``name`` (a string literal, a
+    key of biped_opt.codegen.abi.FUNCTIONS) compiled as a C function at ``address`` (an int64
+    read from sv), with ``args`` lowered as :func:`_lowered` does. The arguments' types are
+    checked against the table when the kernel is compiled: the C function reads its arguments
+    by the table, so a float where it expects an integer, or an array that is not a
+    C-contiguous float64 one, would be read wrong rather than converted; such a call does not
+    compile."""
+    if len(args) == 1 and isinstance(args[0], types.StarArgTuple):
+        args = args[0].types
+    if not isinstance(name, types.StringLiteral) or name.literal_value not in abi.FUNCTIONS:
+        raise errors.TypingError(f"_call: the first argument must name a function of "
+                                 f"biped_opt.codegen.abi.FUNCTIONS, got {name}")
+    kinds, result = abi.FUNCTIONS[name.literal_value]
+    got = [types.unliteral(t) for t in args]
+    wanted = [_KINDS[k] for k in kinds]
+    if len(got) != len(wanted) or any(
+            g != w if k in "AF" else not isinstance(g, type(w))
+            for g, w, k in zip(got, wanted, kinds)):
+        raise errors.TypingError(f"_call of {name.literal_value}: arguments {got} do not match "
+                                 f"the table's {wanted}")
+    restype = types.void if result == "v" else types.float64
+    signature = restype(name, address, types.StarArgTuple.from_types(args))
+
+    def codegen(context, builder, sig, llargs):
+        _, address_value, packed = llargs
+        arg_types = sig.args[2].types
+        values = cgutils.unpack_tuple(builder, packed, len(arg_types))
+        ll_types, ll_values = [], []
+        for ty, value in zip(arg_types, values):
+            t, v = _lowered(context, builder, ty, value)
+            ll_types += t
+            ll_values += v
+        ret = ir.VoidType() if restype is types.void else ir.DoubleType()
+        fn = builder.inttoptr(address_value, ir.FunctionType(ret, ll_types).as_pointer())
+        out = builder.call(fn, ll_values)
+        return context.get_dummy_value() if restype is types.void else out
+
+    return signature, codegen
+
+
+_FIELD_AT = INDEX["_field_at"]
+_STEP = INDEX["step"]
+_DENSE_COEFFICIENTS = INDEX["dense_coefficients"]
+_APPLY_IMPACT = INDEX["apply_impact"]
+_CONSTRAINT_RATES = INDEX["constraint_rates"]
+_GUARD_VALUE = INDEX["guard_value"]
+_GUARD_VALUES = INDEX["guard_values"]
+_INITIAL_STATE = INDEX["initial_state"]
+_OUTCOME_VALUE = INDEX["outcome_value"]
+_REACTION = INDEX["reaction"]
+
+# the kernel's calls of a system's functions, through sv (the same names and arguments as
+# biped_opt.codegen.abi.direct_binding)
+
+
+@nb.njit(**HOT_PATH)
+def sys_field_at(sv, p, mode, y, yo, u, out, off, lam, lo):
+    _call("_field_at", sv[_FIELD_AT], p, mode, y, yo, u, out, off, lam, lo)
+
+
+@nb.njit(**HOT_PATH)
+def sys_step(sv, p, mode, u, term_sign, y, f, h, W, y_new, f_new, lam, rtol, atol, probe):
+    return _call("step", sv[_STEP], p, mode, u, term_sign, y, f, h, W, y_new, f_new, lam,
+                       rtol, atol, probe)
+
+
+@nb.njit(**HOT_PATH)
+def sys_dense_coefficients(sv, p, mode, u, y, f, h, W, y_new, f_new, F):
+    _call("dense_coefficients", sv[_DENSE_COEFFICIENTS], p, mode, u, y, f, h, W, y_new, f_new,
+          F)
+
+
+@nb.njit(**HOT_PATH)
+def sys_apply_impact(sv, p, mode, y):
+    _call("apply_impact", sv[_APPLY_IMPACT], p, mode, y)
+
+
+@nb.njit(**HOT_PATH)
+def sys_constraint_rates(sv, p, y, yo, out):
+    _call("constraint_rates", sv[_CONSTRAINT_RATES], p, y, yo, out)
+
+
+@nb.njit(**HOT_PATH)
+def sys_guard_value(sv, p, mode, u, code, y, yo, lam, lo, i):
+    return _call("guard_value", sv[_GUARD_VALUE], p, mode, u, code, y, yo, lam, lo, i)
+
+
+@nb.njit(**HOT_PATH)
+def sys_guard_values(sv, p, mode, u, code, y, yo, lam, lo, out):
+    _call("guard_values", sv[_GUARD_VALUES], p, mode, u, code, y, yo, lam, lo, out)
+
+
+@nb.njit(**HOT_PATH)
+def sys_initial_state(sv, code, s, p, y0):
+    _call("initial_state", sv[_INITIAL_STATE], code, s, p, y0)
+
+
+@nb.njit(**HOT_PATH)
+def sys_outcome_value(sv, code, p, y, yo):
+    return _call("outcome_value", sv[_OUTCOME_VALUE], code, p, y, yo)
+
+
+@nb.njit(**HOT_PATH)
+def sys_reaction(sv, p, mode, u, y, j):
+    return _call("reaction", sv[_REACTION], p, mode, u, y, j)
+
 
 # --- kernel ---
 
@@ -44,9 +206,6 @@ INCONSISTENT = int(Status.INCONSISTENT)
 APEX_IN_CONTACT = int(Status.APEX_IN_CONTACT)
 STEP_FAILURE = int(Status.STEP_FAILURE)
 CONSTRAINT_VIOLATED = int(Status.CONSTRAINT_VIOLATED)
-EVENT_WIDTH = 6 + 2 * NSTATE
-SAMPLE_WIDTH = 2 + NSTATE + NCON
-NLAM = max(NCON, 1)
 
 SIMULTANEOUS_TOL = 1e-9
 REARM_TOL = 1e-10
@@ -71,19 +230,8 @@ _EVENT_STEP_FRACTION = 0.7
 #: about where the guards' rounding noise leaves the root undetermined anyway
 _ROOT_XTOL = 1e-13
 
-CFG_T_END = 0
-CFG_MAX_EVENTS = 1
-CFG_RTOL = 2
-CFG_ATOL = 3
-CFG_H_MAX = 4
-CFG_SAMPLE_DT = 5
-#: 1: a touchdown happened before y0 (a trajectory continued from an event), so a terminal
-#: guard armed after the first touchdown is armed from the start
-CFG_TOUCHED_DOWN = 6
-CFG_SIZE = 7
-
 #: the y0 argument of simulate_maneuver that starts from the maneuver's own initial state at s
-#: (an array of NSTATE entries is the state to start from)
+#: (an array of 2d entries is the state to start from)
 FROM_S = np.empty(0)
 
 
@@ -102,47 +250,61 @@ def _dense_eval(F, y, x, out):
 
 
 @nb.njit(**HOT_PATH)
-def _guard_at(p, mode, u, code, y, i, lam):
-    """Guard i at a state y whose reactions are not known yet (lam: scratch)."""
-    if i < NCON and mode >> i & 1:
-        return reaction(p, mode, u, y, i)
-    return guard_value(p, mode, u, code, y, 0, lam, 0, i)
+def _guard_component(sv, mode, code, i):
+    """(k, sign) when guard i in this mode and maneuver is sign * y[k] (event roots then
+    interpolate that one component), else (-1, 1.0): from the system's table."""
+    ncon = sv[SV_NCON]
+    if i < ncon:
+        if mode >> i & 1:
+            return -1, 1.0  # (a reaction)
+        at = SV_GUARDS + 2 * i
+    else:
+        at = SV_GUARDS + 2 * ncon + MANEUVER_WIDTH * code
+    return sv[at], float(sv[at + 1])
 
 
 @nb.njit(**HOT_PATH)
-def _guard_on_dense(p, mode, u, code, F, y, x, i, tmp, lam):
+def _guard_at(p, sv, mode, u, code, y, i, lam):
+    """Guard i at a state y whose reactions are not known yet (lam: scratch)."""
+    if i < sv[SV_NCON] and mode >> i & 1:
+        return sys_reaction(sv, p, mode, u, y, i)
+    return sys_guard_value(sv, p, mode, u, code, y, 0, lam, 0, i)
+
+
+@nb.njit(**HOT_PATH)
+def _guard_on_dense(p, sv, mode, u, code, F, y, x, i, tmp, lam):
     """Guard i on the interpolant at x: one component when the guard is one (a height in the
     air, a velocity as terminal guard: see ``guard_component``), else the whole state."""
-    k, sign = guard_component(mode, code, i)
+    k, sign = _guard_component(sv, mode, code, i)
     if k >= 0:
         xm = 1.0 - x
         return sign * (y[k] + x * (F[0, k] + xm * (F[1, k] + x * (F[2, k] + xm * (
             F[3, k] + x * (F[4, k] + xm * (F[5, k] + x * F[6, k])))))))
     _dense_eval(F, y, x, tmp)
-    return _guard_at(p, mode, u, code, tmp, i, lam)
+    return _guard_at(p, sv, mode, u, code, tmp, i, lam)
 
 
 @nb.njit(**HOT_PATH)
-def _guard_rate(p, mode, u, code, y, f, i, tmp, lam):
+def _guard_rate(p, sv, mode, u, code, y, f, i, tmp, lam):
     """d/dt of guard i along the flow of ``mode`` at y (f = vector field at y), by a central
     difference: only its sign is used, to decide which near-zero guards flip together."""
     eps = 1e-6
     for m in range(y.shape[0]):
         tmp[m] = y[m] + eps * f[m]
-    g_plus = _guard_at(p, mode, u, code, tmp, i, lam)
+    g_plus = _guard_at(p, sv, mode, u, code, tmp, i, lam)
     for m in range(y.shape[0]):
         tmp[m] = y[m] - eps * f[m]
-    g_minus = _guard_at(p, mode, u, code, tmp, i, lam)
+    g_minus = _guard_at(p, sv, mode, u, code, tmp, i, lam)
     return (g_plus - g_minus) / (2.0 * eps)
 
 
 @nb.njit(**HOT_PATH)
-def _root_on_dense(p, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, lam):
+def _root_on_dense(p, sv, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, lam):
     """Root in (xa, xb] of guard i on the dense output (ga > 0 >= gb), by regula falsi with
     the Anderson-Bjorck modification, to a bracket below _ROOT_XTOL of the step. A guard that
     is one state component (see ``guard_component``) iterates on that component's eight
     coefficients, read once; only other guards interpolate the whole state per iterate."""
-    k, sign = guard_component(mode, code, i)
+    k, sign = _guard_component(sv, mode, code, i)
     c = max(k, 0)  # (read but unused when the guard is not one component)
     y0, f0, f1, f2, f3 = y[c], F[0, c], F[1, c], F[2, c], F[3, c]
     f4, f5, f6 = F[4, c], F[5, c], F[6, c]
@@ -160,7 +322,7 @@ def _root_on_dense(p, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, lam):
                 f5 + x * f6)))))))
         else:
             _dense_eval(F, y, x, tmp)
-            gx = _guard_at(p, mode, u, code, tmp, i, lam)
+            gx = _guard_at(p, sv, mode, u, code, tmp, i, lam)
         if gx > 0.0:
             if side == 1:
                 m = 1.0 - gx / ga
@@ -180,16 +342,16 @@ def _root_on_dense(p, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, lam):
 
 
 @nb.njit(**HOT_PATH)
-def _rate_on_dense(p, F, y, x, j, tmp, rates):
+def _rate_on_dense(p, sv, F, y, x, j, tmp, rates):
     """d/dt a_j along the step's interpolant at x: Da_j(q) q' of the interpolated state (the
     velocities are part of the state, so no derivative of the interpolant is needed)."""
     _dense_eval(F, y, x, tmp)
-    constraint_rates(p, tmp, 0, rates)
+    sys_constraint_rates(sv, p, tmp, 0, rates)
     return rates[j]
 
 
 @nb.njit(**HOT_PATH)
-def _extremum(p, mode, u, code, F, y, j, ra, rb, above, tmp, lam, rates):
+def _extremum(p, sv, mode, u, code, F, y, j, ra, rb, above, tmp, lam, rates):
     """Toward the extremum of constraint j's height a_j inside the step, where its rate on the
     interpolant (ra at the start, rb at the end, of opposite signs) is zero: the apex of a
     flight (ra > 0) or a lowest point (ra < 0). Regula falsi on the rate (Illinois), which
@@ -206,10 +368,10 @@ def _extremum(p, mode, u, code, F, y, j, ra, rb, above, tmp, lam, rates):
         x = (xa * rb - xb * ra) / (rb - ra)
         if not xa < x < xb:
             x = 0.5 * (xa + xb)
-        g = _guard_on_dense(p, mode, u, code, F, y, x, j, tmp, lam)
+        g = _guard_on_dense(p, sv, mode, u, code, F, y, x, j, tmp, lam)
         if (g > 0.0) == (above > 0.0) or xb - xa <= 1e-12:
             break
-        r = _rate_on_dense(p, F, y, x, j, tmp, rates)
+        r = _rate_on_dense(p, sv, F, y, x, j, tmp, rates)
         if (r > 0.0) == (ra > 0.0):
             if side == 1:
                 rb *= 0.5
@@ -230,48 +392,48 @@ _PROBES = 8
 
 
 @nb.njit(**HOT_PATH)
-def _first_probe(p, mode, u, code, F, y, i, xa, xb, last, above, tmp, lam):
+def _first_probe(p, sv, mode, u, code, F, y, i, xa, xb, last, above, tmp, lam):
     """The first of the points xa + (xb - xa) m / _PROBES, m = 1 .. last, where guard i on the
     interpolant is above zero (``above`` = 1.0) or at or below it (``above`` = 0.0; a float,
     as in _extremum): (x, g there), or (-1.0, 0.0) when none is."""
     for m in range(1, last + 1):
         x = xa + (xb - xa) * m / _PROBES
-        g = _guard_on_dense(p, mode, u, code, F, y, x, i, tmp, lam)
+        g = _guard_on_dense(p, sv, mode, u, code, F, y, x, i, tmp, lam)
         if (g > 0.0) == (above > 0.0):
             return x, g
     return -1.0, 0.0
 
 
 @nb.njit(**HOT_PATH)
-def _separation_point(p, mode, u, code, F, y, j, r0, r1, x_end, tmp, lam, rates):
+def _separation_point(p, sv, mode, u, code, F, y, j, r0, r1, x_end, tmp, lam, rates):
     """Where in [0, x_end) of the step constraint j, disarmed at ~0 after an event (a bounce, a
     liftoff, a foot that left the ground at once), is above the ground: at the start if it is
     above there and coming down (a flight that began in an earlier step); near the apex of its
     flight when its rate went from separating (r0 > 0) to approaching (r1 < 0); else at the
     first of _PROBES - 1 probes with a_j > 0. -1.0 when a_j never rose above 0 (it went the
     wrong way, or the flight is shorter than the guard's rounding)."""
-    if r0 < 0.0 and _guard_on_dense(p, mode, u, code, F, y, 0.0, j, tmp, lam) > 0.0:
+    if r0 < 0.0 and _guard_on_dense(p, sv, mode, u, code, F, y, 0.0, j, tmp, lam) > 0.0:
         return 0.0
     if r0 > 0.0 and r1 < 0.0:
-        x, g = _extremum(p, mode, u, code, F, y, j, r0, r1, 1.0, tmp, lam, rates)
+        x, g = _extremum(p, sv, mode, u, code, F, y, j, r0, r1, 1.0, tmp, lam, rates)
         if g > 0.0 and x < x_end:
             return x
-    return _first_probe(p, mode, u, code, F, y, j, 0.0, x_end, _PROBES - 1, 1.0, tmp, lam)[0]
+    return _first_probe(p, sv, mode, u, code, F, y, j, 0.0, x_end, _PROBES - 1, 1.0, tmp, lam)[0]
 
 
 @nb.njit(**HOT_PATH)
-def _separation_rate(p, mode, u, y, f, j, tmp, rates):
+def _separation_rate(p, sv, mode, u, y, f, j, tmp, rates):
     """d/dt (Da_j q') along the flow of ``mode`` (f: the vector field there): a_j'', the
     separation acceleration of a constraint at rest on its surface, by a central difference
     (only its sign is used)."""
     eps = 1e-6
     for m in range(y.shape[0]):
         tmp[m] = y[m] + eps * f[m]
-    constraint_rates(p, tmp, 0, rates)
+    sys_constraint_rates(sv, p, tmp, 0, rates)
     r_plus = rates[j]
     for m in range(y.shape[0]):
         tmp[m] = y[m] - eps * f[m]
-    constraint_rates(p, tmp, 0, rates)
+    sys_constraint_rates(sv, p, tmp, 0, rates)
     return (r_plus - rates[j]) / (2.0 * eps)
 
 
@@ -281,54 +443,56 @@ _COMPLEMENTARITY_TOL = 1e-10
 
 
 @nb.njit(**HOT_PATH)
-def _consistent_mode(p, mode, u, y, f, lam, tmp, tmp2, rates):
+def _consistent_mode(p, sv, mode, u, y, f, lam, tmp, tmp2, rates):
     """The contact mode that satisfies the complementarity conditions at y, chosen among the
     subsets of ``mode`` (the constraints at rest on their surface after the event's resets):
     every active constraint with lambda_j >= 0, every released one with a separation
     acceleration a_j'' >= 0. Subsets are tried from the largest down (2^n candidates; the
     Schur complement Da M^-1 Da^T is positive definite, so at most one fits). Returns the mode
     (f and lam then hold its vector field and reactions), or -1 when none fits."""
-    for size in range(NCON, -1, -1):
-        for cand in range(1 << NCON):
+    ncon = sv[SV_NCON]
+    for size in range(ncon, -1, -1):
+        for cand in range(1 << ncon):
             if cand & ~mode:
                 continue
             bits = 0
-            for j in range(NCON):
+            for j in range(ncon):
                 bits += cand >> j & 1
             if bits != size:
                 continue
-            _field_at(p, cand, y, 0, u, f, 0, lam, 0)
+            sys_field_at(sv, p, cand, y, 0, u, f, 0, lam, 0)
             ok = True
-            for j in range(NCON):
+            for j in range(ncon):
                 if not mode >> j & 1:
                     continue
                 if cand >> j & 1:
                     ok = lam[j] >= -_COMPLEMENTARITY_TOL
                 else:
-                    ok = _separation_rate(p, cand, u, y, f, j, tmp2, rates) \
+                    ok = _separation_rate(p, sv, cand, u, y, f, j, tmp2, rates) \
                         >= -_COMPLEMENTARITY_TOL
                 if not ok:
                     break
             if ok:
                 return cand
-    _field_at(p, mode, y, 0, u, f, 0, lam, 0)
+    sys_field_at(sv, p, mode, y, 0, u, f, 0, lam, 0)
     return -1
 
 
 @nb.njit(**HOT_PATH)
-def _record_sample(samples, ns, t, y, mode, lam):
+def _record_sample(sv, samples, ns, t, y, mode, lam):
     if ns < samples.shape[0]:
         samples[ns, 0] = t
-        for k in range(NSTATE):
+        n = sv[SV_NSTATE]
+        for k in range(n):
             samples[ns, 1 + k] = y[k]
-        samples[ns, 1 + NSTATE] = mode
-        for j in range(NCON):
-            samples[ns, 2 + NSTATE + j] = lam[j]
+        samples[ns, 1 + n] = mode
+        for j in range(sv[SV_NCON]):
+            samples[ns, 2 + n + j] = lam[j]
     return ns + 1
 
 
 @nb.njit(**HOT_PATH)
-def _initial_step(p, mode, u, y, f, rtol, atol, h_max, tmp, ftmp, lam):
+def _initial_step(p, sv, mode, u, y, f, rtol, atol, h_max, tmp, ftmp, lam):
     """Starting step size (Hairer, Norsett and Wanner, Sec. II.4), one extra evaluation."""
     n = y.shape[0]
     d0 = 0.0
@@ -342,7 +506,7 @@ def _initial_step(p, mode, u, y, f, rtol, atol, h_max, tmp, ftmp, lam):
     h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
     for i in range(n):
         tmp[i] = y[i] + h0 * f[i]
-    _field_at(p, mode, tmp, 0, u, ftmp, 0, lam, 0)
+    sys_field_at(sv, p, mode, tmp, 0, u, ftmp, 0, lam, 0)
     d2 = 0.0
     for i in range(n):
         scale = atol + rtol * abs(y[i])
@@ -356,35 +520,40 @@ def _initial_step(p, mode, u, y, f, rtol, atol, h_max, tmp, ftmp, lam):
 
 
 @nb.njit(**HOT_PATH, inline="always")
-def _all_guards(p, mode, u, code, y, lam, out):
-    guard_values(p, mode, u, code, y, 0, lam, 0, out)
+def _all_guards(p, sv, mode, u, code, y, lam, out):
+    sys_guard_values(sv, p, mode, u, code, y, 0, lam, 0, out)
 
 
 @nb.njit(**HOT_PATH)
-def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
+def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0):
     """Integrate maneuver ``code`` from t = 0 to its terminal event: from its initial state at
-    s, or, when y0 has NSTATE entries, from (y0, mode0) (a trajectory continued after an event;
+    s, or, when y0 has 2d entries, from (y0, mode0) (a trajectory continued after an event;
     s then unused). One compiled call per trajectory, and one function: a wrapper around the
     kernel cost a second compile, in which LLVM optimises the linked step again (~1 s).
 
     Returns (status, t_final, mode_final, n_events, n_samples, nfev, nsteps, nrejected,
     outcome at the final state).
     """
-    term_after_touchdown = TERM_AFTER_TOUCHDOWN[code] != 0 and cfg[CFG_TOUCHED_DOWN] == 0.0
-    term_mode = FINAL_MODE[code]
+    ncon = sv[SV_NCON]
+    maneuver = SV_GUARDS + 2 * ncon + MANEUVER_WIDTH * code  # (this maneuver's entries)
+    term_after_touchdown = sv[maneuver + 2] != 0 and cfg[CFG_TOUCHED_DOWN] == 0.0
+    term_mode = sv[maneuver + 3]
     t_end = cfg[CFG_T_END]
     max_events = int(cfg[CFG_MAX_EVENTS])
     rtol = cfg[CFG_RTOL]
     atol = cfg[CFG_ATOL]
     h_max = cfg[CFG_H_MAX]
     sample_dt = cfg[CFG_SAMPLE_DT]
-    term = NCON  # index of the terminal guard
+    term = ncon  # index of the terminal guard
+    nguards = ncon + 1
+    nlam = max(ncon, 1)
 
-    n = NSTATE
+    n = sv[SV_NSTATE]
+    workspace = sv[SV_WORKSPACE]
     # one allocation carved into views (a dozen small arrays cost more than a step)
-    buf = np.zeros(WORKSPACE + 13 * n + 6 * NLAM + 3 * NGUARDS)
-    W = buf[:WORKSPACE]
-    o = WORKSPACE
+    buf = np.zeros(workspace + 13 * n + 6 * nlam + 3 * nguards)
+    W = buf[:workspace]
+    o = workspace
     F = buf[o:o + 7 * n].reshape((7, n))
     o += 7 * n
     y = buf[o:o + n]
@@ -394,26 +563,26 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
     tmp = buf[o + 4 * n:o + 5 * n]
     tmp2 = buf[o + 5 * n:o + 6 * n]
     o += 6 * n
-    rates = buf[o:o + NLAM]
-    lam = buf[o + NLAM:o + 2 * NLAM]
-    lam_new = buf[o + 2 * NLAM:o + 3 * NLAM]
-    lam_tmp = buf[o + 3 * NLAM:o + 4 * NLAM]
-    rate0 = buf[o + 4 * NLAM:o + 5 * NLAM]  # Da q' at the step's start
-    rate1 = buf[o + 5 * NLAM:o + 6 * NLAM]  # and at its end
-    o += 6 * NLAM
-    gv = buf[o:o + NGUARDS]
-    gv_new = buf[o + NGUARDS:o + 2 * NGUARDS]
-    probe = buf[o + 2 * NGUARDS:o + 3 * NGUARDS]
-    flags = np.zeros(2 * NGUARDS, dtype=np.bool_)
-    armed = flags[:NGUARDS]
-    flips = flags[NGUARDS:]
+    rates = buf[o:o + nlam]
+    lam = buf[o + nlam:o + 2 * nlam]
+    lam_new = buf[o + 2 * nlam:o + 3 * nlam]
+    lam_tmp = buf[o + 3 * nlam:o + 4 * nlam]
+    rate0 = buf[o + 4 * nlam:o + 5 * nlam]  # Da q' at the step's start
+    rate1 = buf[o + 5 * nlam:o + 6 * nlam]  # and at its end
+    o += 6 * nlam
+    gv = buf[o:o + nguards]
+    gv_new = buf[o + nguards:o + 2 * nguards]
+    probe = buf[o + 2 * nguards:o + 3 * nguards]
+    flags = np.zeros(2 * nguards, dtype=np.bool_)
+    armed = flags[:nguards]
+    flips = flags[nguards:]
     if y0.shape[0] == n:
         for k in range(n):
             y[k] = y0[k]
         mode = mode0
     else:
-        initial_state(code, s, p, y)
-        mode = INITIAL_MODE[code]
+        sys_initial_state(sv, code, s, p, y)
+        mode = sv[maneuver + 4]
     t = 0.0
     nfev = 0
     nsteps = 0
@@ -425,19 +594,19 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
     sampling = sample_dt > 0.0
     next_sample = 0
 
-    _field_at(p, mode, y, 0, u, f, 0, lam, 0)
+    sys_field_at(sv, p, mode, y, 0, u, f, 0, lam, 0)
     nfev += 1
-    _all_guards(p, mode, u, code, y, lam, gv)
-    constraint_rates(p, y, 0, rate0)
-    for i in range(NGUARDS):
+    _all_guards(p, sv, mode, u, code, y, lam, gv)
+    sys_constraint_rates(sv, p, y, 0, rate0)
+    for i in range(nguards):
         armed[i] = gv[i] > REARM_TOL
     if not term_enabled:
         armed[term] = False
     if sampling:
-        ns = _record_sample(samples, ns, t, y, mode, lam)
+        ns = _record_sample(sv, samples, ns, t, y, mode, lam)
         next_sample = 1
 
-    h = _initial_step(p, mode, u, y, f, rtol, atol, h_max, tmp, tmp2, lam_tmp)
+    h = _initial_step(p, sv, mode, u, y, f, rtol, atol, h_max, tmp, tmp2, lam_tmp)
     nfev += 1
     trial = True
     step_rejected = False
@@ -451,7 +620,8 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
             status = HORIZON
             break
         h_step = min(h, h_max, t_end - t)
-        err = step(p, mode, u, code, y, f, h_step, W, y_new, f_new, lam_new, rtol, atol, probe)
+        err = sys_step(sv, p, mode, u, code, y, f, h_step, W, y_new, f_new, lam_new, rtol, atol,
+                       probe)
         nfev += 12
         nsteps += 1
         if not err < 1.0:
@@ -470,18 +640,18 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
         trial = False
         h = h_step * factor
 
-        _all_guards(p, mode, u, code, y_new, lam_new, gv_new)
-        constraint_rates(p, y_new, 0, rate1)
+        _all_guards(p, sv, mode, u, code, y_new, lam_new, gv_new)
+        sys_constraint_rates(sv, p, y_new, 0, rate1)
         # candidates: an armed guard seen <= 0 at the end or at a stage state; a constraint in
         # the air that is above the ground at both ends but was moving down at the start and
         # up at the end (its lowest point is inside the step: is it below the ground?); a
         # constraint disarmed after an event that ends the step at or below the ground (it
         # may have left and come back within the step)
         any_candidate = False
-        for i in range(NGUARDS):
+        for i in range(nguards):
             if armed[i] and gv[i] > 0.0 and (gv_new[i] <= 0.0 or probe[i] <= 1.0):
                 any_candidate = True
-            elif i < NCON and not mode >> i & 1:
+            elif i < ncon and not mode >> i & 1:
                 if armed[i]:
                     if gv[i] > 0.0 and rate0[i] < 0.0 and rate1[i] > 0.0:
                         any_candidate = True
@@ -490,7 +660,7 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
 
         dense_ready = False
         if any_candidate or sampling:
-            dense_coefficients(p, mode, u, y, f, h_step, W, y_new, f_new, F)
+            sys_dense_coefficients(sv, p, mode, u, y, f, h_step, W, y_new, f_new, F)
             nfev += 3
             dense_ready = True
 
@@ -500,51 +670,51 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
         if any_candidate:
             # the armed guards first, then the reset constraints, searched only up to the
             # earliest root found (the common case: the step also holds the terminal event)
-            for i in range(NGUARDS):
+            for i in range(nguards):
                 if not armed[i] or gv[i] <= 0.0:
                     continue
                 if gv_new[i] <= 0.0:
                     xb = 1.0
                     gb = gv_new[i]
                 elif probe[i] <= 1.0:
-                    xb, gb = _first_probe(p, mode, u, code, F, y, i, 0.0, probe[i], _PROBES,
+                    xb, gb = _first_probe(p, sv, mode, u, code, F, y, i, 0.0, probe[i], _PROBES,
                                           0.0, tmp, lam_tmp)
                     if xb < 0.0:
                         continue
-                elif i < NCON and not mode >> i & 1 and rate0[i] < 0.0 and rate1[i] > 0.0:
+                elif i < ncon and not mode >> i & 1 and rate0[i] < 0.0 and rate1[i] > 0.0:
                     # its lowest point is inside the step: at or below the ground?
-                    xb, gb = _extremum(p, mode, u, code, F, y, i, rate0[i], rate1[i], 0.0,
+                    xb, gb = _extremum(p, sv, mode, u, code, F, y, i, rate0[i], rate1[i], 0.0,
                                        tmp, lam_tmp, rates)
                     if gb > 0.0:
                         continue
                 else:
                     continue
-                x = _root_on_dense(p, mode, u, code, F, y, i, 0.0, gv[i], xb, gb, tmp, lam_tmp)
+                x = _root_on_dense(p, sv, mode, u, code, F, y, i, 0.0, gv[i], xb, gb, tmp, lam_tmp)
                 if x < x_first:
                     x_first = x
                     first = i
-            for i in range(NCON):
+            for i in range(ncon):
                 if armed[i] or mode >> i & 1 or gv_new[i] > 0.0:
                     continue
                 x_end = min(x_first, 1.0)
                 g_end = gv_new[i]
                 if x_end < 1.0:
-                    g_end = _guard_on_dense(p, mode, u, code, F, y, x_end, i, tmp, lam_tmp)
+                    g_end = _guard_on_dense(p, sv, mode, u, code, F, y, x_end, i, tmp, lam_tmp)
                     if g_end > 0.0:
                         continue
-                xa = _separation_point(p, mode, u, code, F, y, i, rate0[i], rate1[i], x_end,
+                xa = _separation_point(p, sv, mode, u, code, F, y, i, rate0[i], rate1[i], x_end,
                                        tmp, lam_tmp, rates)
                 if xa < 0.0:
                     wrong_way = wrong_way or g_end < -REARM_TOL
                     continue
-                ga = _guard_on_dense(p, mode, u, code, F, y, xa, i, tmp, lam_tmp)
+                ga = _guard_on_dense(p, sv, mode, u, code, F, y, xa, i, tmp, lam_tmp)
                 # the first probe at or below, else the end of the searched part
-                xb, gb = _first_probe(p, mode, u, code, F, y, i, xa, x_end, _PROBES - 1, 0.0,
+                xb, gb = _first_probe(p, sv, mode, u, code, F, y, i, xa, x_end, _PROBES - 1, 0.0,
                                       tmp, lam_tmp)
                 if xb < 0.0:
                     xb = x_end
                     gb = g_end
-                x = _root_on_dense(p, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, lam_tmp)
+                x = _root_on_dense(p, sv, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, lam_tmp)
                 if x < x_first:
                     x_first = x
                     first = i
@@ -556,9 +726,9 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
                 if ts > t_stop or (first >= 0 and ts >= t_stop):
                     break
                 _dense_eval(F, y, (ts - t) / h_step, tmp)
-                _field_at(p, mode, tmp, 0, u, tmp2, 0, lam_tmp, 0)
+                sys_field_at(sv, p, mode, tmp, 0, u, tmp2, 0, lam_tmp, 0)
                 nfev += 1
-                ns = _record_sample(samples, ns, ts, tmp, mode, lam_tmp)
+                ns = _record_sample(sv, samples, ns, ts, tmp, mode, lam_tmp)
                 next_sample += 1
 
         if first < 0:
@@ -566,10 +736,10 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
             for k in range(n):
                 y[k] = y_new[k]
                 f[k] = f_new[k]
-            for j in range(NLAM):
+            for j in range(nlam):
                 lam[j] = lam_new[j]
                 rate0[j] = rate1[j]
-            for i in range(NGUARDS):
+            for i in range(nguards):
                 gv[i] = gv_new[i]
                 if not armed[i] and (i < term or term_enabled):
                     if gv[i] > REARM_TOL:
@@ -586,23 +756,23 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
         _dense_eval(F, y, x_first, tmp)
         for k in range(n):
             y[k] = tmp[k]
-        _field_at(p, mode, y, 0, u, f, 0, lam, 0)
+        sys_field_at(sv, p, mode, y, 0, u, f, 0, lam, 0)
         nfev += 1
-        _all_guards(p, mode, u, code, y, lam, gv_new)
+        _all_guards(p, sv, mode, u, code, y, lam, gv_new)
         # contact guards near zero and moving toward it flip with a contact guard (MODEL.md
         # Sec. 3); the terminal guard is ordered by time: it never joins contact events
-        for i in range(NGUARDS):
+        for i in range(nguards):
             flips[i] = i == first
             if i != first and armed[i] and i != term and first != term:
                 if abs(gv_new[i]) <= SIMULTANEOUS_TOL:
-                    flips[i] = _guard_rate(p, mode, u, code, y, f, i, tmp, lam_tmp) < 0.0
-        for j in range(NCON):
+                    flips[i] = _guard_rate(p, sv, mode, u, code, y, f, i, tmp, lam_tmp) < 0.0
+        for j in range(ncon):
             if not flips[j] and not mode >> j & 1 and gv_new[j] < -VIOLATION_TOL:
                 status = CONSTRAINT_VIOLATED  # (a root missed before this event)
                 finished = True
         touchdown = 0
         liftoff = 0
-        for j in range(NCON):
+        for j in range(ncon):
             if flips[j]:
                 if mode >> j & 1:
                     liftoff |= 1 << j
@@ -618,25 +788,25 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
             for k in range(n):
                 row[6 + k] = y[k]
             if sampling:
-                ns = _record_sample(samples, ns, t, y, mode, lam)
+                ns = _record_sample(sv, samples, ns, t, y, mode, lam)
             term_was_armed = armed[term] and gv_new[term] > 0.0
             mode = mode ^ (touchdown | liftoff)
             if touchdown:
-                apply_impact(p, mode, y)
+                sys_apply_impact(sv, p, mode, y)
                 # restitution: an impacted constraint moving apart leaves the mode at once
-                constraint_rates(p, y, 0, rates)
-                for j in range(NCON):
+                sys_constraint_rates(sv, p, y, 0, rates)
+                for j in range(ncon):
                     if touchdown >> j & 1 and rates[j] > SEPARATION_TOL:
                         mode &= ~(1 << j)
-            _field_at(p, mode, y, 0, u, f, 0, lam, 0)
+            sys_field_at(sv, p, mode, y, 0, u, f, 0, lam, 0)
             nfev += 1
             # complementarity: the next mode has every active constraint pressing (lambda >=
             # 0) and every released one not accelerating into its surface; when the mode the
             # event suggests has a pulling contact, the others are tried
-            for j in range(NCON):
+            for j in range(ncon):
                 if mode >> j & 1 and lam[j] < 0.0:
-                    chosen = _consistent_mode(p, mode, u, y, f, lam, tmp, tmp2, rates)
-                    nfev += 1 << NCON
+                    chosen = _consistent_mode(p, sv, mode, u, y, f, lam, tmp, tmp2, rates)
+                    nfev += 1 << ncon
                     if chosen < 0:
                         status = INCONSISTENT  # no mode fits: every one pulls or penetrates
                         finished = True
@@ -648,12 +818,12 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
                 row[6 + n + k] = y[k]
             n_events += 1
             if sampling:
-                ns = _record_sample(samples, ns, t, y, mode, lam)
+                ns = _record_sample(sv, samples, ns, t, y, mode, lam)
             if touchdown and term_after_touchdown:
                 term_enabled = True
-            _all_guards(p, mode, u, code, y, lam, gv)
-            constraint_rates(p, y, 0, rate0)
-            for i in range(NGUARDS):
+            _all_guards(p, sv, mode, u, code, y, lam, gv)
+            sys_constraint_rates(sv, p, y, 0, rate0)
+            for i in range(nguards):
                 if flips[i] or not armed[i]:
                     # events can follow each other without a plain step between them (a bar's
                     # impacts 1e-7 apart): a guard away from zero since is armed again here;
@@ -682,28 +852,29 @@ def simulate_maneuver(p, code, s, u, cfg, samples, events, y_out, y0, mode0):
             finished = True
 
     if sampling:
-        ns = _record_sample(samples, ns, t, y, mode, lam)
+        ns = _record_sample(sv, samples, ns, t, y, mode, lam)
     for k in range(n):
         y_out[k] = y[k]
-    outcome = outcome_value(code, p, y_out, 0)
+    outcome = sys_outcome_value(sv, code, p, y_out, 0)
     return status, t, mode, n_events, ns, nfev, nsteps, nrejected, outcome
 
 
 @nb.njit(**HOT_PATH, nogil=True)
-def simulate_batch_kernel(p, code, ss, us, cfg, events, y_out, outcome, info, start, stop):
+def simulate_batch_kernel(p, sv, code, ss, us, cfg, events, y_out, outcome, info, start, stop):
     """:func:`simulate_maneuver` for the cases start <= k < stop of many s and inputs (row k of
     each array); ``outcome[k]`` receives the maneuver's outcome at the final state. It releases
     the GIL: Python threads run it on disjoint ranges in parallel
     (:meth:`biped_opt.simulation.compiled.CompiledSystem.simulate_batch` hands out the ranges),
     which shares the work out by how fast each thread actually runs, where a parallel loop
     splits it evenly in advance and waits for a thread whose core is busy elsewhere."""
-    no_samples = np.empty((0, SAMPLE_WIDTH))
+    no_samples = np.empty((0, 2 + sv[SV_NSTATE] + sv[SV_NCON]))
     from_s = np.empty(0)  # (FROM_S, allocated here: a global array would be frozen into code)
-    mode0 = INITIAL_MODE[code]  # (unused with from_s; a variable, not a literal 0, which Numba
-    # would compile a second specialisation of the whole kernel for)
+    # (unused with from_s; a variable, not a literal 0, which Numba would compile a second
+    # specialisation of the whole kernel for)
+    mode0 = sv[SV_GUARDS + 2 * sv[SV_NCON] + MANEUVER_WIDTH * code + 4]
     for k in range(start, stop):
         status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej, value = simulate_maneuver(
-            p, code, ss[k], us[k], cfg, no_samples, events[k], y_out[k], from_s, mode0
+            p, sv, code, ss[k], us[k], cfg, no_samples, events[k], y_out[k], from_s, mode0
         )
         outcome[k] = value
         info[k, 0] = status
@@ -717,17 +888,17 @@ def simulate_batch_kernel(p, code, ss, us, cfg, events, y_out, outcome, info, st
 
 
 @nb.njit(**HOT_PATH)
-def variational_field(p, mode, w, u, du, step, steps, weights, out, lam):
-    """d/dt of w = (y, Z), Z = dy/dp stored row-major (NSTATE x k), into ``out``; returns the
+def variational_field(p, sv, mode, w, u, du, step, steps, weights, out, lam):
+    """d/dt of w = (y, Z), Z = dy/dp stored row-major (2d x k), into ``out``; returns the
     field evaluations used. f(y, u) first; then column c of Z' is the derivative of f along
     (Z[:, c], du[:, c]): the central difference sum_b weights[b] f(y + steps[b] h Z[:, c],
     u + steps[b] h du[:, c]) / (12 h), h = step / (the column's largest entry), 0 for a zero
     column. The arithmetic of :meth:`biped_opt.control.derivatives._Model.variational_rhs`
     in one compiled call (from Python, each field evaluation cost a dispatch)."""
-    n = NSTATE
+    n = sv[SV_NSTATE]
     k = du.shape[1]
     m = u.shape[0]
-    vector_field(p, mode, w, 0, u, out, 0, lam, 0)
+    sys_field_at(sv, p, mode, w, 0, u, out, 0, lam, 0)
     ys = np.empty(n)
     us = np.empty(m)
     fs = np.empty(n)
@@ -750,10 +921,38 @@ def variational_field(p, mode, w, u, du, step, steps, weights, out, lam):
                 ys[i] = w[i] + off * w[n + i * k + c]
             for i in range(m):
                 us[i] = u[i] + off * du[i, c]
-            vector_field(p, mode, ys, 0, us, fs, 0, lam, 0)
+            sys_field_at(sv, p, mode, ys, 0, us, fs, 0, lam, 0)
             for i in range(n):
                 acc[i] = weights[0] * fs[i] if b == 0 else acc[i] + weights[b] * fs[i]
             count += 1
         for i in range(n):
             out[n + i * k + c] = acc[i] / (12.0 * h)
     return count
+
+
+#: the types the kernel's entry points are called with (biped_opt.simulation.compiled,
+#: biped_opt.control.derivatives), for :func:`compile_all`
+ENTRY_SIGNATURES = {
+    "simulate_maneuver": "Tuple((i8, f8, i8, i8, i8, i8, i8, i8, f8))(f8[::1], i8[::1], i8, f8, "
+                         "f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], i8)",
+    "simulate_batch_kernel": "void(f8[::1], i8[::1], i8, f8[::1], f8[:, ::1], f8[::1], "
+                             "f8[:, :, ::1], f8[:, ::1], f8[::1], f8[:, ::1], i8, i8)",
+    "variational_field": "i8(f8[::1], i8[::1], i8, f8[::1], f8[::1], f8[:, ::1], f8, f8[::1], "
+                         "f8[::1], f8[::1], f8[::1])",
+}
+
+
+def compile_all() -> float:
+    """Compile the kernel's entry points for the types they are called with (or load them from
+    Numba's cache); returns the seconds it took. ``make venv`` runs it once after installing,
+    so that no system's first compile includes the kernel's."""
+    import time
+
+    t0 = time.perf_counter()
+    for name, signature in ENTRY_SIGNATURES.items():
+        globals()[name].compile(signature)
+    return time.perf_counter() - t0
+
+
+if __name__ == "__main__":
+    print(f"biped_opt's shared kernel compiled (or loaded) in {compile_all():.1f} s")

@@ -1,81 +1,59 @@
-"""A second process that compiles a freshly generated module's event functions, in parallel.
+"""A second process that compiles a freshly generated module's functions, in parallel.
 
-A system's first simulation compiles its kernel, and Numba compiles the kernel's callees as it
-meets them: the initial state and step, then the DOP853 step (about half of the whole compile),
-then the functions that locate and handle events (dense output, guards on the interpolant, roots,
-guard rates: a quarter). None of them depends on the step, so :func:`start` hands them to a
-second interpreter as soon as the module is written; it compiles them with their explicit
-signatures (:data:`SIGNATURES`, the types the kernel calls them with) into Numba's on-disk cache,
-while the first process compiles the step (:func:`step_first`) and then the kernel, which loads
-them from there (Numba reads a function's cache index each time it compiles it). On 2 cores
-this takes ~3 s off a cold compile.
+A new system compiles only its own functions: the kernel that calls them is shared by every
+system (:mod:`biped_opt.codegen.kernel`, compiled once per installation). The first process
+needs the vector field and the step first (:func:`step_first`: half of the work for a large
+system) and then the others, in the table's order (``function_addresses``,
+biped_opt.codegen.abi). :func:`start` hands those that do not call the vector field (the impact
+map, the guards, the initial states...: ``FIELD_FREE``) to a second interpreter as soon as the
+module is written; it compiles them in the opposite order into Numba's on-disk cache, so that
+the first process, after the step, finds them there (a C-callable function is looked up in the
+cache each time it is made).
 
-It only ever saves time: if the second process is late, fails, or a signature differs from the
-kernel's call (``tests/codegen/test_precompile.py`` checks that they agree), the first process
-compiles the function itself, as without it. ``BIPED_OPT_PRECOMPILE=0`` turns it off.
+It only ever saves time: if the second process is late or fails, the first compiles what it
+does not find, as without it. ``BIPED_OPT_PRECOMPILE=0`` turns it off. After the functions it
+builds the kernel ahead of time for later starts (:mod:`biped_opt.codegen.aot`).
 
-Run as ``python -m biped_opt.codegen.precompile PATH MODULE_NAME``.
+Run as ``python -m biped_opt.codegen.precompile PATH MODULE_NAME [WAIT_S]`` (WAIT_S: how long
+to wait for the first process, :data:`WAIT_S` by default).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
+import time
+from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
-from biped_opt.codegen import aot
+from biped_opt.codegen import abi, aot
 from biped_opt.codegen.aot import load_module
 
-__all__ = ["SIGNATURES", "STEP_SIGNATURE", "signatures", "start", "step_first", "main"]
+__all__ = ["FIRST", "cached", "step_first", "start", "main"]
 
-#: the kernel's calls, by callee: argument types in Numba's signature syntax (A: a C-contiguous
-#: float array, F: the interpolant's 2-D coefficients; i8 mode, code, guard index; f8 scalars)
-SIGNATURES: dict[str, str] = {
-    "initial_state": "i8, f8, A, A",
-    "_initial_step": "A, i8, A, A, A, f8, f8, f8, A, A, A",
-    "_guard_on_dense": "A, i8, A, i8, F, A, f8, i8, A, A",
-    "_root_on_dense": "A, i8, A, i8, F, A, i8, f8, f8, f8, f8, A, A",
-    "dense_coefficients": "A, i8, A, A, A, f8, A, A, A, F",
-    "_guard_rate": "A, i8, A, i8, A, A, i8, A, A",
-    "apply_impact": "A, i8, A",
-    "_first_probe": "A, i8, A, i8, F, A, i8, f8, f8, i8, f8, A, A",
-    "_separation_point": "A, i8, A, i8, F, A, i8, f8, f8, f8, A, A, A",
-    "_extremum": "A, i8, A, i8, F, A, i8, f8, f8, f8, A, A, A",
-    "_consistent_mode": "A, i8, A, A, A, A, A, A, A",
-}
+#: what the first process compiles before anything else
+FIRST = "step"
 
 
-#: the step, which the first process compiles before anything else (see :func:`step_first`)
-STEP_SIGNATURE = "A, i8, A, i8, A, A, f8, A, A, A, A, f8, f8, A"
-
-
-def _types(text: str) -> tuple:
-    from numba import types
-
-    names = {"A": types.Array(types.float64, 1, "C"), "F": types.Array(types.float64, 2, "C"),
-             "i8": types.int64, "f8": types.float64}
-    return tuple(names[t.strip()] for t in text.split(","))
-
-
-def signatures() -> dict[str, tuple]:
-    """:data:`SIGNATURES` as tuples of Numba types."""
-    return {fn: _types(text) for fn, text in SIGNATURES.items()}
+def enabled() -> bool:
+    return os.environ.get("BIPED_OPT_PRECOMPILE", "1") != "0"
 
 
 def step_first(module: ModuleType) -> None:
-    """Compile the new module's step now, in this process: the kernel's typing would otherwise
-    meet the initial state and the initial step first and compile them here too, while the
-    second process has them (and the event functions) ready by the time the step is done."""
-    if os.environ.get("BIPED_OPT_PRECOMPILE", "1") != "0":
-        module.step.compile(_types(STEP_SIGNATURE))
+    """Compile the new module's step now, in this process (the second process compiles the
+    other functions meanwhile)."""
+    if enabled():
+        module.compile_functions([FIRST])
 
 
 def start(path: Path, module_name: str) -> subprocess.Popen | None:
     """Start the second process for the module at ``path`` (imported as ``module_name``), or
     None when turned off. It runs detached: nothing waits for it."""
-    if os.environ.get("BIPED_OPT_PRECOMPILE", "1") == "0":
+    if not enabled():
         return None
     try:
         return subprocess.Popen(
@@ -87,14 +65,56 @@ def start(path: Path, module_name: str) -> subprocess.Popen | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    path, module_name = (sys.argv[1:] if argv is None else argv)[:2]
+    args = sys.argv[1:] if argv is None else argv
+    path, module_name = args[:2]
+    wait = float(args[2]) if len(args) > 2 else WAIT_S
     module = load_module(Path(path), module_name)
-    for fn, sig in signatures().items():
-        getattr(module, fn).compile(sig)
-    # then the kernel ahead of time, for later starts (biped_opt.codegen.aot): after the event
-    # functions, which the first process waits for
-    aot.build_once(module, Path(path).parent, Path(path).stem)
+    # what does not call the vector field, in the opposite of the first process's order; then,
+    # once the first process has the field in the cache (it compiles it for the step; compiling
+    # it here too would only slow that process down on a shared core), the rest but the step
+    for name in reversed([n for n in abi.FUNCTIONS if n in module.FIELD_FREE]):
+        module.compile_functions([name])
+    if _wait(lambda: cached(module._field_at, unknown=True), timeout=wait):
+        for name in reversed([n for n in abi.FUNCTIONS
+                              if n not in module.FIELD_FREE and n != FIRST]):
+            module.compile_functions([name])
+    if not aot.enabled():
+        return 0
+    # then, once the first process has compiled everything (or after a while), the kernel ahead
+    # of time for later starts (biped_opt.codegen.aot), at a low priority
+    _wait(lambda: all(cached(getattr(module, name + "_c"), unknown=True)
+                      for name in abi.FUNCTIONS), timeout=wait)
+    with contextlib.suppress(OSError):
+        os.nice(10)
+    aot.build_once(Path(path), Path(path).stem)
     return 0
+
+
+#: how long the second process waits for the first before it builds the ahead-of-time kernel
+WAIT_S = 600.0
+
+
+def cached(fn: Any, *, unknown: bool) -> bool:
+    """Whether Numba's on-disk cache has an entry for ``fn``: a dispatcher, or the Python
+    function of a C-callable one (``<name>_c``); ``unknown`` where that cannot be told (another
+    Numba's layout)."""
+    from numba.core.caching import FunctionCache
+
+    try:
+        cache = fn._cache if hasattr(fn, "_cache") else FunctionCache(fn)
+        return bool(cache._cache_file._load_index())
+    except (AttributeError, OSError, RuntimeError):
+        return unknown
+
+
+def _wait(ready: Callable[[], bool], timeout: float) -> bool:
+    """Poll ``ready`` every 0.2 s until it holds (True) or ``timeout`` [s] passes (False)."""
+    deadline = time.monotonic() + timeout
+    while not ready():
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(0.2)
+    return True
 
 
 if __name__ == "__main__":

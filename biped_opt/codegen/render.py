@@ -17,8 +17,11 @@ Python module that Numba compiles (and caches on disk, keyed by that file):
   outcomes, and the guards of every mode (a_j in the air, lambda_j in contact, the terminal one);
 - the DOP853 step (:mod:`biped_opt.codegen.dop853` with this system's dimensions; a small
   vector field written out into its twelve stages, a large one called from them, see
-  :data:`INLINE_FIELD_LINES`) and the event-driven kernel (:mod:`biped_opt.codegen.kernel`,
-  appended verbatim).
+  :data:`INLINE_FIELD_LINES`, and a larger one still from one loop over the stages, see
+  :data:`LOOP_STEP_LINES`);
+- the system's table and the C-callable wrappers of these functions through which the
+  event-driven kernel, one for every system, calls them (:mod:`biped_opt.codegen.abi`,
+  :mod:`biped_opt.codegen.kernel`): a new system compiles only its own functions.
 
 Parameters and inputs are arguments (``p``, ``u``), never constants: changing a parameter value
 does not change the source, so it does not recompile. Assignments a function never reads are
@@ -45,21 +48,18 @@ import tokenize
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, cast
 
 import sympy as sp
 from sympy.printing.pycode import PythonCodePrinter
 
-from biped_opt.codegen import dop853
+from biped_opt.codegen import abi, dop853
 from biped_opt.systems.derive import DerivedManeuver, DerivedSystem
 from biped_opt.systems.description import System, SystemDescriptionError
 
-__all__ = ["render", "source_key", "KERNEL_BODY", "UnsupportedExpressionError"]
-
-KERNEL_BODY = Path(__file__).with_name("kernel.py")
+__all__ = ["render", "source_key", "UnsupportedExpressionError"]
 #: bump when the generated code's form changes (the cache key includes it)
-FORMAT = 9
+FORMAT = 10
 
 
 class UnsupportedExpressionError(SystemDescriptionError):
@@ -621,6 +621,22 @@ def _reaction(vector_field: list[str], n: int) -> list[str]:
             f"    return {chosen}"]
 
 
+def _reaction_through_field(nstate: int, n: int) -> list[str]:
+    """``reaction`` for a large vector field: the called field's reactions. A copy of the
+    field's body without its stores, as :func:`_reaction` makes, would compile as long as the
+    field itself (6 s of a planar chain with d = 9); the accelerations it saves are a small
+    part of the field, and a reaction is evaluated only while an event's root is searched.
+    The same expressions, so the same value to the last bit."""
+    return ["@nb.njit(**HOT_PATH)",
+            "def reaction(p, mode, u, y, j):",
+            '    """lambda_j of mode ``mode`` at the state y (0 for an inactive constraint),',
+            '    Eq. (1a), from the called vector field."""',
+            f"    out = np.empty({nstate})",
+            f"    lam = np.empty({max(n, 1)})",
+            "    _field_at(p, mode, y, 0, u, out, 0, lam, 0)",
+            "    return lam[j]"]
+
+
 def _columns(em: _Emitter, L: list[list[str]], Da: list[list[str]], active: list[int]
              ) -> list[list[str]]:
     """M^-1 Da_j^T for the constraints in ``active``."""
@@ -815,8 +831,7 @@ def _guards(derived: DerivedSystem) -> list[str]:
         "    if mode >> i & 1:",
         "        return lam[lo + i]",
         "    return constraint_value(i, p, y, yo)",
-    ] + ["", ""] + _probe(derived, values=True) + [
-        "", ""] + _components(derived)
+    ] + ["", ""] + _probe(derived, values=True)
 
 
 def _as_component(derived: DerivedSystem, expr: sp.Expr) -> tuple[int, float] | None:
@@ -826,24 +841,6 @@ def _as_component(derived: DerivedSystem, expr: sp.Expr) -> tuple[int, float] | 
         if candidate in state:
             return state.index(candidate), sign
     return None
-
-
-def _components(derived: DerivedSystem) -> list[str]:
-    """``guard_component(mode, code, i)``: (k, sign) when guard i in this mode and maneuver is
-    sign * y[k] (event roots then interpolate one component), else (-1, 1.0)."""
-    n = derived.nconstraints
-    out = ["@nb.njit(**HOT_PATH, inline=\"always\")", "def guard_component(mode, code, i):",
-           '    """(k, sign) of a guard that is one state component, else (-1, 1.0)."""']
-    for j in range(n):
-        one = _as_component(derived, derived.constraints[j])
-        if one is not None:
-            out += [f"    if i == {j} and not mode >> {j} & 1:",
-                    f"        return {one[0]}, {one[1]!r}"]
-    for code, m in enumerate(derived.maneuvers.values()):
-        one = _as_component(derived, m.terminal)
-        if one is not None:
-            out += [f"    if i == {n} and code == {code}:", f"        return {one[0]}, {one[1]!r}"]
-    return out + ["    return -1, 1.0"]
 
 
 def _probe(derived: DerivedSystem, *, values: bool = False) -> list[str]:
@@ -1261,6 +1258,15 @@ def _int_array(values: list[int]) -> str:
 #: the three-legged walker's (123 lines) in 41.6 s and 53.9 us written out, 27.6 s and 50.5 us
 #: called (the copies' live values no longer spill). Outcomes are the same to the last bit.
 INLINE_FIELD_LINES = 110
+#: the largest called vector field whose step is still written out stage by stage; a larger
+#: one gets the step as one loop over the stages (biped_opt.codegen.dop853, ``loop=True``),
+#: which compiles one copy of the stage and its guard probe instead of twelve: walker8's step
+#: compiles in 1.3 s instead of 10.7 s. Per trajectory (one thread, 50 touchdowns or drops,
+#: written out against loop): the five-link chain (field of 212 lines) 653 against 568 us,
+#: chain9 6430 against 6412 us, but the four-legged walker (156 lines) 33.2 against 44.0 us
+#: and walker8 (285 lines) 73.3 against 100.4 us: a cheap field pays for the loop's index
+#: arithmetic. The library's three-legged walker (123 lines) stays written out.
+LOOP_STEP_LINES = 150
 
 
 def render(derived: DerivedSystem) -> str:
@@ -1268,8 +1274,13 @@ def render(derived: DerivedSystem) -> str:
     system = derived.system
     d, n = derived.ndof, derived.nconstraints
     maneuvers = list(derived.maneuvers.values())
-    after = [int(m.description.armed_after == "touchdown") for m in maneuvers]
     final = [-1 if m.final_mode is None else m.final_mode for m in maneuvers]
+    after = [int(m.description.armed_after == "touchdown") for m in maneuvers]
+    table = abi.system_table(
+        2 * d, n, 18 * (2 * d + max(n, 1)),
+        [_as_component(derived, a) for a in derived.constraints],
+        [(_as_component(derived, m.terminal), bool(a), f, m.mode)
+         for m, a, f in zip(maneuvers, after, final)])
     head = [
         f'"""Compiled simulator of the system {system.name!r}.',
         "",
@@ -1282,7 +1293,6 @@ def render(derived: DerivedSystem) -> str:
         "import numpy as np",
         "",
         "from biped_opt._jit import HOT_PATH",
-        "from biped_opt.codegen.runtime import EVENT_CONTACT, EVENT_TERMINAL, Status",
         "from biped_opt.codegen.runtime import sincos as _sincos",
         "",
         f"NDOF = {d}",
@@ -1291,18 +1301,25 @@ def render(derived: DerivedSystem) -> str:
         f"NGUARDS = {n + 1}",
         f"NPARAM = {len(system.p)}",
         f"NINPUT = {len(system.u)}",
-        f"TERM_AFTER_TOUCHDOWN = {_int_array(after)}",
-        f"FINAL_MODE = {_int_array(final)}",
         f"INITIAL_MODE = {_int_array([m.mode for m in maneuvers])}",
+        f"FINAL_MODE = {_int_array(final)}",
+        f"TERM_AFTER_TOUCHDOWN = {_int_array(after)}",
+        "#: the layouts of the kernel's event rows and samples (biped_opt.codegen.kernel)",
+        f"EVENT_WIDTH = {6 + 4 * d}",
+        f"SAMPLE_WIDTH = {2 + 2 * d + n}",
+        "#: the system's table for the shared kernel (biped_opt.codegen.abi.system_table)",
+        f"SYSTEM_TABLE = {_int_array(table)}",
         "",
     ]
     try:
         vector_field, prepare = _vector_field(derived)
+        field_lines = _prune(vector_field)
+        inline_field = len(field_lines) <= INLINE_FIELD_LINES
         parts = [
             head,
             prepare,
             vector_field,
-            _reaction(vector_field, n),
+            _reaction(vector_field, n) if inline_field else _reaction_through_field(2 * d, n),
             _impact(derived),
             _scalar_function("constraint_rates", "Da(q) q' into out[:n].", "p, y, yo, out",
                              derived, list(derived.jacobian * sp.Matrix(system.dq))
@@ -1318,12 +1335,11 @@ def render(derived: DerivedSystem) -> str:
     except UnsupportedExpressionError as exc:
         raise UnsupportedExpressionError(f"{system.where()}: {exc}") from None
     text = "\n\n\n".join("\n".join(_prune(part)) for part in parts) + "\n"
-    field_lines = _prune(vector_field)
-    inline_field = len(field_lines) <= INLINE_FIELD_LINES
     step = dop853.render(n=2 * d, imports="",
                          rhs="vector_field" if inline_field else "_field_at",
                          probe="probe_stage", nlam=max(n, 1), registers=True, nguards=n + 1,
-                         probe_head="p, mode, u, term_sign", dense_rhs="_field_at")
+                         probe_head="p, mode, u, term_sign", dense_rhs="_field_at",
+                         loop=len(field_lines) > LOOP_STEP_LINES)
     step = step[step.index("\nSTRIDE = ") + 1:]
     # the vector field with its sines and cosines expanded (one pass over its text): expanded
     # further into the step's stages, or the body of the called field
@@ -1332,14 +1348,16 @@ def render(derived: DerivedSystem) -> str:
     expanded = {"vector_field": field_text} if inline_field else {}
     expanded["probe_stage"] = "\n".join(_prune(probe))
     step = _expand(step, expanded, invariant={"p", "u", "mode", "term_sign"})
-    body = KERNEL_BODY.read_text()
-    body = body[body.index("\n# --- kernel ---\n") + 1:]
     return (text + "\n\n" + step + "\n\n" + _field_at(None if inline_field else field_text)
-            + "\n\n" + body)
+            + "\n\n" + abi.cfunc_source())
 
 
 #: the called vector field's types (its explicit signature: see :func:`_field_at`)
 FIELD_SIGNATURE = "void(f8[::1], i8, f8[::1], i8, f8[::1], f8[::1], i8, f8[::1], i8)"
+#: the functions of biped_opt.codegen.abi.FUNCTIONS that a generated module writes without a
+#: call of the vector field
+FIELD_FREE = ("apply_impact", "constraint_rates", "guard_value", "guard_values", "initial_state",
+              "outcome_value")
 
 
 def _field_at(field_text: str | None) -> str:
@@ -1348,14 +1366,27 @@ def _field_at(field_text: str | None) -> str:
     for the step's stages too. A small field is inlined into it (by Numba: one copy); a large
     one *is* its body (``field_text``: the field with its sines and cosines written out), since
     Numba's inlining of a large function into a small one costs more than compiling the
-    function itself (a planar chain with d = 9: 11.8 of the 29.5 s this function took). The
-    explicit signature compiles it once: called with the literal offsets of the dense stages,
-    Numba would otherwise compile one specialisation per offset."""
-    head = [f'@nb.njit("{FIELD_SIGNATURE}", **HOT_PATH)',
+    function itself (a planar chain with d = 9: 11.8 of the 29.5 s this function took).
+
+    ``_field_ready()`` compiles it for its one signature (or loads it from the cache) and then
+    no other: called with the literal offsets of the dense stages, Numba would otherwise compile
+    one specialisation per offset. Only when needed (``compile_functions`` calls it first for
+    every function but those in ``FIELD_FREE``), so that a second process can compile the
+    functions that do not call the field while the first compiles it."""
+    head = ["@nb.njit(**HOT_PATH)",
             "def _field_at(p, mode, y, yo, u, out, off, lam, lo):",
             '    """The vector field as a call (biped_opt.codegen.render._field_at)."""']
+    ready = ["", "", f'FIELD_SIGNATURE = "{FIELD_SIGNATURE}"',
+             "#: the compiled functions that do not call the field",
+             f"FIELD_FREE = {FIELD_FREE!r}", "", "",
+             "def _field_ready():",
+             '    """Compile _field_at for its one signature (see render._field_at)."""',
+             "    if not _field_at.signatures:",
+             "        _field_at.compile(FIELD_SIGNATURE)",
+             "    _field_at.disable_compile()", ""]
     if field_text is None:
-        return "\n".join([*head, "    vector_field(p, mode, y, yo, u, out, off, lam, lo)"]) + "\n"
+        return "\n".join([*head, "    vector_field(p, mode, y, yo, u, out, off, lam, lo)",
+                          *ready])
     tree = ast.parse(field_text)
     fn = next(node for node in tree.body if isinstance(node, ast.FunctionDef))
     statements = fn.body
@@ -1364,7 +1395,7 @@ def _field_at(field_text: str | None) -> str:
         statements = statements[1:]  # (the field's docstring)
     lines = field_text.split("\n")
     body = lines[statements[0].lineno - 1:fn.end_lineno]
-    return "\n".join([*head, *body]).rstrip() + "\n"
+    return "\n".join([*head, *body]).rstrip() + "\n" + "\n".join(ready)
 
 
 def source_key(text: str) -> str:

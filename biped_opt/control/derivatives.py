@@ -251,8 +251,8 @@ class _Model:
     def field(self, mode: int, y: Array, u: Array | None = None) -> Array:
         """f_J(y, u), shape (2d,)."""
         out = np.empty(self.n)
-        self.mod.vector_field(self.p, mode, np.ascontiguousarray(y, dtype=np.float64), 0,
-                              self.u if u is None else u, out, 0, self._lam, 0)
+        self.mod._field_at(self.p, mode, np.ascontiguousarray(y, dtype=np.float64), 0,
+                           self.u if u is None else u, out, 0, self._lam, 0)
         self.nfev += 1
         return out
 
@@ -269,12 +269,13 @@ class _Model:
 
         Column c of Z_y' is D_y f Z_y[:, c] + D_u f du/dp[:, c]: the derivative of f along that
         column, by a fourth-order central difference whose step scales with the column
-        (_STEP over the column's largest entry). The generated module's ``variational_field``
-        does it in one compiled call.
+        (_STEP over the column's largest entry). The kernel's ``variational_field`` does it in
+        one compiled call.
         """
         out = np.empty_like(w)
-        self.nfev += int(self.mod.variational_field(
-            self.p, mode, np.ascontiguousarray(w), self.u, self.du, _STEP, _STENCIL_STEPS,
+        kernel, sv = self.compiled.shared_kernel()
+        self.nfev += int(kernel.variational_field(
+            self.p, sv, mode, np.ascontiguousarray(w), self.u, self.du, _STEP, _STENCIL_STEPS,
             _STENCIL_WEIGHTS, out, self._lam))
         return out
 
@@ -351,7 +352,9 @@ class _Model:
         mode at once when gamma > 0), as a bit mask."""
         rates = np.empty(max(self.ncon, 1))
         self.mod.constraint_rates(self.p, np.ascontiguousarray(y_after), 0, rates)
-        tol = float(self.mod.SEPARATION_TOL)
+        from biped_opt.codegen.kernel import SEPARATION_TOL
+
+        tol = float(SEPARATION_TOL)
         return sum(1 << j for j in range(self.ncon) if touchdown >> j & 1 and rates[j] > tol)
 
 

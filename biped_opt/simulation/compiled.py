@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from biped_opt.codegen import aot, precompile
+from biped_opt.codegen import abi, aot, precompile
 from biped_opt.errors import InvalidInputError, InvalidParameterError
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
 from biped_opt.simulation.scene import Scene
@@ -98,10 +98,11 @@ def _import(name: str, path: Path) -> ModuleType:
 
 
 #: the generated module's constants a start from the index needs before (or without) the
-#: module itself: array layouts, the kernel's cfg indices, each maneuver's initial mode
-_AHEAD_CONSTANTS = ("NSTATE", "NCON", "SAMPLE_WIDTH", "EVENT_WIDTH", "INITIAL_MODE", "CFG_SIZE",
-                    "CFG_T_END", "CFG_MAX_EVENTS", "CFG_RTOL", "CFG_ATOL", "CFG_H_MAX",
-                    "CFG_SAMPLE_DT", "CFG_TOUCHED_DOWN")
+#: module itself: array layouts, each maneuver's initial mode, the system's table
+_AHEAD_CONSTANTS = ("NSTATE", "NCON", "SAMPLE_WIDTH", "EVENT_WIDTH", "INITIAL_MODE",
+                    "SYSTEM_TABLE")
+#: the y0 argument of the kernel that starts from the maneuver's own initial state at s
+_FROM_S = np.empty(0)
 
 
 def _constants(module: ModuleType) -> dict[str, Any]:
@@ -121,8 +122,9 @@ def _prepare_source(text: str) -> str:
 class _AheadModule:
     """A generated module seen through its ahead-of-time kernel (:mod:`biped_opt.codegen.aot`):
     the constants the index keeps, ``prepare_parameters`` read from the module's text, and
-    ``simulate_maneuver`` from the extension. Any other attribute imports the module itself
-    (and with it Numba) when first read."""
+    ``simulate_maneuver`` from the extension with the system vector it takes (``sv``: the
+    table, no addresses; see biped_opt.codegen.abi). Any other attribute imports the module
+    itself (and with it Numba) when first read."""
 
     def __init__(self, name: str, path: Path, constants: Mapping[str, Any],
                  extension: ModuleType) -> None:
@@ -130,8 +132,9 @@ class _AheadModule:
         for key, value in constants.items():
             setattr(self, key, np.array(value, dtype=np.int64) if isinstance(value, list)
                     else value)
-        self.FROM_S = np.empty(0)
         self.simulate_maneuver = extension.simulate_maneuver
+        self.sv = np.concatenate((np.zeros(abi.NFUNC, dtype=np.int64),
+                                  np.asarray(constants["SYSTEM_TABLE"], dtype=np.int64)))
         namespace: dict[str, Any] = {"np": np, "math": math}
         exec(compile(_prepare_source(path.read_text()), str(path), "exec"), namespace)
         self.prepare_parameters = namespace["prepare_parameters"]
@@ -271,20 +274,19 @@ def _digest(path: Path) -> str | None:
         return None
 
 
-def kernel_config(module: Any, options: SimulatorOptions, sample_dt: float = 0.0,
+def kernel_config(options: SimulatorOptions, sample_dt: float = 0.0,
                   touched_down: bool = False) -> Array:
-    """The ``cfg`` vector a generated module's kernel takes (layout: its CFG_* indices).
+    """The ``cfg`` vector the kernel takes (layout: biped_opt.codegen.abi's CFG_* indices).
     ``touched_down``: the trajectory continues after a touchdown, so a terminal event armed
     after the first touchdown is armed from the start."""
-    m = module
-    cfg = np.empty(m.CFG_SIZE)
-    cfg[m.CFG_T_END] = options.t_end
-    cfg[m.CFG_MAX_EVENTS] = options.max_events
-    cfg[m.CFG_RTOL] = options.rtol
-    cfg[m.CFG_ATOL] = options.atol
-    cfg[m.CFG_H_MAX] = options.h_max
-    cfg[m.CFG_SAMPLE_DT] = sample_dt
-    cfg[m.CFG_TOUCHED_DOWN] = float(touched_down)
+    cfg = np.empty(abi.CFG_SIZE)
+    cfg[abi.CFG_T_END] = options.t_end
+    cfg[abi.CFG_MAX_EVENTS] = options.max_events
+    cfg[abi.CFG_RTOL] = options.rtol
+    cfg[abi.CFG_ATOL] = options.atol
+    cfg[abi.CFG_H_MAX] = options.h_max
+    cfg[abi.CFG_SAMPLE_DT] = sample_dt
+    cfg[abi.CFG_TOUCHED_DOWN] = float(touched_down)
     return cfg
 
 
@@ -316,6 +318,7 @@ class CompiledSystem:
         self._derived: DerivedSystem | None = None
         #: the generated module (or its ahead-of-time view, on a start from the index)
         self.module: Any = None
+        self._shared: tuple[ModuleType, npt.NDArray[np.int64]] | None = None
         entry = _start_entry(system)
         cached = _read_entry(entry, ahead=True)
         if cached is None:
@@ -534,8 +537,22 @@ class CompiledSystem:
         key = (options, sample_dt)
         cfg = self._cfgs.get(key)
         if cfg is None:
-            cfg = self._cfgs[key] = kernel_config(self.module, options, sample_dt)
+            cfg = self._cfgs[key] = kernel_config(options, sample_dt)
         return cfg
+
+    def shared_kernel(self) -> tuple[ModuleType, npt.NDArray[np.int64]]:
+        """The kernel every system shares (:mod:`biped_opt.codegen.kernel`) and this system's
+        vector ``sv`` for it: its compiled functions' addresses, then its table
+        (biped_opt.codegen.abi). Its functions are compiled here when first needed (or loaded
+        from Numba's cache)."""
+        if self._shared is None:
+            from biped_opt.codegen import kernel
+
+            m = self.module
+            sv = np.concatenate((m.function_addresses(),
+                                 np.asarray(m.SYSTEM_TABLE, dtype=np.int64)))
+            self._shared = (kernel, sv)
+        return self._shared
 
     def simulate(self, maneuver: str, s: float, inputs: Any = None, *,
                  options: SimulatorOptions = DEFAULT_OPTIONS,
@@ -564,8 +581,13 @@ class CompiledSystem:
                    else self._cfg(options, 0.0))
         events = np.empty((options.max_events + 1, m.EVENT_WIDTH))
         y_out = np.empty(m.NSTATE)
-        status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej, outcome = m.simulate_maneuver(
-            self.prepared, code, s, u, cfg, samples, events, y_out, m.FROM_S, 0)
+        if isinstance(m, _AheadModule):
+            run, sv = m.simulate_maneuver, m.sv
+        else:
+            kernel, sv = self.shared_kernel()
+            run = kernel.simulate_maneuver
+        status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej, outcome = run(
+            self.prepared, sv, code, s, u, cfg, samples, events, y_out, _FROM_S, 0)
         return Trajectory.from_kernel(
             self._name, maneuver, s, tuple(u.tolist()[: self._ninputs]), status, t_f, outcome,
             y_out, mode_f, self._initial_modes[code], n_ev, events,
@@ -593,8 +615,9 @@ class CompiledSystem:
         y_out = np.zeros((ss.size, m.NSTATE))
         outcome = np.zeros(ss.size)
         info = np.zeros((ss.size, 8))
-        run_batch(m.simulate_batch_kernel, ss.size,
-                  (self.prepared, code, ss, us, self._cfg(options, 0.0), events, y_out, outcome,
+        kernel, sv = self.shared_kernel()
+        run_batch(kernel.simulate_batch_kernel, ss.size,
+                  (self.prepared, sv, code, ss, us, self._cfg(options, 0.0), events, y_out, outcome,
                    info))
         return BatchResult.from_kernel(self._name, maneuver, ss, us, info, outcome, y_out, events,
                                        self._initial_modes[code], self._constraints)
@@ -768,20 +791,17 @@ def simulate_batch(system: System | str, maneuver: str, s: npt.ArrayLike,
 
 def kernels_cached(system: str) -> bool:
     """True when the compiled module of a library system or system file is on disk and Numba's
-    cache holds its simulation kernels for the current sources (a start then loads them in about
-    a second instead of compiling them)."""
+    cache holds its compiled functions and the shared kernel for the current sources (a start
+    then loads them in about a second instead of compiling them)."""
     m = cached_module(system)
     if m is None:
         return False
-    for fn in (m.simulate_maneuver, m.simulate_batch_kernel):
-        if fn.signatures:
-            continue  # compiled (or loaded) in this process already
-        try:
-            if not fn._cache._cache_file._load_index():
-                return False
-        except (AttributeError, OSError):  # another Numba layout: assume the worst
-            return False
-    return True
+    from biped_opt.codegen import kernel
+
+    return all(fn.signatures or precompile.cached(fn, unknown=False)
+               for fn in (kernel.simulate_maneuver, kernel.simulate_batch_kernel)) \
+        and all(precompile.cached(getattr(m, name + "_c"), unknown=False)
+                for name in abi.FUNCTIONS)
 
 
 def warm_up(system: str) -> float:

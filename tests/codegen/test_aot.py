@@ -1,5 +1,6 @@
 """The kernel compiled ahead of time (biped_opt/codegen/aot.py): the same trajectories, bit for
-bit, as the Numba-compiled module, and a cached start that imports neither Numba, SymPy nor
+bit, as the shared kernel that calls the system's functions through their addresses
+(biped_opt/codegen/kernel.py, abi.py), and a cached start that imports neither Numba, SymPy nor
 SciPy."""
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from biped_opt.codegen import aot
+from biped_opt.codegen import abi, aot
 from biped_opt.simulation.compiled import (
     _MODULE_PREFIX,
     CompiledSystem,
@@ -49,21 +50,21 @@ def built(request):
         module = cached_module(name)  # (the module itself, not a view of it)
         assert module is not None
         stem = module.__name__[len(_MODULE_PREFIX):]
-        if aot.build_once(module, cache_dir(), stem) is None:  # (built, or being built by
+        if aot.build_once(Path(module.__file__), stem) is None:  # (built, or being built by
             aot.wait_built(cache_dir(), stem, 600.0)  # the compile's second process)
         out[name] = (c, module, aot.load(cache_dir(), stem))
         assert out[name][2] is not None
     return out
 
 
-def _run(fn, c, module, code, s, u, sample_dt):
+def _run(fn, sv, c, module, code, s, u, sample_dt):
     options = c.maneuver_options(c.maneuvers[code])
-    cfg = kernel_config(module, options, sample_dt)
+    cfg = kernel_config(options, sample_dt)
     samples = np.zeros((int(options.t_end / sample_dt) + 200, module.SAMPLE_WIDTH)) if sample_dt \
         else np.empty((0, module.SAMPLE_WIDTH))
     events = np.zeros((options.max_events + 1, module.EVENT_WIDTH))
     y_out = np.zeros(module.NSTATE)
-    result = fn(c.prepared, code, s, u, cfg, samples, events, y_out, np.empty(0), 0)
+    result = fn(c.prepared, sv, code, s, u, cfg, samples, events, y_out, np.empty(0), 0)
     return result, y_out, events[: result[3]], samples[: result[4]]
 
 
@@ -75,10 +76,13 @@ def test_same_trajectories_bit_for_bit(built, system, maneuver, inputs, ss, samp
     c, module, extension = built[system]
     code = c.code(maneuver)
     u = c.input_vector(inputs)
+    kernel, sv = c.shared_kernel()
+    table = np.concatenate((np.zeros(abi.NFUNC, dtype=np.int64), module.SYSTEM_TABLE))
+    assert sv[abi.NFUNC:].tolist() == table[abi.NFUNC:].tolist() and sv[:abi.NFUNC].all()
     outcomes = []
     for s in ss:
-        jit = _run(module.simulate_maneuver, c, module, code, s, u, sample_dt)
-        ahead = _run(extension.simulate_maneuver, c, module, code, s, u, sample_dt)
+        jit = _run(kernel.simulate_maneuver, sv, c, module, code, s, u, sample_dt)
+        ahead = _run(extension.simulate_maneuver, table, c, module, code, s, u, sample_dt)
         assert ahead[0] == jit[0]
         for a, b in zip(ahead[1:], jit[1:]):
             np.testing.assert_array_equal(a, b)

@@ -34,24 +34,34 @@ def no_probe(mode, term_sign, y, yo, lam, lo, c, c0, c1, c2):
 '''
 
 
-@pytest.fixture(scope="module")
-def oscillator_step(tmp_path_factory):
-    """The template rendered for a 2-state oscillator, imported from a temporary directory."""
-    d = tmp_path_factory.mktemp("dop853_oscillator")
+def _oscillator_module(tmp_path_factory, form: str):
+    """The template rendered for a 2-state oscillator in ``form`` (stages written out, or as a
+    loop), imported from a temporary directory."""
+    name = f"osc_dop853_{form}"
+    if name in sys.modules:
+        return sys.modules[name]
+    d = tmp_path_factory.mktemp(name)
     (d / "osc_rhs.py").write_text(_OSCILLATOR)
-    (d / "osc_dop853.py").write_text(
+    (d / f"{name}.py").write_text(
         dop853.render(
             n=2,
             imports="from biped_opt._jit import HOT_PATH\nfrom osc_rhs import no_probe, oscillator",
             rhs="oscillator",
             probe="no_probe",
+            loop=form == "loop",
         )
     )
     sys.path.insert(0, str(d))
     try:
-        yield importlib.import_module("osc_dop853")
+        return importlib.import_module(name)
     finally:
         sys.path.remove(str(d))
+
+
+@pytest.fixture(scope="module", params=["written_out", "loop"])
+def oscillator_step(tmp_path_factory, request):
+    """The oscillator's step in each form."""
+    return _oscillator_module(tmp_path_factory, request.param)
 
 
 def _one_step(mod, h):
@@ -82,6 +92,26 @@ def test_step_is_eighth_order_and_dense_output_seventh(oscillator_step):
     assert math.log2(d_big / d_small) > 7.6
     # FSAL: the returned derivative is the vector field at the new point
     assert f_new == pytest.approx([-math.sin(0.2), -math.cos(0.2)], abs=1e-13)
+
+
+def test_both_forms_give_the_same_numbers_to_the_last_bit(tmp_path_factory):
+    """The stages as a loop add the same terms in the same order as the written-out stages, so a
+    step, its error estimate, the derivative at the new point and the dense output's
+    coefficients agree bit for bit (a term added out of order would change the last bits)."""
+    forms = [_oscillator_module(tmp_path_factory, f) for f in ("written_out", "loop")]
+    outs = []
+    for mod in forms:
+        y, f = np.array([0.3, -1.7]), np.array([-1.7, -0.3])
+        W = np.zeros(mod.WORKSPACE)
+        y_new, f_new, lam, probe = np.empty(2), np.empty(2), np.empty(2), np.empty(3)
+        empty = np.empty(0)
+        err = mod.step(empty, 0, empty, 1.0, y, f, 0.37, W, y_new, f_new, lam, 1e-9, 1e-10, probe)
+        F = np.empty((7, 2))
+        mod.dense_coefficients(empty, 0, empty, y, f, 0.37, W, y_new, f_new, F)
+        outs.append((err, y_new, f_new, F))
+    assert outs[0][0] == outs[1][0]
+    for a, b in zip(outs[0][1:], outs[1][1:]):
+        np.testing.assert_array_equal(a, b)
 
 
 def test_error_estimate_shrinks_with_the_step(oscillator_step):

@@ -58,6 +58,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.integrate import solve_ivp
 
+from biped_opt.codegen.abi import CFG_T_END
 from biped_opt.control.derivatives import DEFAULT_VARIATIONAL, VariationalOptions, saltation_matrix
 from biped_opt.control.theorem1 import Derivatives
 from biped_opt.errors import InvalidInputError, SimulationError
@@ -360,10 +361,11 @@ def _continue(
     m = k.module
     events = np.empty((options.max_events + 1, m.EVENT_WIDTH))
     y_out = np.empty(NSTATE)
-    cfg = kernel_config(m, options, 0.0, touched_down)
-    cfg[m.CFG_T_END] = options.t_end - t0
-    status, t_f, mode_f, n_ev, _, nfev, nsteps, nrej, _ = m.simulate_maneuver(
-        k.prepared, k.code(name), 0.0, u, cfg, np.empty((0, m.SAMPLE_WIDTH)),
+    cfg = kernel_config(options, 0.0, touched_down)
+    cfg[CFG_T_END] = options.t_end - t0
+    kernel, sv = k.shared_kernel()
+    status, t_f, mode_f, n_ev, _, nfev, nsteps, nrej, _ = kernel.simulate_maneuver(
+        k.prepared, sv, k.code(name), 0.0, u, cfg, np.empty((0, m.SAMPLE_WIDTH)),
         events, y_out, np.ascontiguousarray(y0, dtype=np.float64), int(mode0),
     )
     n_rows = n_ev + (1 if status in (Status.OK, Status.APEX_IN_CONTACT) else 0)

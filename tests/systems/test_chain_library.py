@@ -3,16 +3,12 @@ against ``tests/simulation/user/reference_chain``, SciPy's solve_ivp on equation
 again from the links' velocity Jacobians and Christoffel symbols (it imports nothing from
 biped_opt).
 
-Each compiled system is built once per session (module-scoped fixtures); a cold compile of
-chain9 takes about a minute or more, so chain9 is checked in one test. The compiled chains with
-knees (d = 7, 9: 1.5 minutes of compiling and comparing) run only with BIPED_OPT_SLOW_TESTS=1,
-to keep the suite within its time budget; their descriptions, and the compiled d = 5 chain, are
-checked in every run.
+Each compiled system is built once per session (module-scoped fixtures); chain9, whose cold
+compile is the longest (about 15 s), is checked in one test. The compiled chains with knees
+(d = 7, 9) take about 35 s of compiling and comparing in all.
 """
 
 from __future__ import annotations
-
-import os
 
 import numpy as np
 import pytest
@@ -31,11 +27,6 @@ from tests.simulation.user import reference_chain
 #: near the simultaneous touchdown at s = 0: within the model's 1e-9 band the two impacts merge
 #: (or not, by the guards' values there), as the reference decides with the same rule
 OFFSETS = (-1e-9, -3e-10, -1e-10, 1e-10, 3e-10, 1e-9)
-
-
-slow = pytest.mark.skipif(
-    os.environ.get("BIPED_OPT_SLOW_TESTS") != "1",
-    reason="compiles the chains with knees (1.5 minutes); set BIPED_OPT_SLOW_TESTS=1")
 
 
 @pytest.fixture(scope="module")
@@ -127,7 +118,6 @@ def test_chain_is_the_user_files_chain():
 
 # -- d = 7 --------------------------------------------------------------------------------------
 
-@slow
 def test_chain7_against_solve_ivp(chain7, reference7):
     """Impacts, event times and outcome at 1e-9 (assert_agrees: the reference locates events to
     ~1e-11, the simulator to ~1e-12; the flights here last ~1 time unit with 1-4 impacts)."""
@@ -137,7 +127,6 @@ def test_chain7_against_solve_ivp(chain7, reference7):
         assert_agrees(chain7.simulate("drop", tilt), ref, f"chain7 tilt {tilt}")
 
 
-@slow
 def test_chain7_feet_landing_together(chain7, reference7):
     """Mirror-symmetric at s = 0: both feet land at once there, in one impact, and the middle
     link comes back level (th' = 0 at the apex). On either side one foot lands first, the left
@@ -150,7 +139,6 @@ def test_chain7_feet_landing_together(chain7, reference7):
     _across_level(chain7, reference7, OFFSETS)
 
 
-@slow
 def test_chain7_keeps_its_energy_in_flight(chain7, reference7):
     """The energy check (``biped-opt systems chain7 --check``): no damping, no inputs, so the
     declared energy is constant up to the first impact to the integrator's accuracy
@@ -166,9 +154,8 @@ def test_chain7_keeps_its_energy_in_flight(chain7, reference7):
     assert np.ptp(energy) < 1e-9, np.ptp(energy)
 
 
-# -- d = 9, in one test (its compile costs a minute) --------------------------------------------
+# -- d = 9, in one test (its compile is the longest) ---------------------------------------------
 
-@slow
 def test_chain9_against_solve_ivp_and_its_energy():
     """chain9: the energy check; the drop at two tilts and at s = 0 against the reference at
     1e-9 (as chain7); and on each side of s = 0, 1e-9 away, the reference's first impact (one

@@ -109,15 +109,24 @@ def chain(segments: int = 1, *, name: str | None = None) -> System:
             point = point + length * out
             points.append(point)
         chains.append(points)
-    T = sum(m / 2 * ((c.jacobian(q) * dq).T * (c.jacobian(q) * dq))[0] + i / 2 * w**2
-            for m, c, i, w in zip(masses, centres, inertias, spins))
+    # M = sum of m J^T J + I w^T w over the bodies (J: the centre's Jacobian, w: the
+    # angular velocity's coefficients, constant here), and Lagrange's equations through the
+    # derivatives of M: dT/dq_k = q'^T (dM/dq_k) q' / 2, d/dt(M q') = M q'' + sum_k dM/dq_k q'
+    # q'_k; the same as differentiating T itself, with far smaller expressions to differentiate
+    M = sp.zeros(d, d)
+    for m, c, i, w in zip(masses, centres, inertias, spins):
+        J = c.jacobian(q)
+        W = sp.Matrix([[sp.diff(w, v) for v in s.dq]])
+        M += m * J.T * J + i * W.T * W
+    M = M.applyfunc(sp.expand)
     V = sum(m * g * c[1] for m, c in zip(masses, centres)) \
         + sum(link(j, "k") / 2 * (s.q[3 + 2 * j + leg] + side * link(j, "rest")) ** 2
               for j in range(segments) for leg, side in ((0, -1), (1, 1)))
-    M = sp.hessian(T, s.dq)
+    T = (dq.T * M * dq)[0] / 2
     s.mass_matrix = M
-    momentum = M * dq
-    lagrange = (sp.Matrix([T]).jacobian(q).T - momentum.jacobian(q) * dq
+    dM = [M.diff(v) for v in s.q]
+    lagrange = (sp.Matrix([(dq.T * dM[k] * dq)[0] / 2 for k in range(d)])
+                - sum((dM[k] * dq * dq[k] for k in range(d)), sp.zeros(d, 1))
                 - sp.Matrix([V]).jacobian(q).T)
     s.forces = lambda J: lagrange
     s.energy = T + V
