@@ -32,7 +32,8 @@ from collections.abc import Sequence
 
 __all__ = ["FUNCTIONS", "NFUNC", "INDEX", "SV_NSTATE", "SV_NCON", "SV_NMAN", "SV_WORKSPACE",
            "SV_GUARDS", "MANEUVER_WIDTH", "CFG_T_END", "CFG_MAX_EVENTS", "CFG_RTOL", "CFG_ATOL",
-           "CFG_H_MAX", "CFG_SAMPLE_DT", "CFG_TOUCHED_DOWN", "CFG_SIZE", "digest",
+           "CFG_H_MAX", "CFG_SAMPLE_DT", "CFG_TOUCHED_DOWN", "CFG_SIZE", "ENTRY_SIGNATURES",
+           "digest",
            "system_table", "cfunc_source", "direct_binding", "binding_names"]
 
 #: the system functions the kernel calls: name -> (argument kinds, result kind). Kinds: ``A`` a
@@ -79,6 +80,20 @@ CFG_SAMPLE_DT = 5
 #: guard armed after the first touchdown is armed from the start
 CFG_TOUCHED_DOWN = 6
 CFG_SIZE = 7
+
+
+#: the types the kernel's entry points are called with (biped_opt.simulation.compiled,
+#: biped_opt.control.derivatives): what ``make venv`` compiles them for
+#: (biped_opt.codegen.kernel.compile_all), and what the kernel compiled ahead of time exports
+#: ``simulate_maneuver`` with (biped_opt.codegen.aot)
+ENTRY_SIGNATURES = {
+    "simulate_maneuver": "Tuple((i8, f8, i8, i8, i8, i8, i8, i8, f8))(f8[::1], i8[::1], i8, f8, "
+                         "f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], i8)",
+    "simulate_batch_kernel": "void(f8[::1], i8[::1], i8, f8[::1], f8[:, ::1], f8[::1], "
+                             "f8[:, :, ::1], f8[:, ::1], f8[::1], f8[:, ::1], i8, i8)",
+    "variational_field": "i8(f8[::1], i8[::1], i8, f8[::1], f8[::1], f8[:, ::1], f8, f8[::1], "
+                         "f8[::1], f8[::1], f8[::1])",
+}
 
 
 def digest() -> str:

@@ -40,15 +40,15 @@ import warnings
 from pathlib import Path
 from types import ModuleType
 
+from biped_opt.codegen.abi import ENTRY_SIGNATURES
+
 __all__ = ["SIGNATURE", "enabled", "extension_path", "load", "build", "build_once", "start",
            "wait_built", "load_module", "main"]
 
-#: ``simulate_maneuver``'s types: (status, t_f, mode_f, events, samples, nfev, steps, rejected,
-#: outcome) from (p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
-SIGNATURE = ("Tuple((i8, f8, i8, i8, i8, i8, i8, i8, f8))(f8[::1], i8[::1], i8, f8, f8[::1], "
-             "f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], i8)")
-#: the exported function
+#: the exported function, and its types: (status, t_f, mode_f, events, samples, nfev, steps,
+#: rejected, outcome) from (p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
 EXPORTED = "simulate_maneuver"
+SIGNATURE = ENTRY_SIGNATURES[EXPORTED]
 #: a lock older than this belongs to a build that died [s]
 STALE_LOCK_S = 1800.0
 
@@ -98,13 +98,12 @@ def load(folder: Path, name: str) -> ModuleType | None:
     return module
 
 
-#: what the kernel's source needs besides the system's module (the engine's own header, which
-#: binds its calls through addresses, is not part of it)
+#: what the kernel's source needs besides the system's module: the table's layout and the
+#: status codes (the engine's own header, which binds its calls through addresses, is not part
+#: of it)
 _KERNEL_IMPORTS = """
-from biped_opt.codegen.abi import (CFG_ATOL, CFG_H_MAX, CFG_MAX_EVENTS, CFG_RTOL,  # noqa
-    CFG_SAMPLE_DT, CFG_T_END, CFG_TOUCHED_DOWN, MANEUVER_WIDTH, SV_GUARDS, SV_NCON, SV_NSTATE,
-    SV_WORKSPACE)
-from biped_opt.codegen.status import EVENT_CONTACT, EVENT_TERMINAL, Status  # noqa
+from biped_opt.codegen.abi import *  # noqa
+from biped_opt.codegen.status import *  # noqa
 """
 
 

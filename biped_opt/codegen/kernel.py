@@ -89,10 +89,11 @@ _KINDS = {"A": types.Array(types.float64, 1, "C"), "F": types.Array(types.float6
 
 
 @intrinsic
-def _call(typingctx, name, address, *args):
-    """``_call(name, address, *args)``: call the system function ``name`` (a string literal, a
-    key of biped_opt.codegen.abi.FUNCTIONS) compiled as a C function at ``address`` (an int64
-    read from sv), with ``args`` lowered as :func:`_lowered` does. The arguments' types are
+def _call(typingctx, name, sv, *args):
+    """``_call(name, sv, *args)``: call the system function ``name`` (a string literal, a key of
+    biped_opt.codegen.abi.FUNCTIONS) compiled as a C function, at the address sv holds for it
+    (its index in the table), with ``args`` lowered as :func:`_lowered` does. The arguments'
+    types are
     checked against the table when the kernel is compiled: the C function reads its arguments
     by the table, so a float where it expects an integer, or an array that is not a
     C-contiguous float64 one, would be read wrong rather than converted; such a call does not
@@ -102,6 +103,9 @@ def _call(typingctx, name, address, *args):
     if not isinstance(name, types.StringLiteral) or name.literal_value not in abi.FUNCTIONS:
         raise errors.TypingError(f"_call: the first argument must name a function of "
                                  f"biped_opt.codegen.abi.FUNCTIONS, got {name}")
+    if sv != types.Array(types.int64, 1, "C"):
+        raise errors.TypingError(f"_call: sv must be a C-contiguous int64 vector, got {sv}")
+    index = INDEX[name.literal_value]
     kinds, result = abi.FUNCTIONS[name.literal_value]
     got = [types.unliteral(t) for t in args]
     wanted = [_KINDS[k] for k in kinds]
@@ -111,10 +115,13 @@ def _call(typingctx, name, address, *args):
         raise errors.TypingError(f"_call of {name.literal_value}: arguments {got} do not match "
                                  f"the table's {wanted}")
     restype = types.void if result == "v" else types.float64
-    signature = restype(name, address, types.StarArgTuple.from_types(args))
+    signature = restype(name, sv, types.StarArgTuple.from_types(args))
 
     def codegen(context, builder, sig, llargs):
-        _, address_value, packed = llargs
+        _, sv_value, packed = llargs
+        table = cgutils.create_struct_proxy(sig.args[1])(context, builder, value=sv_value)
+        address_value = builder.load(builder.gep(table.data, [ir.Constant(ir.IntType(64),
+                                                                          index)]))
         arg_types = sig.args[2].types
         values = cgutils.unpack_tuple(builder, packed, len(arg_types))
         ll_types, ll_values = [], []
@@ -130,71 +137,59 @@ def _call(typingctx, name, address, *args):
     return signature, codegen
 
 
-_FIELD_AT = INDEX["_field_at"]
-_STEP = INDEX["step"]
-_DENSE_COEFFICIENTS = INDEX["dense_coefficients"]
-_APPLY_IMPACT = INDEX["apply_impact"]
-_CONSTRAINT_RATES = INDEX["constraint_rates"]
-_GUARD_VALUE = INDEX["guard_value"]
-_GUARD_VALUES = INDEX["guard_values"]
-_INITIAL_STATE = INDEX["initial_state"]
-_OUTCOME_VALUE = INDEX["outcome_value"]
-_REACTION = INDEX["reaction"]
-
 # the kernel's calls of a system's functions, through sv (the same names and arguments as
 # biped_opt.codegen.abi.direct_binding)
 
 
 @nb.njit(**HOT_PATH)
 def sys_field_at(sv, p, mode, y, yo, u, out, off, lam, lo):
-    _call("_field_at", sv[_FIELD_AT], p, mode, y, yo, u, out, off, lam, lo)
+    _call("_field_at", sv, p, mode, y, yo, u, out, off, lam, lo)
 
 
 @nb.njit(**HOT_PATH)
 def sys_step(sv, p, mode, u, term_sign, y, f, h, W, y_new, f_new, lam, rtol, atol, probe):
-    return _call("step", sv[_STEP], p, mode, u, term_sign, y, f, h, W, y_new, f_new, lam,
-                       rtol, atol, probe)
+    return _call("step", sv, p, mode, u, term_sign, y, f, h, W, y_new, f_new, lam, rtol, atol,
+                 probe)
 
 
 @nb.njit(**HOT_PATH)
 def sys_dense_coefficients(sv, p, mode, u, y, f, h, W, y_new, f_new, F):
-    _call("dense_coefficients", sv[_DENSE_COEFFICIENTS], p, mode, u, y, f, h, W, y_new, f_new,
-          F)
+    _call("dense_coefficients", sv, p, mode, u, y, f, h, W, y_new, f_new, F)
 
 
 @nb.njit(**HOT_PATH)
 def sys_apply_impact(sv, p, mode, y):
-    _call("apply_impact", sv[_APPLY_IMPACT], p, mode, y)
+    _call("apply_impact", sv, p, mode, y)
 
 
 @nb.njit(**HOT_PATH)
 def sys_constraint_rates(sv, p, y, yo, out):
-    _call("constraint_rates", sv[_CONSTRAINT_RATES], p, y, yo, out)
+    _call("constraint_rates", sv, p, y, yo, out)
 
 
 @nb.njit(**HOT_PATH)
 def sys_guard_value(sv, p, mode, u, code, y, yo, lam, lo, i):
-    return _call("guard_value", sv[_GUARD_VALUE], p, mode, u, code, y, yo, lam, lo, i)
+    return _call("guard_value", sv, p, mode, u, code, y, yo, lam, lo, i)
 
 
 @nb.njit(**HOT_PATH)
 def sys_guard_values(sv, p, mode, u, code, y, yo, lam, lo, out):
-    _call("guard_values", sv[_GUARD_VALUES], p, mode, u, code, y, yo, lam, lo, out)
+    _call("guard_values", sv, p, mode, u, code, y, yo, lam, lo, out)
 
 
 @nb.njit(**HOT_PATH)
 def sys_initial_state(sv, code, s, p, y0):
-    _call("initial_state", sv[_INITIAL_STATE], code, s, p, y0)
+    _call("initial_state", sv, code, s, p, y0)
 
 
 @nb.njit(**HOT_PATH)
 def sys_outcome_value(sv, code, p, y, yo):
-    return _call("outcome_value", sv[_OUTCOME_VALUE], code, p, y, yo)
+    return _call("outcome_value", sv, code, p, y, yo)
 
 
 @nb.njit(**HOT_PATH)
 def sys_reaction(sv, p, mode, u, y, j):
-    return _call("reaction", sv[_REACTION], p, mode, u, y, j)
+    return _call("reaction", sv, p, mode, u, y, j)
 
 
 # --- kernel ---
@@ -930,18 +925,6 @@ def variational_field(p, sv, mode, w, u, du, step, steps, weights, out, lam):
     return count
 
 
-#: the types the kernel's entry points are called with (biped_opt.simulation.compiled,
-#: biped_opt.control.derivatives), for :func:`compile_all`
-ENTRY_SIGNATURES = {
-    "simulate_maneuver": "Tuple((i8, f8, i8, i8, i8, i8, i8, i8, f8))(f8[::1], i8[::1], i8, f8, "
-                         "f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], i8)",
-    "simulate_batch_kernel": "void(f8[::1], i8[::1], i8, f8[::1], f8[:, ::1], f8[::1], "
-                             "f8[:, :, ::1], f8[:, ::1], f8[::1], f8[:, ::1], i8, i8)",
-    "variational_field": "i8(f8[::1], i8[::1], i8, f8[::1], f8[::1], f8[:, ::1], f8, f8[::1], "
-                         "f8[::1], f8[::1], f8[::1])",
-}
-
-
 def compile_all() -> float:
     """Compile the kernel's entry points for the types they are called with (or load them from
     Numba's cache); returns the seconds it took. ``make venv`` runs it once after installing,
@@ -949,7 +932,7 @@ def compile_all() -> float:
     import time
 
     t0 = time.perf_counter()
-    for name, signature in ENTRY_SIGNATURES.items():
+    for name, signature in abi.ENTRY_SIGNATURES.items():
         globals()[name].compile(signature)
     return time.perf_counter() - t0
 

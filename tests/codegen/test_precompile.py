@@ -20,8 +20,8 @@ def test_a_call_that_does_not_match_the_table_does_not_compile():
     reads its arguments by the table (biped_opt.codegen.abi.FUNCTIONS): a float where it
     expects an integer, or an array that is not C-contiguous float64, would be read wrong
     rather than converted. The kernel's ``_call`` checks every call against the table when it
-    is compiled; here a call with the table's types compiles (it is not run: address 0), and
-    each kind of mismatch is refused."""
+    is compiled; here a call with the table's types compiles (it is not run: sv would hold no
+    address), and each kind of mismatch is refused."""
     import numba as nb
     import pytest
     from numba.core.errors import TypingError
@@ -29,25 +29,26 @@ def test_a_call_that_does_not_match_the_table_does_not_compile():
     from biped_opt.codegen.kernel import _call
 
     @nb.njit
-    def right(address, p, mode, u, y, j):
-        return _call("reaction", address, p, mode, u, y, j)
+    def right(sv, p, mode, u, y, j):
+        return _call("reaction", sv, p, mode, u, y, j)
 
     vec = types.Array(types.float64, 1, "C")
-    right.compile((types.int64, vec, types.int64, vec, vec, types.int64))
+    sv = types.Array(types.int64, 1, "C")
+    right.compile((sv, vec, types.int64, vec, vec, types.int64))
     for wrong in [
-        (types.int64, vec, types.float64, vec, vec, types.int64),  # a float for the mode
-        (types.int64, vec, types.int64, vec, types.Array(types.float64, 1, "A"), types.int64),
-        (types.int64, vec, types.int64, vec, types.Array(types.float64, 2, "C"), types.int64),
+        (sv, vec, types.float64, vec, vec, types.int64),  # a float for the mode
+        (sv, vec, types.int64, vec, types.Array(types.float64, 1, "A"), types.int64),
+        (sv, vec, types.int64, vec, types.Array(types.float64, 2, "C"), types.int64),
     ]:
         with pytest.raises(TypingError, match="do not match the table"):
             right.compile(wrong)
 
     @nb.njit
-    def unknown(address, p):
-        return _call("no_such_function", address, p)
+    def unknown(sv, p):
+        return _call("no_such_function", sv, p)
 
     with pytest.raises(TypingError, match="must name a function"):
-        unknown.compile((types.int64, vec))
+        unknown.compile((sv, vec))
 
 
 def test_the_direct_binding_has_the_engines_names_and_arguments():
@@ -94,14 +95,14 @@ def test_the_kernel_compiled_at_install_is_the_one_simulations_call():
     compiled entries, not compile others for slightly different types (a first simulation of
     every new system would pay the kernel's compile again)."""
     script = (
-        "from biped_opt.codegen import kernel\n"
+        "from biped_opt.codegen import abi, kernel\n"
         "from biped_opt.simulation.compiled import compile_system\n"
         "kernel.compile_all()\n"
         "c = compile_system('rocking_bar')\n"
         "c.simulate('drop', 0.05)\n"
         "c.simulate('drop', 0.05, sample_dt=0.01)\n"
         "c.simulate_batch('drop', [0.05, -0.05, 0.01])\n"
-        "for name in kernel.ENTRY_SIGNATURES:\n"
+        "for name in abi.ENTRY_SIGNATURES:\n"
         "    fn = getattr(kernel, name)\n"
         "    assert len(fn.signatures) == 1, (name, fn.signatures)\n"
     )
