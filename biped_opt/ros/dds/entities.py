@@ -146,6 +146,13 @@ class Entity:
     def destroyed(self) -> bool:
         return self._destroyed
 
+    def _triggered(self) -> bool:
+        """Whether the read condition has samples to take: False without one, and once
+        destroyed. Under the lock, since another thread may destroy the entity while an
+        executor looks (a deleted condition raises DDS_RETCODE_BAD_PARAMETER)."""
+        with self._lock:
+            return self.condition is not None and bool(self.condition.is_triggered())
+
     def destroy(self) -> None:
         """Release the DDS entities (idempotent)."""
         with self._lock:

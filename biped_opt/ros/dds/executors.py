@@ -161,10 +161,10 @@ class Executor:
         if not self.context.ok():
             return
         for entity in entities:
-            if entity.condition is None and not hasattr(entity, "time_until_next_call"):
-                continue  # publishers: nothing to execute
-            if entity.condition is not None and not entity.condition.is_triggered():
-                continue
+            if hasattr(entity, "time_until_next_call"):
+                pass  # a timer: its _take decides
+            elif not entity._triggered():
+                continue  # nothing new; a publisher; or destroyed while the executor waited
             for task in entity._take():
                 self._ready.append((entity.callback_group, task))
 
