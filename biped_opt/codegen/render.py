@@ -140,6 +140,8 @@ def _share_products(subs: list[tuple[sp.Symbol, sp.Expr]], reduced: list[sp.Expr
             return e
         factors = Counter(e.args)
         for sym, known in products:  # (sorted largest first)
+            if not known.keys() <= factors.keys():
+                continue  # (most products: one set operation instead of a count per factor)
             while known != factors and all(factors[f] >= k for f, k in known.items()):
                 factors -= known
                 factors[sym] += 1
@@ -167,6 +169,7 @@ class _Emitter:
         self.printer = _Printer({"fully_qualified_modules": True, "names": names})
         self.trig: dict[sp.Expr, tuple[sp.Symbol, sp.Symbol]] = {}
         self.named: dict[str, str] = {}
+        self.stems: set[str] = set()  # the names of exprs's subexpressions start so
         self.sincos = sincos
 
     def line(self, text: str) -> None:
@@ -202,8 +205,11 @@ class _Emitter:
         "0.0" for the ones that are zero."""
         if self.sincos:
             values = self._sincos(values)
-        subs, reduced = _share_products(
-            *sp.cse(values, symbols=sp.numbered_symbols(f"_s{prefix}{self.count}_")))
+        stem = f"_s{prefix}{self.count}_"
+        while stem in self.stems:  # (a call that named nothing new leaves count as it was)
+            stem = stem + "x_"
+        self.stems.add(stem)
+        subs, reduced = _share_products(*sp.cse(values, symbols=sp.numbered_symbols(stem)))
         for sym, sub in subs:
             self.line(f"{sym} = {self.expr(sub)}")
         return [self.assign(prefix, self.expr(r)) if r != 0 else "0.0" for r in reduced]
@@ -215,7 +221,8 @@ class _Emitter:
         would sit on the evaluation's critical path: see runtime.sincos). Only the vector
         field uses them: elsewhere the ~30 inlined operations would cost more compile time
         than they save at run time, and the guards keep one definition of sin and cos."""
-        found = set().union(*(sp.sympify(v).atoms(sp.sin, sp.cos) for v in values))
+        values = [sp.sympify(v) for v in values]
+        found = _atoms(values, (sp.sin, sp.cos))
         if not found:
             return values
         for angle in sorted({f.args[0] for f in found}, key=sp.default_sort_key):
@@ -224,7 +231,39 @@ class _Emitter:
                 self.line(f"{sin}, {cos} = _sincos({self.expr(angle)})")
                 self.trig[angle] = (sp.Symbol(sin), sp.Symbol(cos))
         swap = {f: self.trig[f.args[0]][0 if isinstance(f, sp.sin) else 1] for f in found}
-        return [sp.sympify(v).xreplace(swap) for v in values]
+        return _xreplace(values, swap)
+
+
+def _atoms(values: list[sp.Basic], types: tuple[type, ...]) -> set[sp.Basic]:
+    """The subexpressions of ``values`` of the given types, each distinct subexpression
+    visited once (``atoms`` walks shared subexpressions again at every use)."""
+    seen: set[sp.Basic] = set()
+    found = set()
+    stack = list(values)
+    while stack:
+        e = stack.pop()
+        if e in seen:
+            continue
+        seen.add(e)
+        if isinstance(e, types):
+            found.add(e)
+        stack.extend(e.args)
+    return found
+
+
+def _xreplace(values: list[sp.Basic], swap: dict[sp.Basic, sp.Basic]) -> list[sp.Basic]:
+    """``[v.xreplace(swap) for v in values]``, each distinct subexpression rebuilt once."""
+    memo: dict[sp.Basic, sp.Basic] = dict(swap)
+
+    def go(e: sp.Basic) -> sp.Basic:
+        hit = memo.get(e)
+        if hit is None:
+            args = [go(a) for a in e.args]
+            hit = memo[e] = e.func(*args) if any(
+                a is not b for a, b in zip(args, e.args)) else e
+        return hit
+
+    return [go(v) for v in values]
 
 
 _LITERAL = re.compile(r"-?[0-9]+\.[0-9]*(e[-+]?[0-9]+)?")
@@ -307,11 +346,121 @@ def _bindings(derived: DerivedSystem, em: _Emitter, *, velocities: bool, inputs:
     return {}
 
 
+def _mass_entries(derived: DerivedSystem, em: _Emitter) -> list[str]:
+    """M(q)'s entries (row by row) as scalars of the function body: the given matrix's
+    expressions, or the bodies' sum (see :func:`_body_parts`)."""
+    d = derived.ndof
+    if derived.bodies:
+        return _body_mass(em, _body_parts(derived, em, motion=False), d)
+    return em.exprs([derived.mass_matrix[i, j] for i in range(d) for j in range(d)], "m")
+
+
+@dataclass
+class _BodyNames:
+    """A body's quantities (:class:`~biped_opt.systems.derive.DerivedBody`) as names of the
+    function body: mass, inertia rows, gravity, Jv and Jw rows, and (with the motion) av, aw."""
+
+    mass: str
+    inertia: list[list[str]]
+    gravity: list[str]
+    jv: list[list[str]]
+    jw: list[list[str]]
+    av: list[str]
+    aw: list[str]
+
+
+def _body_parts(derived: DerivedSystem, em: _Emitter, *, motion: bool,
+                hoist: _Hoisted | None = None) -> list[_BodyNames]:
+    """Every body's Jacobians (and, with ``motion``, its accelerations at q'' = 0), their
+    common subexpressions shared across the bodies (a leg's links repeat the trunk's terms).
+    With ``hoist``, the masses, inertias and gravity (parameters alone) are computed once per
+    parameter vector."""
+    d = derived.ndof
+    const = [e for b in derived.bodies for e in (b.mass, *b.inertia, *b.gravity)]
+    names = (hoist.load_all(hoist.pre.exprs(const, "i")) if hoist is not None
+             else em.exprs(const, "i"))
+    width = 1 + 9 + 3
+    varying = [e for b in derived.bodies
+               for e in (*b.jv, *b.jw, *((*b.av, *b.aw) if motion else ()))]
+    values = em.exprs(varying, "j")
+    step = 6 * d + (6 if motion else 0)
+    out = []
+    for k in range(len(derived.bodies)):
+        c = names[width * k:width * (k + 1)]
+        v = values[step * k:step * (k + 1)]
+        out.append(_BodyNames(
+            mass=c[0], inertia=[c[1 + 3 * r:4 + 3 * r] for r in range(3)], gravity=c[10:13],
+            jv=[v[r * d:(r + 1) * d] for r in range(3)],
+            jw=[v[(3 + r) * d:(4 + r) * d] for r in range(3)],
+            av=v[6 * d:6 * d + 3] if motion else [], aw=v[6 * d + 3:6 * d + 6] if motion else []))
+    return out
+
+
+def _body_mass(em: _Emitter, parts: list[_BodyNames], d: int) -> list[str]:
+    """M = sum of m Jv^T Jv + Jw^T I Jw over the bodies, each entry one sum of the products
+    that are not structurally zero (two legs' hinges share none), upper triangle mirrored."""
+    terms: list[list[list[str]]] = [[[] for _ in range(d)] for _ in range(d)]
+    for b in parts:
+        for r in range(3):
+            cols = [i for i in range(d) if not _is_zero(b.jv[r][i])]
+            weighted = {i: em.assign("w", _mul(b.mass, b.jv[r][i])) for i in cols}
+            for a, i in enumerate(cols):
+                for j in cols[a:]:
+                    terms[i][j].append(_mul(weighted[i], b.jv[r][j]))
+        cols = [j for j in range(d) if any(not _is_zero(b.jw[r][j]) for r in range(3))]
+        turned = [{j: em.assign("w", _sum([_mul(b.inertia[r][t], b.jw[t][j])
+                                           for t in range(3)])) for j in cols}
+                  for r in range(3)]
+        for r in range(3):
+            for a, i in enumerate(cols):
+                if _is_zero(b.jw[r][i]):
+                    continue
+                for j in cols[a:]:
+                    terms[i][j].append(_mul(b.jw[r][i], turned[r][j]))
+    m = [["0.0"] * d for _ in range(d)]
+    for i in range(d):
+        for j in range(i, d):
+            m[i][j] = m[j][i] = em.assign("m", _sum(terms[i][j]))
+    return [m[i][j] for i in range(d) for j in range(d)]
+
+
+def _body_forces(em: _Emitter, parts: list[_BodyNames], velocities: list[str]) -> list[str]:
+    """The bodies' part of the forces: -(Jv^T m (av - g) + Jw^T (I aw + w x I w)) summed over
+    the bodies, w = Jw q' (see :class:`~biped_opt.systems.derive.DerivedBody`)."""
+    d = len(velocities)
+    terms: list[list[str]] = [[] for _ in range(d)]
+    for b in parts:
+        push = [em.assign("w", _mul(b.mass, "(" + _sum([b.av[r], *(
+            [] if _is_zero(b.gravity[r]) else [f"-({b.gravity[r]})"])]) + ")"))
+            for r in range(3)]
+        for r in range(3):
+            for i in range(d):
+                terms[i].append(_mul(b.jv[r][i], push[r]))
+        if all(_is_zero(x) for row in b.jw for x in row):
+            continue
+        w = [em.assign("w", _sum([_mul(b.jw[r][k], velocities[k]) for k in range(d)]))
+             for r in range(3)]
+        spin = [em.assign("w", _sum([_mul(b.inertia[r][t], w[t]) for t in range(3)]))
+                for r in range(3)]
+        twist = [em.assign("w", _sum([*(_mul(b.inertia[r][t], b.aw[t]) for t in range(3)),
+                                      _mul(w[(r + 1) % 3], spin[(r + 2) % 3]),
+                                      "-(" + _mul(w[(r + 2) % 3], spin[(r + 1) % 3]) + ")"]))
+                 for r in range(3)]
+        for r in range(3):
+            for i in range(d):
+                terms[i].append(_mul(b.jw[r][i], twist[r]))
+    out = []
+    for i in range(d):
+        total = _sum(terms[i])
+        out.append("0.0" if _is_zero(total) else em.assign("g", f"-({total})"))
+    return out
+
+
 def _factors(derived: DerivedSystem, em: _Emitter
              ) -> tuple[list[list[str]], list[list[str]]]:
     """Cholesky factor L of M(q) and the entries of Da(q), as scalars of the function body."""
     d, n = derived.ndof, derived.nconstraints
-    m = em.exprs([derived.mass_matrix[i, j] for i in range(d) for j in range(d)], "m")
+    m = _mass_entries(derived, em)
     L = _cholesky(em, [[m[i * d + j] for j in range(d)] for i in range(d)], "c")
     da = em.exprs(list(derived.jacobian), "a") if n else []
     return L, [[da[j * d + i] for i in range(d)] for j in range(n)]
@@ -401,7 +550,7 @@ def _mode_mixed(em: _Emitter, derived: DerivedSystem) -> list[str]:
     for i in range(d):
         by_expr: dict[sp.Expr, list[int]] = {}
         for mask in range(1 << n):
-            by_expr.setdefault(derived.forces[mask][i], []).append(mask)
+            by_expr.setdefault(derived.applied[mask][i], []).append(mask)
         variants.append(by_expr)
     needed = {m for by_expr in variants if len(by_expr) > 1 for ms in by_expr.values()
               for m in ms}
@@ -486,10 +635,12 @@ def _vector_field(derived: DerivedSystem) -> tuple[list[str], list[str]]:
     em = _Emitter(_symbol_names(derived.system), sincos=True)
     _bindings(derived, em, velocities=True, inputs=True)
     hoist = _Hoisted(derived, em)
-    const_m = hoist.constant(derived.mass_matrix)
+    const_m = not derived.bodies and hoist.constant(derived.mass_matrix)
     const_da = n == 0 or hoist.constant(derived.jacobian)
     m_em = hoist.pre if const_m else em
-    m = m_em.exprs([derived.mass_matrix[i, j] for i in range(d) for j in range(d)], "m")
+    parts = _body_parts(derived, em, motion=True, hoist=hoist) if derived.bodies else []
+    m = (_body_mass(em, parts, d) if parts else
+         m_em.exprs([derived.mass_matrix[i, j] for i in range(d) for j in range(d)], "m"))
     L = _cholesky(m_em, [[m[i * d + j] for j in range(d)] for i in range(d)], "c")
     if const_m:
         L = _Inverse(hoist.load_all(L)) if isinstance(L, _Inverse) else hoist.load_all(L)
@@ -502,6 +653,9 @@ def _vector_field(derived: DerivedSystem) -> tuple[list[str], list[str]]:
     for i in range(d):
         em.line(f"out[off + {i}] = y[yo + {d + i}]")
     f = _mode_mixed(em, derived)
+    if parts:
+        inertial = _body_forces(em, parts, [em.names[v] for v in derived.system.dq])
+        f = [em.assign("f", _sum([a, b])) for a, b in zip(f, inertial)]
     x = _solve(em, L, f, "x")
     acc = x
     if n:
@@ -896,9 +1050,10 @@ def _prune(lines: list[str]) -> list[str]:
     for a, b in zip(starts, starts[1:]):
         body = lines[a:b]
         while True:
-            words = [set(re.findall(r"\w+", line)) for line in body]
+            # (a name on no line but its own assignment's: counted once over the body)
+            seen = Counter(w for line in body for w in set(re.findall(r"\w+", line)))
             unread = {k for k, line in enumerate(body) if (m := _ASSIGNMENT.fullmatch(line))
-                      and not any(m[1] in w for j, w in enumerate(words) if j != k)}
+                      and seen[m[1]] == 1}
             if not unread:
                 break
             body = [line for k, line in enumerate(body) if k not in unread]

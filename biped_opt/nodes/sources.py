@@ -149,7 +149,7 @@ class SystemLimits:
 
     def check_library(self, field: str, name: str) -> None:
         """A library system's size from its name alone (nothing built yet: building the
-        quadruped's description alone takes a minute)."""
+        quadruped's description and derivation take seconds)."""
         from biped_opt.systems.files import library_size
 
         size = library_size(name)
@@ -245,7 +245,7 @@ class Sources:
                       checked=Path(source).suffix != ".py" and source not in BY_NAME)
         if not names.checked:
             # a file's description runs its code, and a library system built only when named
-            # takes a minute to describe: either waits for the compiler, never the service
+            # takes seconds to describe: either waits for the compiler, never the service
             return names
         described = self.describe("system", source)
         if problem:

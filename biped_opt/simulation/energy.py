@@ -75,13 +75,20 @@ def energy_drift(compiled: CompiledSystem, maneuver: str | None = None, s: float
             f"{system.where()}: the energy may use coordinates, velocities and parameters only, "
             f"not {', '.join(sorted(map(str, unknown)))}")
     energy = sp.lambdify(symbols, system.energy, modules="math")
-    kinetic = sp.lambdify(symbols, (sp.Matrix(system.dq).T * system.mass_matrix
-                                    * sp.Matrix(system.dq))[0, 0] / 2, modules="math")
+    d = len(system.q)
+    if system.mass_matrix is not None:
+        kinetic = sp.lambdify(symbols, (sp.Matrix(system.dq).T * system.mass_matrix
+                                        * sp.Matrix(system.dq))[0, 0] / 2, modules="math")
+    else:  # (a description of bodies: M summed from them, SYSTEMS.md Sec. 1a)
+        numeric = compiled.derived.numeric(**compiled.parameters)
+
+        def kinetic(*values: float) -> float:
+            q, dq = np.array(values[:d]), np.array(values[d:2 * d])
+            return float(dq @ numeric.mass_matrix(q) @ dq) / 2
     run = compiled.simulate(name, value, None, sample_dt=1.0 / SAMPLES_PER_TIME)
     t_end = run.contact_events[0].t if run.contact_events else run.t_final
     samples = run.samples
     assert samples is not None
-    d = len(system.q)
     inside = samples[samples[:, 0] < t_end]
     p = [compiled.parameters[k] for k in system.p.names()]
     values = np.array([energy(*row[1:1 + 2 * d], *p) for row in inside])

@@ -13,6 +13,7 @@ reference the compiled kernels are checked against, not the fast path.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -24,8 +25,8 @@ import sympy as sp
 from biped_opt.systems.description import ManeuverDescription, System, SystemDescriptionError
 from biped_opt.systems.mechanics import MechanicalSystem
 
-__all__ = ["DerivedSystem", "DerivedManeuver", "NumericSystem", "derive", "mode_mask",
-           "mode_name"]
+__all__ = ["DerivedSystem", "DerivedManeuver", "DerivedBody", "NumericSystem", "derive",
+           "mode_mask", "mode_name"]
 
 Array = npt.NDArray[np.float64]
 
@@ -44,17 +45,79 @@ class DerivedManeuver:
 
 
 @dataclass(frozen=True)
+class DerivedBody:
+    """A rigid body's part of Eq. (1a) (SYSTEMS.md Sec. 1a): its centre's velocity Jacobian
+    Jv (3 x d, world axes) and its angular velocity's Jw (3 x d, the body's axes: w = Jw q'),
+    the accelerations at q'' = 0, av = (d/dt Jv) q' and aw = (d/dt Jw) q', its mass and
+    inertia I (3 x 3, body axes, parameters only), and the gravity g that acts on it (world,
+    zeros if none). Its contributions: m Jv^T Jv + Jw^T I Jw to M, and
+    -(Jv^T m (av - g) + Jw^T (I aw + w x I w)) to the forces of every mode."""
+
+    name: str
+    mass: sp.Expr
+    inertia: sp.Matrix  # (3, 3)
+    jv: sp.Matrix  # (3, d)
+    jw: sp.Matrix  # (3, d); all zero for a body without a rotation
+    av: sp.Matrix  # (3,)
+    aw: sp.Matrix  # (3,)
+    gravity: sp.Matrix  # (3,)
+
+    # (both unevaluated: SymPy's distributing of coefficients over these large sums would
+    # take longer than the whole derivation; the values are the same)
+
+    def mass_matrix(self) -> sp.Matrix:
+        with sp.evaluate(False):
+            return self.mass * self.jv.T * self.jv + self.jw.T * self.inertia * self.jw
+
+    def forces(self, dq: sp.Matrix) -> sp.Matrix:
+        """The generalised force of the body's inertia and weight at q'' = 0."""
+        with sp.evaluate(False):
+            w = self.jw * dq
+            spin = self.inertia * w
+            torque = self.inertia * self.aw + w.cross(spin)
+            return -(self.jv.T * (self.mass * (self.av - self.gravity)) + self.jw.T * torque)
+
+
+@dataclass(frozen=True)
 class DerivedSystem:
     """A checked description and its derived quantities (all SymPy)."""
 
     system: System
-    mass_matrix: sp.Matrix  # (d, d)
-    forces: tuple[sp.Matrix, ...]  # f_J for J = 0 .. 2^n - 1 (bit j: constraint j active)
+    given_mass: sp.Matrix | None  # (d, d): the description's M, None when it has bodies
+    applied: tuple[sp.Matrix, ...]  # the forces it gives, for J = 0 .. 2^n - 1 (bit j: j on)
     constraints: sp.Matrix  # (n,)
     jacobian: sp.Matrix  # Da, (n, d)
     jacobian_rate: sp.Matrix  # (d/dt Da) q', (n,)
     restitution: sp.Expr
     maneuvers: Mapping[str, DerivedManeuver]
+    #: the rigid bodies M and the forces are summed from (empty when M is given)
+    bodies: tuple[DerivedBody, ...] = ()
+
+    @functools.cached_property
+    def mass_matrix(self) -> sp.Matrix:
+        """M(q), (d, d): the given one, or the bodies' sum (formed only when asked for: the
+        compiled code and :class:`NumericSystem` sum the bodies' parts numerically)."""
+        if self.given_mass is not None:
+            return self.given_mass
+        mass = sp.zeros(self.ndof, self.ndof)
+        for body in self.bodies:
+            mass += body.mass_matrix()
+        return mass
+
+    @functools.cached_property
+    def forces(self) -> tuple[sp.Matrix, ...]:
+        """f_J for every mode J: the applied forces, plus the bodies' (when asked for, as
+        :attr:`mass_matrix`)."""
+        if not self.bodies:
+            return self.applied
+        dq = sp.Matrix(self.system.dq)
+        inertial = sp.zeros(self.ndof, 1)
+        for body in self.bodies:
+            inertial += body.forces(dq)
+        total: dict[sp.ImmutableMatrix, sp.Matrix] = {}  # (modes with equal forces share)
+        for f in self.applied:
+            total.setdefault(sp.ImmutableMatrix(f), f + inertial)
+        return tuple(total[sp.ImmutableMatrix(f)] for f in self.applied)
 
     @property
     def ndof(self) -> int:
@@ -147,7 +210,7 @@ def derive(system: System) -> DerivedSystem:
     where = system.where()
     normalise = _normaliser(system)
     d = len(system.q)
-    q, dq = sp.Matrix(system.q), sp.Matrix(system.dq)
+    dq = sp.Matrix(system.dq)
     params, inputs = set(system.p), set(system.u)
     config = set(system.q) | params
     state = config | set(system.dq) | inputs
@@ -183,10 +246,23 @@ def derive(system: System) -> DerivedSystem:
                 f"{where}: {item}: must be {want}, got {m.shape[0]}x{m.shape[1]}")
         return m
 
-    mass = matrix("mass_matrix", system.mass_matrix, (d, d))
-    check_symbols("mass_matrix", mass, config, "a coordinate or a parameter")
-    if not (mass - mass.T).applyfunc(sp.simplify).is_zero_matrix:
-        raise SystemDescriptionError(f"{where}: mass_matrix: must be symmetric")
+    # one differentiator per direction (each q_k, and the motion q'), shared by the bodies and
+    # the constraints: a chain's links repeat their parents' terms, each is differentiated once
+    partial = [_Derivative({system.q[k]: sp.Integer(1)}) for k in range(d)]
+    along = _Derivative(dict(zip(system.q, system.dq)))
+    bodies = _bodies(system, normalise, check_symbols, config, params, partial, along)
+    if bodies:
+        if system.mass_matrix is not None:
+            raise SystemDescriptionError(
+                f"{where}: mass_matrix: give either it or bodies, not both")
+        mass = None
+    else:
+        if system.gravity is not None:
+            raise SystemDescriptionError(f"{where}: gravity: acts on bodies, and none is given")
+        mass = matrix("mass_matrix", system.mass_matrix, (d, d))
+        check_symbols("mass_matrix", mass, config, "a coordinate or a parameter")
+        if not (mass - mass.T).applyfunc(sp.simplify).is_zero_matrix:
+            raise SystemDescriptionError(f"{where}: mass_matrix: must be symmetric")
 
     names = list(system.constraints)
     n = len(names)
@@ -194,22 +270,25 @@ def derive(system: System) -> DerivedSystem:
     for name, expr in constraints.items():
         check_symbols(f"constraint {name!r}", expr, config, "a coordinate or a parameter")
     a = sp.Matrix([constraints[k] for k in names]) if n else sp.zeros(0, 1)
-    da = a.jacobian(q) if n else sp.zeros(0, d)
-    rate = ((da * dq).jacobian(q) * dq) if n else sp.zeros(0, 1)
+    da = sp.Matrix(n, d, lambda j, k: partial[k](a[j])) if n else sp.zeros(0, d)
+    rate = (da * dq).applyfunc(along) if n else sp.zeros(0, 1)
 
-    forces = []
+    applied = []
     for mask in range(1 << n):
         active = frozenset(names[j] for j in range(n) if mask >> j & 1)
         label = "{" + ", ".join(sorted(active)) + "}"
-        try:
-            value = system.forces(active) if callable(system.forces) else system.forces
-        except Exception as exc:  # the user's own code: say where it failed
-            raise SystemDescriptionError(
-                f"{where}: forces in mode {label}: {type(exc).__name__}: {exc}") from None
+        if bodies and system.forces is None:
+            value = sp.zeros(d, 1)  # (the bodies' weight may be all there is)
+        else:
+            try:
+                value = system.forces(active) if callable(system.forces) else system.forces
+            except Exception as exc:  # the user's own code: say where it failed
+                raise SystemDescriptionError(
+                    f"{where}: forces in mode {label}: {type(exc).__name__}: {exc}") from None
         f = matrix(f"forces in mode {label}", value, (d, 1))
         check_symbols(f"forces in mode {label}", f, state,
                       "a coordinate, velocity, parameter or input")
-        forces.append(f)
+        applied.append(f)
 
     gamma = normalise(system.restitution)
     check_symbols("restitution", gamma, params, "a parameter")
@@ -242,9 +321,123 @@ def derive(system: System) -> DerivedSystem:
             raise SystemDescriptionError(f"{item}: {exc}") from None
         maneuvers[name] = DerivedManeuver(m, tuple(initial), mode, terminal, outcome, final)
 
-    return DerivedSystem(system=system, mass_matrix=mass, forces=tuple(forces), constraints=a,
+    return DerivedSystem(system=system, given_mass=mass, applied=tuple(applied), constraints=a,
                          jacobian=da, jacobian_rate=rate, restitution=gamma,
-                         maneuvers=maneuvers)
+                         maneuvers=maneuvers, bodies=bodies)
+
+
+class _Derivative:
+    """The derivative of expressions along ``direction`` (symbol: its rate), sum of
+    de/ds direction[s], memoised on subexpressions: SymPy's ``diff`` walks an expression as a
+    tree (each shared subexpression again, and its free symbols again at every node), which
+    takes minutes for the position of a 3-D robot's foot; this walks it as the graph it is.
+    The rules are the textbook ones; a function it does not know goes to ``diff``."""
+
+    def __init__(self, direction: Mapping[sp.Symbol, sp.Expr]) -> None:
+        self.direction = dict(direction)
+        self.memo: dict[sp.Basic, sp.Expr] = {}
+
+    def __call__(self, e: Any) -> sp.Expr:
+        e = sp.sympify(e)
+        hit = self.memo.get(e)
+        if hit is None:
+            hit = self.memo[e] = self._rule(e)
+        return hit
+
+    def _rule(self, e: sp.Basic) -> sp.Expr:
+        if e.is_Symbol:
+            return self.direction.get(e, sp.Integer(0))
+        if e.is_Atom:
+            return sp.Integer(0)
+        if e.is_Add:
+            return sp.Add(*(self(a) for a in e.args))
+        if e.is_Mul:
+            args = e.args
+            terms = []
+            for i, a in enumerate(args):
+                da = self(a)
+                if da != 0:
+                    terms.append(sp.Mul(*args[:i], da, *args[i + 1:]))
+            return sp.Add(*terms)
+        if e.is_Pow:
+            base, power = e.args
+            db, dp = self(base), self(power)
+            if dp == 0:
+                return sp.Integer(0) if db == 0 else power * base ** (power - 1) * db
+            return e * (dp * sp.log(base) + power * db / base)
+        if isinstance(e, (sp.sin, sp.cos)):
+            da = self(e.args[0])
+            if da == 0:
+                return sp.Integer(0)
+            return (sp.cos(e.args[0]) if isinstance(e, sp.sin) else -sp.sin(e.args[0])) * da
+        return sp.Add(*(e.diff(s) * v for s, v in self.direction.items()))
+
+
+def _check_rotation(system: System, item: str, rot: sp.Matrix) -> None:
+    """R^T R = I and det R = 1 at a few arbitrary configurations (default parameters): a
+    symbolic proof would cost more than the whole derivation."""
+    rng = np.random.default_rng(0)
+    values = {system.p[k]: v for k, v in system.defaults.items()}
+    f = sp.lambdify(list(system.q) + list(values), rot, "numpy")
+    for _ in range(3):
+        r = np.array(f(*rng.uniform(-2.0, 2.0, len(system.q)), *values.values()), dtype=float)
+        if not (np.allclose(r.T @ r, np.eye(3), rtol=0, atol=1e-9)
+                and abs(np.linalg.det(r) - 1) < 1e-9):
+            raise SystemDescriptionError(
+                f"{system.where()}: {item}: rotation: not a rotation matrix (R^T R = I, "
+                "det R = 1) at every configuration")
+
+
+def _bodies(system: System, normalise: Callable[[Any], Any],
+            check_symbols: Callable[[str, Any, set[sp.Symbol], str], None],
+            config: set[sp.Symbol], params: set[sp.Symbol], partial: list[_Derivative],
+            along: _Derivative) -> tuple[DerivedBody, ...]:
+    """Each body's Jacobians and accelerations at q'' = 0 (see :class:`DerivedBody`), by
+    differentiating its position and rotation: w^ = R^T R' (the body-axes angular velocity,
+    read off the skew matrix's entries below the diagonal as (w^_21, w^_02, w^_10)), and
+    d/dt (J q') = (d(J q')/dq) q'."""
+    where = system.where()
+    dq = sp.Matrix(system.dq)
+    d = len(system.q)
+    gravity = sp.zeros(3, 1)
+    if system.gravity is not None:
+        try:
+            gravity = normalise(sp.Matrix(list(system.gravity)))
+        except (TypeError, ValueError, sp.SympifyError) as exc:
+            raise SystemDescriptionError(f"{where}: gravity: not a vector ({exc})") from None
+        if gravity.shape != (3, 1):
+            raise SystemDescriptionError(f"{where}: gravity: must be (x, y, z)")
+        check_symbols("gravity", gravity, params, "a parameter")
+    out = []
+    for body in system.bodies.values():
+        item = f"body {body.name!r}"
+        mass = normalise(body.mass)
+        check_symbols(f"{item}: mass", mass, params, "a parameter")
+        inertia = normalise(sp.Matrix(body.inertia))
+        check_symbols(f"{item}: inertia", inertia, params, "a parameter")
+        position = normalise(sp.Matrix(body.position))
+        check_symbols(f"{item}: position", position, config, "a coordinate or a parameter")
+        jv = sp.Matrix([[partial[k](position[r]) for k in range(d)] for r in range(3)])
+        av = (jv * dq).applyfunc(along)
+        if body.rotation is None:
+            jw, aw = sp.zeros(3, d), sp.zeros(3, 1)
+        else:
+            rot = normalise(sp.Matrix(body.rotation))
+            check_symbols(f"{item}: rotation", rot, config, "a coordinate or a parameter")
+            _check_rotation(system, item, rot)
+            columns = []
+            for k in range(d):
+                turn = rot.applyfunc(partial[k])
+                if turn.is_zero_matrix:
+                    columns.append(sp.zeros(3, 1))
+                    continue
+                # the entries of R^T dR/dq_k below the diagonal: (w^_21, w^_02, w^_10)
+                columns.append(sp.Matrix([sum(rot[i, r] * turn[i, c] for i in range(3))
+                                          for r, c in ((2, 1), (0, 2), (1, 0))]))
+            jw = sp.Matrix.hstack(*columns)
+            aw = (jw * dq).applyfunc(along)
+        out.append(DerivedBody(body.name, mass, inertia, jv, jw, av, aw, gravity))
+    return tuple(out)
 
 
 class NumericSystem(MechanicalSystem):
@@ -271,8 +464,13 @@ class NumericSystem(MechanicalSystem):
         def compile_(expr: Any, args: list[Any]) -> Callable[..., Any]:
             return sp.lambdify(args, sp.sympify(expr).subs(subs), modules="numpy", cse=True)
 
-        self._mass = compile_(derived.mass_matrix, q)
-        self._forces = [compile_(f, q + dq + u) for f in derived.forces]
+        self._bodies = _NumericBodies(derived, subs) if derived.bodies else None
+        if self._bodies is None:
+            self._mass = compile_(derived.mass_matrix, q)
+        distinct: dict[sp.ImmutableMatrix, Callable[..., Any]] = {}  # (modes that share forces)
+        for f in derived.applied:
+            distinct.setdefault(sp.ImmutableMatrix(f), compile_(f, q + dq + u))
+        self._forces = [distinct[sp.ImmutableMatrix(f)] for f in derived.applied]
         self._a = compile_(derived.constraints, q)
         self._da = compile_(derived.jacobian, q)
         self._rate = compile_(derived.jacobian_rate, q + dq)
@@ -285,11 +483,14 @@ class NumericSystem(MechanicalSystem):
         return self._gamma
 
     def mass_matrix(self, q: Array) -> Array:
+        if self._bodies is not None:
+            return self._bodies.mass_matrix(q)
         return np.array(self._mass(*q), dtype=np.float64).reshape(self.ndof, self.ndof)
 
     def forces(self, q: Array, dq: Array, u: Array, mode: int) -> Array:
         u = np.asarray(u, dtype=np.float64).ravel()
-        return np.array(self._forces[mode](*q, *dq, *u), dtype=np.float64).reshape(self.ndof)
+        f = np.array(self._forces[mode](*q, *dq, *u), dtype=np.float64).reshape(self.ndof)
+        return f if self._bodies is None else f + self._bodies.forces(q, dq)
 
     def constraints(self, q: Array) -> Array:
         return np.array(self._a(*q), dtype=np.float64).reshape(self.nconstraints)
@@ -310,3 +511,43 @@ class NumericSystem(MechanicalSystem):
                 f"{', '.join(self._initial) or 'none'})") from None
         y0 = np.array(fill(float(s)), dtype=np.float64).reshape(2 * self.ndof)
         return y0, self.derived.maneuvers[maneuver].mode
+
+
+class _NumericBodies:
+    """The bodies' parts of M and the forces (:class:`DerivedBody`), from their Jacobians and
+    accelerations evaluated with NumPy and summed as matrices."""
+
+    def __init__(self, derived: DerivedSystem, subs: Mapping[sp.Symbol, float]) -> None:
+        self.d = derived.ndof
+        system = derived.system
+        parts = []
+        for b in derived.bodies:
+            parts += [b.jv, b.jw, b.av, b.aw]
+        self._parts = sp.lambdify([list(system.q), list(system.dq)],
+                                  [m.xreplace(subs) for m in parts], "numpy", cse=True)
+        self.constants = [(float(sp.sympify(b.mass).xreplace(subs)),
+                           np.array(b.inertia.xreplace(subs), dtype=np.float64),
+                           np.array(b.gravity.xreplace(subs), dtype=np.float64).ravel())
+                          for b in derived.bodies]
+
+    def _evaluate(self, q: Array, dq: Array) -> list[tuple[Array, Array, Array, Array]]:
+        values = self._parts(list(q), list(dq))
+        out = []
+        for k in range(len(self.constants)):
+            jv, jw, av, aw = (np.array(v, dtype=np.float64) for v in values[4 * k:4 * k + 4])
+            out.append((jv.reshape(3, self.d), jw.reshape(3, self.d), av.ravel(), aw.ravel()))
+        return out
+
+    def mass_matrix(self, q: Array) -> Array:
+        m = np.zeros((self.d, self.d))
+        for (jv, jw, _av, _aw), (mass, inertia, _g) in zip(
+                self._evaluate(q, np.zeros(self.d)), self.constants):
+            m += mass * jv.T @ jv + jw.T @ inertia @ jw
+        return (m + m.T) / 2  # (symmetric to the last bit, as the compiled code's mirror)
+
+    def forces(self, q: Array, dq: Array) -> Array:
+        f = np.zeros(self.d)
+        for (jv, jw, av, aw), (mass, inertia, g) in zip(self._evaluate(q, dq), self.constants):
+            w = jw @ dq
+            f -= jv.T @ (mass * (av - g)) + jw.T @ (inertia @ aw + np.cross(w, inertia @ w))
+        return f

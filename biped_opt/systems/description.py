@@ -33,8 +33,8 @@ import sympy as sp
 
 from biped_opt.errors import BipedOptError
 
-__all__ = ["System", "ManeuverDescription", "SystemDescriptionError", "Symbols", "Frame", "Shape",
-           "WORLD", "SHAPE_KINDS"]
+__all__ = ["System", "Body", "ManeuverDescription", "SystemDescriptionError", "Symbols", "Frame",
+           "Shape", "WORLD", "SHAPE_KINDS"]
 
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -131,6 +131,19 @@ class Frame:
 
 
 @dataclass(frozen=True)
+class Body:
+    """A rigid body (SYSTEMS.md Sec. 1a): its mass, its centre of mass (world x, y, z) and its
+    orientation R (3 x 3, its axes' world components as columns), expressions of q and the
+    parameters, and its inertia about the centre in its own axes (3 x 3, parameters only)."""
+
+    name: str
+    mass: Any
+    position: tuple[Any, Any, Any]
+    rotation: tuple[tuple[Any, ...], ...] | None  # None: fixed axes (a point mass, a slider)
+    inertia: tuple[tuple[Any, ...], ...]
+
+
+@dataclass(frozen=True)
 class Shape:
     """A simple shape to draw (SYSTEMS.md Sec. 6): ``box`` (edge lengths ``size``) or ``sphere``
     (``size`` = (radius,)) fixed at the origin of ``frame``, or ``line``: a polyline through
@@ -189,6 +202,10 @@ class System:
         self.defaults: dict[str, float] = parameters
         self.mass_matrix: Any = None
         self.forces: Callable[[frozenset[str]], Any] | Any = None
+        #: rigid bodies, instead of ``mass_matrix`` (see :meth:`body`), and the acceleration
+        #: of gravity (world x, y, z) that acts on each of them, if any
+        self.bodies: dict[str, Body] = {}
+        self.gravity: Any = None
         self.restitution: Any = restitution
         #: the total energy (kinetic plus potential), an expression in q, q' and the
         #: parameters, if declared: ``biped-opt systems FILE --check`` tests the forces with it
@@ -225,6 +242,26 @@ class System:
         if at is not None:
             self.contact_points[name] = (_triple(self, f"constraint {name!r}: at", at),
                                          _triple(self, f"constraint {name!r}: normal", normal))
+        return self
+
+    def body(self, name: str, mass: Any, *, position: Sequence[Any],
+             rotation: Any = None, inertia: Any = (0, 0, 0)) -> System:
+        """A rigid body (see :class:`Body`), instead of giving ``mass_matrix``: M(q) is then
+        the sum of the bodies' m Jv^T Jv + Jw^T I Jw, and their velocity products (Coriolis,
+        centrifugal, gyroscopic) and weight (``gravity``) join the forces of every mode
+        (SYSTEMS.md Sec. 1a). ``inertia`` is (Ixx, Iyy, Izz) or a symmetric 3 x 3 matrix in
+        the body's axes; ``rotation`` None keeps the body's axes fixed (then only its mass
+        counts)."""
+        _check_name("body name", name, self.name)
+        if name in self.bodies:
+            raise SystemDescriptionError(f"{self.name}: body {name!r} is given twice")
+        item = f"{self.name}: body {name!r}"
+        matrix = _matrix3(item + ": inertia", inertia)
+        if matrix != tuple(zip(*matrix)):
+            raise SystemDescriptionError(f"{item}: inertia: must be symmetric")
+        rot = None if rotation is None else _matrix3(item + ": rotation", rotation)
+        self.bodies[name] = Body(name, mass, _triple(self, f"body {name!r}: position", position),
+                                 rot, matrix)
         return self
 
     def frame(self, name: str, *, x: Any = 0, y: Any = 0, z: Any = 0, roll: Any = 0,
@@ -352,6 +389,20 @@ def _triple(system: System, what: str, value: Any) -> tuple[Any, Any, Any]:
     if len(items) != 3:
         raise SystemDescriptionError(f"{system.name}: {what} must be (x, y, z), got {value!r}")
     return items
+
+
+def _matrix3(item: str, value: Any) -> tuple[tuple[Any, ...], ...]:
+    """A 3 x 3 matrix from one, or from its diagonal (three entries)."""
+    try:
+        m = sp.Matrix(value)
+    except (TypeError, ValueError, sp.SympifyError) as exc:
+        raise SystemDescriptionError(f"{item}: not a matrix ({exc})") from None
+    if m.shape in ((3, 1), (1, 3)):
+        m = sp.diag(*m)
+    if m.shape != (3, 3):
+        raise SystemDescriptionError(
+            f"{item}: must be 3 x 3 or three diagonal entries, got {m.shape[0]}x{m.shape[1]}")
+    return tuple(tuple(m[i, j] for j in range(3)) for i in range(3))
 
 
 def _check_budget(system: str, maneuver: str, max_events: Any, horizon: Any) -> None:

@@ -2,12 +2,12 @@
 
 ``tests/simulation/user/reference_quadruped.py`` computes M(q), the forces and the feet's
 kinematics numerically by a recursive Newton-Euler pass over the kinematic tree and imports
-nothing from biped_opt; the library's description gets them from SymPy's Kane's method. The
-symbolic description is checked point by point against it without compiling anything (building
-the description takes about a minute). The compiled simulator is compared with the reference's
-solve_ivp only when ``BIPED_OPT_SLOW_TESTS=1``: a cold compile of the quadruped takes many
-minutes on a two-core machine (SYSTEMS.md Sec. 3b), far more than the whole suite may spend on
-one system.
+nothing from biped_opt; the library's description declares its ten bodies (SYSTEMS.md Sec. 1a)
+and ``derive`` sums M and the forces from their Jacobians. The derived system is checked point
+by point against it without compiling anything. The compiled simulator is compared with the
+reference's solve_ivp only when ``BIPED_OPT_SLOW_TESTS=1``: a cold compile of the quadruped
+takes about a minute on a two-core machine (SYSTEMS.md Sec. 3b), more than the whole suite may
+spend on one system.
 """
 
 from __future__ import annotations
@@ -34,25 +34,30 @@ def description():
 
 
 @cache
-def evaluator():
-    """The description's M, forces (no foot in contact), feet heights, their Jacobian and the
-    energy at (q, q') and the default parameters: one NumPy function with their common
-    subexpressions shared (the energy's kinetic part reuses M's)."""
+def derived():
+    from biped_opt.systems.derive import derive
+
+    return derive(description())
+
+
+@cache
+def numeric():
+    return derived().numeric()
+
+
+@cache
+def energy():
     s = description()
     values = {sym: s.defaults[str(sym)] for sym in s.p}
-    feet = sp.Matrix(list(s.constraints.values()))
-    items = [s.mass_matrix, sp.Matrix(s.forces(frozenset())), feet,
-             feet.jacobian(sp.Matrix(s.q)), sp.Matrix([s.energy])]
-    return sp.lambdify([list(s.q), list(s.dq)], [m.xreplace(values) for m in items], "numpy",
-                       cse=True)
+    return sp.lambdify([list(s.q), list(s.dq)], s.energy.xreplace(values), "numpy", cse=True)
 
 
 def evaluate(q, dq):
-    """(M, forces, feet, Da, energy) of the description at (q, q'), as float arrays."""
-    M, f, feet, Da, energy = evaluator()(q, dq)
-    return (np.array(M, dtype=float), np.array(f, dtype=float).ravel(),
-            np.array(feet, dtype=float).ravel(), np.array(Da, dtype=float),
-            float(np.array(energy, dtype=float).ravel()[0]))
+    """(M, forces with no foot in contact, feet, Da, energy) of the derived system at (q, q')
+    and the default parameters, as float arrays."""
+    n = numeric()
+    return (n.mass_matrix(q), n.forces(q, dq, np.zeros(0), 0), n.constraints(q),
+            n.constraint_jacobian(q), float(energy()(list(q), list(dq))))
 
 
 def states(count):
@@ -74,23 +79,22 @@ def test_the_description_is_the_issue_s_size():
 
 
 def test_mass_matrix_is_symmetric_positive_definite_and_the_reference_s():
-    """M is symmetric term by term (derive checks it symbolically); at random q it is positive
+    """M is symmetric (a sum of symmetric products); at random q it is positive
     definite and equals the reference's sum of m Jv^T Jv + Jw^T I Jw to rounding (1e-12 of its
     largest entry: both evaluate the same numbers in different orders)."""
-    s = description()
-    assert (s.mass_matrix - s.mass_matrix.T).is_zero_matrix
     ref = reference.Quadruped()
     for q, _dq in states(4):
         M = evaluate(q, np.zeros(D))[0]
+        assert np.array_equal(M, M.T)
         expected = ref.mass(q)
         assert np.linalg.eigvalsh(M).min() > 1e-4  # the lightest rod's inertia is ~1e-3
         np.testing.assert_allclose(M, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
 
 
 def test_forces_are_the_reference_s():
-    """Kane's forcing plus the hinges' springs equals the reference's gravity, springs and
-    Newton-Euler velocity products at random states (velocity products are O(|q'|^2) ~ 10,
-    the tolerance 1e-10 of the largest force)."""
+    """The bodies' weight and velocity products plus the hinges' springs equal the reference's
+    gravity, springs and Newton-Euler velocity products at random states (velocity products
+    are O(|q'|^2) ~ 10, the tolerance 1e-10 of the largest force)."""
     ref = reference.Quadruped()
     for q, dq in states(4):
         f = evaluate(q, dq)[1]
@@ -271,3 +275,54 @@ def test_the_scene_is_the_reference_s_pose():
         if not name.endswith("_foot"):  # (feet are balls: no orientation declared)
             np.testing.assert_allclose(rotation, poses[name].R, rtol=0, atol=1e-14)
     np.testing.assert_allclose(state.contacts[0], [f.o for f in feet], rtol=0, atol=1e-14)
+
+
+# -- the generated code, run as Python (no compile): the bodies' sums of SYSTEMS.md Sec. 1a -----
+
+@cache
+def generated():
+    """The quadruped's generated module, imported without compiling anything: its functions'
+    ``py_func`` run the generated code itself in Python."""
+    import importlib.util
+    import tempfile
+    from pathlib import Path
+
+    from biped_opt.codegen.render import render
+
+    folder = Path(tempfile.mkdtemp(prefix="biped_opt_quadruped_"))
+    path = folder / "quadruped_generated.py"
+    path.write_text(render(derived()))
+    spec = importlib.util.spec_from_file_location("quadruped_generated", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_generated_field_and_impact_are_eq_1_of_the_derived_system():
+    """The vector field in every mode (accelerations and reactions) and the impact map of every
+    mode, as generated (sums of the bodies' products, unrolled Cholesky), against Eq. (1) from
+    NumericSystem (NumPy sums of the same bodies, LAPACK solves) at random states: 1e-12 of
+    each quantity's scale (two evaluations of the same sums in different orders, and the
+    reactions' small Schur complements amplify rounding by ~1e2)."""
+    from biped_opt.systems import mechanics
+
+    m = generated()
+    n = numeric()
+    s = description()
+    p = m.prepare_parameters(np.array([s.defaults[k] for k in s.p.names()]))
+    for q, dq in states(2):
+        y = np.concatenate([q, dq])
+        for mode in range(16):
+            out, lam = np.zeros(2 * D), np.zeros(4)
+            m._field_at.py_func(p, mode, y.copy(), 0, np.zeros(0), out, 0, lam, 0)
+            acc, reactions = mechanics.accelerations(n, q, dq, np.zeros(0), mode)
+            assert np.array_equal(out[:D], dq)
+            np.testing.assert_allclose(out[D:], acc, rtol=0, atol=1e-12 * np.abs(acc).max())
+            np.testing.assert_allclose(lam, reactions, rtol=0,
+                                       atol=1e-12 * max(1.0, np.abs(reactions).max()))
+            if mode:
+                after = y.copy()
+                m.apply_impact.py_func(p, mode, after)
+                expected = mechanics.impact_map(n, q, mode) @ dq
+                np.testing.assert_allclose(after[D:], expected, rtol=0,
+                                           atol=1e-12 * np.abs(dq).max())

@@ -22,8 +22,8 @@ LIBRARY: dict[str, Callable[[], System]] = {
     "chain": chain,
 }
 
-#: library systems built only when named: the quadruped's description alone takes about a
-#: minute (Kane's method in 3-D), too long for every listing of the library
+#: library systems built only when named: the quadruped's description takes seconds (3-D
+#: kinematics), too long for every listing of the library
 BY_NAME: dict[str, Callable[[], System]] = {
     "quadruped": quadruped,
 }

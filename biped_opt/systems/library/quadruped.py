@@ -17,10 +17,12 @@ is a torsional spring (and damper, ``c``, 0 by default) toward the standing post
 below its hip, all four at the same depth. Gravity acts on every body; the ground is
 frictionless and the impacts plastic (gamma = 0).
 
-The equations come from ``sympy.physics.mechanics``: Kane's method with the velocities as
-generalised speeds gives M(q) (dense and configuration dependent) and the forces (gravity and
-the velocity products); the springs' and dampers' generalised forces are added to them
-directly (a hinge angle's generalised force is the hinge torque).
+The kinematics come from ``sympy.physics.mechanics`` (frames and points); each of the ten rigid
+bodies is declared with its centre, axes and inertia (SYSTEMS.md Sec. 1a), so that M(q) (dense
+and configuration dependent) and the velocity products and weight are summed from the bodies'
+Jacobians; the springs' and dampers' generalised forces are the applied forces (a hinge angle's
+generalised force is the hinge torque). The declared energy takes the kinetic part from
+``sympy.physics.mechanics``'s own velocities, a path independent of those Jacobians.
 
 Maneuver ``drop`` (s = ``th0``): the posed robot from rest with its feet ``drop`` above the
 ground at roll th0 and pitch th0 / 2; in flight nothing but gravity acts on it (the springs sit
@@ -63,7 +65,6 @@ def quadruped() -> System:
     s = System("quadruped", coords, parameters=PARAMETERS, s="th0")
     p = s.p
     s.restitution = p.gamma
-    d = len(coords)
 
     # -- kinematics, in sympy.physics.mechanics's dynamic symbols (named like the coordinates)
     q = me.dynamicsymbols(" ".join(coords))
@@ -121,12 +122,7 @@ def quadruped() -> System:
         hips[leg] = hip_point
         feet[leg] = (knee_point, foot)
 
-    loads = [(body.masscenter, -body.mass * p.g * world.z) for body in bodies]
-    kane = me.KanesMethod(world, q_ind=q, u_ind=u,
-                          kd_eqs=[qi.diff(me.dynamicsymbols._t) - ui for qi, ui in zip(q, u)])
-    kane.kanes_equations(bodies, loads)
-
-    # -- into the description's symbols
+    # -- the bodies: each one's centre and axes in the world, in the description's symbols
     t = me.dynamicsymbols._t
     plain = {**{qi.diff(t): v for qi, v in zip(q, s.dq)}, **dict(zip(u, s.dq)),
              **dict(zip(q, s.q))}
@@ -134,12 +130,12 @@ def quadruped() -> System:
     def to_plain(expr: sp.Expr) -> sp.Expr:
         return sp.sympify(expr).xreplace(plain)
 
-    kane_mass = kane.mass_matrix
-    mass = sp.zeros(d, d)
-    for r in range(d):
-        for c in range(r, d):  # upper triangle mirrored: symmetric term by term
-            mass[r, c] = mass[c, r] = to_plain(kane_mass[r, c])
-    s.mass_matrix = mass
+    for body in bodies:
+        centre = body.masscenter.pos_from(origin).to_matrix(world).applyfunc(to_plain)
+        axes = world.dcm(body.frame).applyfunc(to_plain)
+        inertia = body.inertia[0].to_matrix(body.frame)
+        s.body(body.name, body.mass, position=centre, rotation=axes, inertia=inertia)
+    s.gravity = (0, 0, -p.g)
     rest = {"spine_pitch": 0, "spine_yaw": 0, "abd": 0, "hip": p.phi, "knee": -2 * p.phi}
     stiffness = {"spine_pitch": p.k_spine, "spine_yaw": p.k_spine, "abd": p.k_abd,
                  "hip": p.k_hip, "knee": p.k_knee}
@@ -153,8 +149,7 @@ def quadruped() -> System:
         stretch = s.q[k] - rest[kind]
         springs.append(stiffness[kind] * stretch**2 / 2)
         hinge_force.append(-stiffness[kind] * stretch - p.c * s.dq[k])
-    forcing = [to_plain(f) + h for f, h in zip(kane.forcing, hinge_force)]
-    s.forces = lambda J: forcing
+    s.forces = lambda J: hinge_force
 
     # -- constraints, energy, maneuver, looks
     heights = {leg: to_plain(foot.pos_from(origin).dot(world.z)) for leg, (_k, foot) in
@@ -166,10 +161,10 @@ def quadruped() -> System:
 
     for leg, (_knee, foot) in feet.items():
         s.constraint(f"{leg}_foot", heights[leg], at=world_point(foot))
-    dq = sp.Matrix(s.dq)
     potential = sum(body.mass * p.g * to_plain(body.masscenter.pos_from(origin).dot(world.z))
                     for body in bodies)
-    s.energy = (dq.T * mass * dq)[0, 0] / 2 + potential + sum(springs)
+    kinetic = to_plain(me.kinetic_energy(world, *bodies))
+    s.energy = kinetic + potential + sum(springs)
     sq = dict(zip(coords, s.q))
     depth = (p.l1 + p.l2) * sp.cos(p.phi)
     initial = {sq["z"]: depth + p.drop, sq["roll"]: s.s, sq["pitch"]: s.s / 2}

@@ -1,0 +1,230 @@
+"""Descriptions of rigid bodies instead of M (SYSTEMS.md Sec. 1a).
+
+- A tumbling box (a free rigid body in 3-D, no gravity, no constraint reached): its angular
+  momentum in the world frame and its energy are constants of the motion, a check of the
+  gyroscopic terms (w x I w, aw) that shares nothing with how they are derived;
+- a box dropped on a corner under gravity: the compiled simulator against SciPy's solve_ivp on
+  Newton-Euler equations written out here in NumPy (rotation matrix, body rates), including
+  the impact and inputs within 1e-9 of the corners' simultaneous touchdown;
+- the planar chain with one link per leg described by its bodies gives the library chain's M
+  and forces to rounding;
+- what a description of bodies may not do gets a clear error.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import sympy as sp
+from scipy.integrate import solve_ivp
+
+from biped_opt.simulation.compiled import CompiledSystem
+from biped_opt.systems.derive import derive
+from biped_opt.systems.description import System, SystemDescriptionError
+from biped_opt.systems.library.chain import chain
+
+#: the box: mass, edge lengths (a, b, c), so principal inertias m (b^2 + c^2) / 12, ...
+MASS, EDGES = 2.0, (0.3, 0.2, 0.1)
+INERTIA = tuple(MASS * (EDGES[(i + 1) % 3] ** 2 + EDGES[(i + 2) % 3] ** 2) / 12
+                for i in range(3))
+
+
+def _rz(a):
+    return sp.Matrix([[sp.cos(a), -sp.sin(a), 0], [sp.sin(a), sp.cos(a), 0], [0, 0, 1]])
+
+
+def _ry(a):
+    return sp.Matrix([[sp.cos(a), 0, sp.sin(a)], [0, 1, 0], [-sp.sin(a), 0, sp.cos(a)]])
+
+
+def _rx(a):
+    return sp.Matrix([[1, 0, 0], [0, sp.cos(a), -sp.sin(a)], [0, sp.sin(a), sp.cos(a)]])
+
+
+def box(name: str = "box", *, gravity: bool = True) -> System:
+    """A box on six coordinates (centre x, y, z; yaw, pitch, roll: R = Rz Ry Rx), its lowest
+    corner (-a/2, -b/2, -c/2 in its axes) the one constraint. Drop: from height h, tilted by
+    s about x and s / 2 about y, spinning at rates w0 about its axes' directions; it ends at the
+    centre's lowest point after the touchdown."""
+    s = System(name, ["x", "y", "z", "yaw", "pitch", "roll"], s="tilt", restitution=0.5,
+               parameters={"m": MASS, "a": EDGES[0], "b": EDGES[1], "c": EDGES[2], "g": 9.81,
+                           "h": 0.4})
+    x, y, z, yaw, pitch, roll = s.q
+    p = s.p
+    rot = _rz(yaw) * _ry(pitch) * _rx(roll)
+    s.body("box", p.m, position=(x, y, z), rotation=rot,
+           inertia=(p.m * (p.b**2 + p.c**2) / 12, p.m * (p.a**2 + p.c**2) / 12,
+                    p.m * (p.a**2 + p.b**2) / 12))
+    if gravity:
+        s.gravity = (0, 0, -p.g)
+    corner = sp.Matrix([x, y, z]) + rot * sp.Matrix([-p.a / 2, -p.b / 2, -p.c / 2])
+    s.constraint("corner", corner[2], at=tuple(corner))
+    q = dict(zip(["x", "y", "z", "yaw", "pitch", "roll"], s.q))
+    dq = dict(zip(["x", "y", "z", "yaw", "pitch", "roll"], s.dq))
+    s.maneuver("drop", initial={q["z"]: p.h, q["roll"]: s.s, q["pitch"]: s.s / 2,
+                                dq["yaw"]: 3.0, dq["roll"]: -2.0, dq["pitch"]: 1.0},
+               terminal=-s.dq[2], armed_after="touchdown", outcome=s.dq[5],
+               s_range=(-0.5, 0.5))
+    return s
+
+
+# -- an independent model of the box: NumPy, rotation matrices and body rates -------------------
+
+def _rotation(yaw, pitch, roll):
+    cy, sy, cp, sp_, cr, sr = (math.cos(yaw), math.sin(yaw), math.cos(pitch), math.sin(pitch),
+                               math.cos(roll), math.sin(roll))
+    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
+    ry = np.array([[cp, 0, sp_], [0, 1, 0], [-sp_, 0, cp]])
+    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    return rz @ ry @ rx
+
+
+def _rates_matrix(pitch, roll):
+    """E with body rates w = E (yaw', pitch', roll') for R = Rz Ry Rx."""
+    cp, sp_, cr, sr = math.cos(pitch), math.sin(pitch), math.cos(roll), math.sin(roll)
+    return np.array([[-sp_, 0, 1], [cp * sr, cr, 0], [cp * cr, -sr, 0]])
+
+
+def _angular_momentum(y):
+    """World angular momentum about the centre, R I w."""
+    yaw, pitch, roll = y[3:6]
+    w = _rates_matrix(pitch, roll) @ y[9:12]
+    return _rotation(yaw, pitch, roll) @ (np.array(INERTIA) * w)
+
+
+def _reference_flight(y0, t_end, g):
+    """Newton-Euler in body rates: m x'' = m g, I w' = -w x I w, R' = R w^, integrated in
+    (position, velocity, R, w) without Euler angles (so it shares nothing with the
+    description); returns the centre and the world angular velocity at t_end."""
+    inertia = np.array(INERTIA)
+    yaw, pitch, roll = y0[3:6]
+    r0 = _rotation(yaw, pitch, roll)
+    w0 = _rates_matrix(pitch, roll) @ y0[9:12]
+
+    def rhs(_t, v):
+        rot = v[6:15].reshape(3, 3)
+        w = v[15:18]
+        skew = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
+        return np.concatenate([v[3:6], [0, 0, -g], (rot @ skew).ravel(),
+                               -np.cross(w, inertia * w) / inertia])
+
+    v0 = np.concatenate([y0[0:3], y0[6:9], r0.ravel(), w0])
+    sol = solve_ivp(rhs, (0, t_end), v0, method="DOP853", rtol=1e-12, atol=1e-13)
+    end = sol.y[:, -1]
+    return end[0:3], end[6:15].reshape(3, 3) @ end[15:18]
+
+
+@pytest.fixture(scope="module")
+def tumbling():
+    return CompiledSystem(box("box_free", gravity=False))
+
+
+@pytest.fixture(scope="module")
+def falling():
+    return CompiledSystem(box())
+
+
+def test_a_free_body_keeps_its_angular_momentum_and_energy(tumbling):
+    """Without gravity the box never reaches the ground within the horizon; along the way the
+    world angular momentum R I w and the kinetic energy stay constant to 1e-9 of their size
+    (the integrator's rtol 1e-11 over ~10 time units); a wrong or missing gyroscopic term
+    changes them at O(1) within a fraction of a revolution."""
+    tr = tumbling.simulate("drop", 0.2, sample_dt=0.05)
+    samples = tr.samples
+    assert len(samples) > 100
+    moments = np.array([_angular_momentum(row[1:13]) for row in samples])
+    assert np.ptp(moments, axis=0).max() < 1e-9 * np.abs(moments[0]).max()
+    energy = [0.5 * float(np.dot(np.array(INERTIA) * (w := _rates_matrix(*row[5:7]) @ row[10:13]),
+                                 w)) for row in samples]
+    assert np.ptp(energy) < 1e-9 * energy[0]
+
+
+def test_the_falling_box_flies_as_newton_and_euler_say(falling):
+    """Before its touchdown the box's centre and world angular velocity agree with the
+    independent Newton-Euler integration to 1e-9 (both integrators at rtol 1e-11..1e-12 over
+    ~0.3 time units), at the simulator's own touchdown time."""
+    for tilt in (-0.3, 0.1, 0.4):
+        tr = falling.simulate("drop", tilt)
+        assert tr.status.name == "OK", tr.status
+        first = tr.contact_events[0]
+        y0 = np.zeros(12)  # (the maneuver's start, written out again)
+        y0[2], y0[5], y0[4] = 0.4, tilt, tilt / 2
+        y0[9], y0[11], y0[10] = 3.0, -2.0, 1.0
+        centre, spin = _reference_flight(y0, first.t, 9.81)
+        before = first.state_before
+        np.testing.assert_allclose(before[0:3], centre, rtol=0, atol=1e-9)
+        yaw, pitch, roll = before[3:6]
+        ours = _rotation(yaw, pitch, roll) @ _rates_matrix(pitch, roll) @ before[9:12]
+        np.testing.assert_allclose(ours, spin, rtol=0, atol=1e-9)
+        # the corner is on the ground then
+        corner = before[0:3] + _rotation(yaw, pitch, roll) @ (-np.array(EDGES) / 2)
+        assert abs(corner[2]) < 1e-12
+
+
+def test_the_chain_described_by_its_bodies_is_the_library_chain():
+    """chain (one link per leg) again, its three links declared as bodies turning about y: M
+    and the forces of every mode agree with the library's explicit description to 1e-13 of
+    their size at random states (two derivations, different sums)."""
+    lib = chain()
+    s = System("chain_bodies", [str(c) for c in lib.q], s="tilt", restitution=0.6,
+               parameters=dict(lib.defaults))
+    x, z, th, a1, a2 = s.q
+    p = s.p
+
+    def turned(angle):  # a link in the x-z plane, its pitch turning x towards +z
+        return sp.Matrix([[sp.cos(angle), 0, -sp.sin(angle)], [0, 1, 0],
+                          [sp.sin(angle), 0, sp.cos(angle)]])
+
+    s.body("middle", p.mb, position=(x, 0, z), rotation=turned(th),
+           inertia=(0, p.mb * (2 * p.lb) ** 2 / 12, 0))
+    for side, hinge in ((-1, a1), (1, a2)):
+        pitch = th + hinge
+        hip = sp.Matrix([x + side * p.lb * sp.cos(th), 0, z + side * p.lb * sp.sin(th)])
+        centre = hip + side * p.leg / 2 * sp.Matrix([sp.cos(pitch), 0, sp.sin(pitch)])
+        s.body(f"leg{'12'[side > 0]}", p.ml, position=tuple(centre), rotation=turned(pitch),
+               inertia=(0, p.ml * p.leg**2 / 12, 0))
+    s.gravity = (0, 0, -p.g)
+    s.forces = lambda J: [0, 0, 0, -p.k * (a1 - p.rest), -p.k * (a2 + p.rest)]
+    for name, expr in lib.constraints.items():
+        s.constraint(name, expr)
+    ours, theirs = derive(s).numeric(), derive(lib).numeric()
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        q, dq = rng.uniform(-1.5, 1.5, 5), rng.uniform(-3, 3, 5)
+        m1, m2 = ours.mass_matrix(q), theirs.mass_matrix(q)
+        np.testing.assert_allclose(m1, m2, rtol=0, atol=1e-13 * np.abs(m2).max())
+        for mode in range(4):
+            f1, f2 = ours.forces(q, dq, [], mode), theirs.forces(q, dq, [], mode)
+            np.testing.assert_allclose(f1, f2, rtol=0, atol=1e-13 * np.abs(f2).max())
+
+
+def _plain(**kw) -> System:
+    s = System("plain", ["x", "th"], parameters={"m": 1.0})
+    for k, v in kw.items():
+        setattr(s, k, v)
+    return s
+
+
+@pytest.mark.parametrize(("build", "message"), [
+    (lambda s: (s.body("b", s.p.m, position=(s.q[0], 0, 0)),
+                setattr(s, "mass_matrix", sp.eye(2))), "give either it or bodies"),
+    (lambda s: setattr(s, "gravity", (0, 0, -1)), "acts on bodies"),
+    (lambda s: s.body("b", s.p.m, position=(s.q[0], 0, 0),
+                      rotation=sp.diag(1, 1, 2) * _rz(s.q[1])), "not a rotation matrix"),
+    (lambda s: s.body("b", s.p.m, position=(s.q[0], 0, 0), rotation=_rz(s.q[1]),
+                      inertia=(s.q[0], 1, 1)), "inertia: uses x, which is not a parameter"),
+    (lambda s: s.body("b", s.p.m, position=(s.q[0], 0)), r"position must be \(x, y, z\)"),
+    (lambda s: s.body("b", s.p.m, position=(s.q[0], 0, 0),
+                      inertia=[[1, 2, 0], [0, 1, 0], [0, 0, 1]]), "must be symmetric"),
+    (lambda s: s.body("b", s.q[1], position=(s.q[0], 0, 0)), "mass: uses th"),
+    (lambda s: (s.body("b", 1, position=(s.q[0], 0, 0)),
+                s.body("b", 1, position=(s.q[1], 0, 0))), "given twice"),
+])
+def test_what_a_description_of_bodies_may_not_do(build, message):
+    s = _plain()
+    with pytest.raises(SystemDescriptionError, match=message):
+        build(s)
+        s.forces = [0, 0]
+        derive(s)
