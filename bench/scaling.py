@@ -22,11 +22,14 @@ For each system, in one run:
 Systems: the walker with n = 2, 3, 4, 6, 8, 10 legs (d = 3 + 2n, a diagonal M, 2^n contact
 modes; ``--legs``, none with a bare ``--legs``) and the library's planar chains ``chain5``,
 ``chain7``, ``chain9``, ``chain11`` (d = 3 + 2 links per leg, a dense configuration-dependent M,
-two feet; ``--chains``, default 5; ``--no-chain`` leaves them out). Cold compiles of the larger
-walkers and chains take minutes; ``--legs 2 3 4`` gives a quick table.
+two feet; ``--chains``, default 5; ``--no-chain`` leaves them out) and, with ``--quadruped``,
+the library's 3-D quadruped (d = 20, four feet, 16 modes; its comparator
+``tests/simulation/user/reference_quadruped.py``, recursive Newton-Euler, its cases over its
+maneuver's range [-0.1, 0.1]). Cold compiles of the larger walkers and chains take minutes;
+``--legs 2 3 4`` gives a quick table.
 
-    python bench/scaling.py [--legs 2 3 4 6 8 10] [--chains 5 7 9] [--no-chain] [--cases 20]
-                            [--json]
+    python bench/scaling.py [--legs 2 3 4 6 8 10] [--chains 5 7 9] [--no-chain] [--quadruped]
+                            [--cases 20] [--json]
 """
 
 from __future__ import annotations
@@ -69,6 +72,9 @@ if kind == "walker":
     from bench import system_reference
     from bench.walker_model import Walker
     system_reference.simulate(Walker(n, "coupled"), "touchdown", 0.01, [0.0] * (n + 1))
+elif kind == "quadruped":
+    from tests.simulation.user import reference_quadruped
+    reference_quadruped.simulate(reference_quadruped.Quadruped(), 0.01)
 else:
     from tests.simulation.user import reference_chain
     reference_chain.simulate(reference_chain.Chain(n), 0.01)
@@ -134,7 +140,8 @@ def measure(spec: str, kind: str, n: int, *, cases: int, rounds: int,
             else:
                 os.environ["BIPED_OPT_CACHE"] = before
     d, ninputs = len(compiled.coordinates), len(compiled.inputs)
-    s_values = np.linspace(-0.2, 0.2, cases)
+    lo, hi = (-0.1, 0.1) if kind == "quadruped" else (-0.2, 0.2)  # (its maneuver's range)
+    s_values = np.linspace(lo, hi, cases)
     zero = np.zeros(ninputs)
     compiled.simulate(maneuver, 0.0, zero)  # (loaded and warm)
     loop = np.inf
@@ -156,6 +163,13 @@ def measure(spec: str, kind: str, n: int, *, cases: int, rounds: int,
 
         def reference(s: float) -> float:
             return system_reference.simulate(model, "touchdown", s, [0.0] * (n + 1)).outcome
+    elif kind == "quadruped":
+        from tests.simulation.user import reference_quadruped
+
+        robot = reference_quadruped.Quadruped()
+
+        def reference(s: float) -> float:
+            return reference_quadruped.simulate(robot, s).outcome
     else:
         from tests.simulation.user import reference_chain
 
@@ -204,6 +218,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--chains", type=int, nargs="*", default=[5], choices=CHAINS,
                     metavar="D", help=f"chains by d ({', '.join(map(str, CHAINS))})")
     ap.add_argument("--no-chain", action="store_true")
+    ap.add_argument("--quadruped", action="store_true",
+                    help="also the quadruped (d = 20; a cold compile of about a minute)")
     ap.add_argument("--cases", type=int, default=20)
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--reference-cases", type=int, default=4)
@@ -212,6 +228,8 @@ def main(argv: list[str] | None = None) -> int:
     plan = [(f"walker{n}", "walker", n) for n in args.legs]
     if not args.no_chain:  # (n: links per leg)
         plan += [(f"chain{d}", "chain", (d - 3) // 2) for d in args.chains]
+    if args.quadruped:
+        plan.append(("quadruped", "quadruped", 4))
     t0 = time.perf_counter()
     subprocess.run([sys.executable, "-m", "biped_opt.codegen.kernel"], check=True, cwd=ROOT,
                    capture_output=True)

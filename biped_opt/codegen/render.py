@@ -379,7 +379,7 @@ def _body_parts(derived: DerivedSystem, em: _Emitter, *, motion: bool,
     const = [e for b in derived.bodies for e in (b.mass, *b.inertia, *b.gravity)]
     names = (hoist.load_all(hoist.pre.exprs(const, "i")) if hoist is not None
              else em.exprs(const, "i"))
-    width = 1 + 9 + 3
+    width = 1 + 9 + 3  # (mass, inertia, gravity)
     varying = [e for b in derived.bodies
                for e in (*b.jv, *b.jw, *((*b.av, *b.aw) if motion else ()))]
     values = em.exprs(varying, "j")
@@ -430,9 +430,8 @@ def _body_forces(em: _Emitter, parts: list[_BodyNames], velocities: list[str]) -
     d = len(velocities)
     terms: list[list[str]] = [[] for _ in range(d)]
     for b in parts:
-        push = [em.assign("w", _mul(b.mass, "(" + _sum([b.av[r], *(
-            [] if _is_zero(b.gravity[r]) else [f"-({b.gravity[r]})"])]) + ")"))
-            for r in range(3)]
+        push = [em.assign("w", _mul(b.mass, _bracket(_sum([b.av[r], _neg(b.gravity[r])]))))
+                for r in range(3)]
         for r in range(3):
             for i in range(d):
                 terms[i].append(_mul(b.jv[r][i], push[r]))
@@ -444,16 +443,20 @@ def _body_forces(em: _Emitter, parts: list[_BodyNames], velocities: list[str]) -
                 for r in range(3)]
         twist = [em.assign("w", _sum([*(_mul(b.inertia[r][t], b.aw[t]) for t in range(3)),
                                       _mul(w[(r + 1) % 3], spin[(r + 2) % 3]),
-                                      "-(" + _mul(w[(r + 2) % 3], spin[(r + 1) % 3]) + ")"]))
+                                      _neg(_mul(w[(r + 2) % 3], spin[(r + 1) % 3]))]))
                  for r in range(3)]
         for r in range(3):
             for i in range(d):
                 terms[i].append(_mul(b.jw[r][i], twist[r]))
-    out = []
-    for i in range(d):
-        total = _sum(terms[i])
-        out.append("0.0" if _is_zero(total) else em.assign("g", f"-({total})"))
-    return out
+    return [em.assign("g", _neg(_sum(terms[i]))) for i in range(d)]
+
+
+def _neg(text: str) -> str:
+    return "0.0" if _is_zero(text) else f"-({text})"
+
+
+def _bracket(text: str) -> str:
+    return "0.0" if _is_zero(text) else f"({text})"
 
 
 def _factors(derived: DerivedSystem, em: _Emitter

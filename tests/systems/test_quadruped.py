@@ -4,16 +4,15 @@
 kinematics numerically by a recursive Newton-Euler pass over the kinematic tree and imports
 nothing from biped_opt; the library's description declares its ten bodies (SYSTEMS.md Sec. 1a)
 and ``derive`` sums M and the forces from their Jacobians. The derived system is checked point
-by point against it without compiling anything. The compiled simulator is compared with the
-reference's solve_ivp only when ``BIPED_OPT_SLOW_TESTS=1``: a cold compile of the quadruped
-takes about a minute on a two-core machine (SYSTEMS.md Sec. 3b), more than the whole suite may
-spend on one system.
+by point against it without compiling anything, the generated code run as Python against
+Eq. (1) of the derived system, and the compiled simulator against the reference's solve_ivp
+(a cold compile of the quadruped takes about a minute on two cores, SYSTEMS.md Sec. 3b; the
+compiled tests share one compile on one worker).
 """
 
 from __future__ import annotations
 
 import math
-import os
 from functools import cache
 
 import numpy as np
@@ -143,10 +142,6 @@ def test_the_reference_conserves_energy_and_falls_rigidly():
 
 # -- the compiled simulator against the reference ------------------------------------------------
 
-slow = pytest.mark.skipif(
-    os.environ.get("BIPED_OPT_SLOW_TESTS") != "1",
-    reason="compiles the quadruped (many minutes cold); set BIPED_OPT_SLOW_TESTS=1")
-
 #: event times and outcomes: the reference (rtol 1e-12) and the simulator (rtol 1e-11) follow
 #: the same trajectory through several impacts and liftoffs; 1e-8 leaves room for the
 #: integrators' global errors over ~0.2 s and none for a wrong event (a wrong impact changes
@@ -154,8 +149,9 @@ slow = pytest.mark.skipif(
 TOL = 1e-8
 
 
-@cache
-def compiled():
+@pytest.fixture(scope="module")
+def quad():
+    """The compiled quadruped, once per module (and so on one worker: tests/conftest.py)."""
     from biped_opt.simulation.compiled import CompiledSystem
 
     return CompiledSystem("quadruped")
@@ -197,11 +193,10 @@ def assert_agrees(tr, ref, where):
     assert tr.t_final == pytest.approx(ref.t_final, rel=0, abs=TOL), where
 
 
-@slow
 @pytest.mark.parametrize("th0", [0.05, -0.12])
-def test_drop_against_the_reference(th0):
+def test_drop_against_the_reference(th0, quad):
     ref = reference.simulate(reference.Quadruped(), th0)
-    tr = compiled().simulate("drop", th0)
+    tr = quad.simulate("drop", th0)
     assert_agrees(tr, ref, f"th0 = {th0}")
     before, after = ref.first_impact
     first = tr.contact_events[0]
@@ -209,34 +204,31 @@ def test_drop_against_the_reference(th0):
     np.testing.assert_allclose(first.state_after, after, rtol=0, atol=1e-9)
 
 
-@slow
 @pytest.mark.xfail(strict=True, reason="the kernel ends INCONSISTENT: a foot released at rest "
                    "after its plastic landing (its rate -5e-16, approaching by rounding) hops "
                    "0.12 ms, 3e-10 high, and the watch of a released constraint does not find "
                    "a point above the ground in that step (SYSTEMS.md Sec. 5, 'Disarming')")
-def test_a_released_foot_s_short_hop():
+def test_a_released_foot_s_short_hop(quad):
     """th0 = 0.11: the front left foot lands at t = 0.1060647, is released at once (it would
     pull in contact), hops and lands again 0.116 ms later; the reference follows it with short
     steps while the foot sits at zero."""
     ref = reference.simulate(reference.Quadruped(), 0.11)
     assert [sorted(down) for _t, down, *_rest in ref.events][2:4] == [[0], [0]]
-    assert_agrees(compiled().simulate("drop", 0.11), ref, "th0 = 0.11")
+    assert_agrees(quad.simulate("drop", 0.11), ref, "th0 = 0.11")
 
 
-@slow
-def test_energy_holds_in_flight():
+def test_energy_holds_in_flight(quad):
     """Nothing dissipates before the first touchdown: the reference's energy of the
     simulator's samples stays within 1e-9 of its scale (~31 J)."""
     ref = reference.Quadruped()
-    tr = compiled().simulate("drop", 0.1, sample_dt=0.002)
+    tr = quad.simulate("drop", 0.1, sample_dt=0.002)
     flight = tr.samples[tr.samples[:, 0] < tr.contact_events[0].t]
     assert len(flight) > 20
     energy = np.array([ref.energy(row[1:1 + 2 * D]) for row in flight])
     assert np.ptp(energy) < 1e-9 * abs(energy[0])
 
 
-@slow
-def test_four_feet_land_together_at_th0_zero():
+def test_four_feet_land_together_at_th0_zero(quad):
     """At th0 = 0 the fall is level: one impact of all four feet; within 1e-9 of it the feet
     are within the simultaneity band and still land in one impact, and 1e-6 away they land
     one by one, in orders that differ on the two sides."""
@@ -244,21 +236,20 @@ def test_four_feet_land_together_at_th0_zero():
     for th0 in (0.0, -1e-9, 1e-9):
         level = reference.simulate(ref, th0)
         assert sorted(level.events[0][1]) == [0, 1, 2, 3]
-        assert_agrees(compiled().simulate("drop", th0), level, f"th0 = {th0}")
+        assert_agrees(quad.simulate("drop", th0), level, f"th0 = {th0}")
     orders = []
     for th0 in (-1e-6, 1e-6):
         split = reference.simulate(ref, th0)
-        assert_agrees(compiled().simulate("drop", th0), split, f"th0 = {th0}")
+        assert_agrees(quad.simulate("drop", th0), split, f"th0 = {th0}")
         orders.append([sorted(down) for _t, down, *_rest in split.events if down])
     assert orders[0][0] != orders[1][0]
 
 
-@slow
-def test_the_scene_is_the_reference_s_pose():
+def test_the_scene_is_the_reference_s_pose(quad):
     """The looks in 3-D: at a random pose the frames' positions and rotations (the rear half's
     rpy recovered from its rotation by atan2 and asin) and the contact points are the
     reference's to rounding."""
-    system = compiled()
+    system = quad
     ref = reference.Quadruped()
     q = ref.initial(0.0)[:D] + np.random.default_rng(RNG_SEED).uniform(-0.8, 0.8, D)
     state = system.scene.evaluate(q[None], np.array(list(PARAMETERS.values())))
