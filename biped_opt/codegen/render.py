@@ -288,14 +288,60 @@ class _Inverse(list):
     """The names of 1 / m_ii of a structurally diagonal matrix: solving is multiplying."""
 
 
-def _cholesky(em: _Emitter, m: list[list[str]], tag: str) -> list[list[str]] | _Inverse:
+class _Permuted(list):
+    """A Cholesky factor L of P M P^T, the rows and columns of M taken in ``order``."""
+
+    order: list[int]
+
+
+def _elimination_order(m: list[list[str]]) -> list[int] | None:
+    """A fill-reducing order for the factorisation of the matrix named by ``m`` (greedy
+    minimum degree on its structural nonzeros: a tree of bodies' M, eliminated leaves first,
+    has no fill-in at all), or None when it would not save work over the natural order (the
+    work of a column: the square of its nonzeros below the diagonal)."""
+    k = len(m)
+    links = [{j for j in range(k) if j != i and not _is_zero(m[i][j])} for i in range(k)]
+
+    def work(order: list[int]) -> int:
+        graph = [set(s) for s in links]
+        done: set[int] = set()
+        total = 0
+        for v in order:
+            rest = graph[v] - done
+            total += len(rest) ** 2
+            for a in rest:
+                graph[a] |= rest - {a}
+            done.add(v)
+        return total
+
+    graph = [set(s) for s in links]
+    left = set(range(k))
+    order = []
+    while left:
+        v = min(left, key=lambda i: (len(graph[i] & left), i))
+        near = graph[v] & left
+        for a in near:
+            graph[a] |= near - {a}
+        order.append(v)
+        left.remove(v)
+    return order if work(order) < work(list(range(k))) else None
+
+
+def _cholesky(em: _Emitter, m: list[list[str]], tag: str
+              ) -> list[list[str]] | _Inverse | _Permuted:
     """Unrolled Cholesky factor L (lower) of the symmetric matrix named by ``m``: entries that
-    are structurally zero stay "0.0", and so do those of L that no fill-in reaches. A diagonal
-    matrix (the biped's, the walker's, the bar's mass matrix) gets its inverse instead: one
-    division per entry once, then products."""
+    are structurally zero stay "0.0", and so do those of L that no fill-in reaches; in a
+    fill-reducing order when there is one (:func:`_elimination_order`). A diagonal matrix (the
+    biped's, the walker's, the bar's mass matrix) gets its inverse instead: one division per
+    entry once, then products."""
     k = len(m)
     if all(_is_zero(m[i][j]) for i in range(k) for j in range(k) if i != j):
         return _Inverse(em.assign(f"{tag}v", f"1.0 / {m[i][i]}") for i in range(k))
+    order = _elimination_order(m)
+    if order is not None:
+        factor = _Permuted(_cholesky(em, [[m[i][j] for j in order] for i in order], tag))
+        factor.order = order
+        return factor
     L = [["0.0"] * k for _ in range(k)]
     for j in range(k):
         diag = _sum([m[j][j], *(f"-({_mul(L[j][r], L[j][r])})" for r in range(j)
@@ -314,6 +360,12 @@ def _solve(em: _Emitter, L: list[list[str]] | _Inverse, b: list[str], tag: str) 
     """x with L L^T x = b (forward then back substitution, zeros skipped)."""
     if isinstance(L, _Inverse):
         return [em.assign(tag, _mul(b[i], L[i])) for i in range(len(L))]
+    if isinstance(L, _Permuted):
+        inner = _solve(em, list(L), [b[i] for i in L.order], tag)
+        x_out = [""] * len(L)
+        for i, v in zip(L.order, inner):
+            x_out[i] = v
+        return x_out
     k = len(L)
     z: list[str] = []
     for i in range(k):
@@ -348,107 +400,227 @@ def _bindings(derived: DerivedSystem, em: _Emitter, *, velocities: bool, inputs:
 
 def _mass_entries(derived: DerivedSystem, em: _Emitter) -> list[str]:
     """M(q)'s entries (row by row) as scalars of the function body: the given matrix's
-    expressions, or the bodies' sum (see :func:`_body_parts`)."""
+    expressions, or the bodies' (see :class:`_Tree`)."""
     d = derived.ndof
     if derived.bodies:
-        return _body_mass(em, _body_parts(derived, em, motion=False), d)
+        return _Tree(derived, em, motion=False).mass_matrix()
     return em.exprs([derived.mass_matrix[i, j] for i in range(d) for j in range(d)], "m")
 
 
-@dataclass
-class _BodyNames:
-    """A body's quantities (:class:`~biped_opt.systems.derive.DerivedBody`) as names of the
-    function body: mass, inertia rows, gravity, Jv and Jw rows, and (with the motion) av, aw."""
-
-    mass: str
-    inertia: list[list[str]]
-    gravity: list[str]
-    jv: list[list[str]]
-    jw: list[list[str]]
-    av: list[str]
-    aw: list[str]
+Vec = list[str]  # three names (or literals) of a function body
 
 
-def _body_parts(derived: DerivedSystem, em: _Emitter, *, motion: bool,
-                hoist: _Hoisted | None = None) -> list[_BodyNames]:
-    """Every body's Jacobians (and, with ``motion``, its accelerations at q'' = 0), their
-    common subexpressions shared across the bodies (a leg's links repeat the trunk's terms).
-    With ``hoist``, the masses, inertias and gravity (parameters alone) are computed once per
-    parameter vector."""
-    d = derived.ndof
-    const = [e for b in derived.bodies for e in (b.mass, *b.inertia, *b.gravity)]
-    names = (hoist.load_all(hoist.pre.exprs(const, "i")) if hoist is not None
-             else em.exprs(const, "i"))
-    width = 1 + 9 + 3  # (mass, inertia, gravity)
-    varying = [e for b in derived.bodies
-               for e in (*b.jv, *b.jw, *((*b.av, *b.aw) if motion else ()))]
-    values = em.exprs(varying, "j")
-    step = 6 * d + (6 if motion else 0)
-    out = []
-    for k in range(len(derived.bodies)):
-        c = names[width * k:width * (k + 1)]
-        v = values[step * k:step * (k + 1)]
-        out.append(_BodyNames(
-            mass=c[0], inertia=[c[1 + 3 * r:4 + 3 * r] for r in range(3)], gravity=c[10:13],
-            jv=[v[r * d:(r + 1) * d] for r in range(3)],
-            jw=[v[(3 + r) * d:(4 + r) * d] for r in range(3)],
-            av=v[6 * d:6 * d + 3] if motion else [], aw=v[6 * d + 3:6 * d + 6] if motion else []))
-    return out
+class _Tree:
+    """Eq. (1a)'s M and the bodies' forces for a tree of rigid bodies (SYSTEMS.md Sec. 1a), as
+    straight-line code that follows the tree: each body's pose, velocity and acceleration from
+    its parent's and its joint's (the joint's few expressions, common subexpressions shared),
+    then the composite rigid body sums for M and the recursive Newton-Euler sums for the
+    velocity products and weights (Featherstone's CRBA and RNEA, in world axes about one
+    point P, the root's origin, so that sums over a subtree need no transforms).
 
+    A coordinate q_k moves one body b (its owner) relative to its parent; its unit motion is
+    the twist S_k = (s_k, u_k): the angular velocity and the velocity of the point of b at P.
+    A body's spatial inertia about P is (m, h = m d, J = I_c + m (|d|^2 1 - d d^T)), d from P
+    to its centre, I_c its inertia in world axes; the momentum of twist (w, u) is
+    (J w + h x u, m u + w x h). Then M_kl = S_k . (inertia of the subtree of l's owner) S_l
+    where k's owner is l's or an ancestor of it (0 otherwise), and the bodies' generalised
+    force is -S_k . (the wrench about P of m (a_c - g) and I_c alpha + w x I_c w, summed over
+    the subtree of k's owner) with the accelerations at q'' = 0."""
 
-def _body_mass(em: _Emitter, parts: list[_BodyNames], d: int) -> list[str]:
-    """M = sum of m Jv^T Jv + Jw^T I Jw over the bodies, each entry one sum of the products
-    that are not structurally zero (two legs' hinges share none), upper triangle mirrored."""
-    terms: list[list[list[str]]] = [[[] for _ in range(d)] for _ in range(d)]
-    for b in parts:
-        for r in range(3):
-            cols = [i for i in range(d) if not _is_zero(b.jv[r][i])]
-            weighted = {i: em.assign("w", _mul(b.mass, b.jv[r][i])) for i in cols}
-            for a, i in enumerate(cols):
-                for j in cols[a:]:
-                    terms[i][j].append(_mul(weighted[i], b.jv[r][j]))
-        cols = [j for j in range(d) if any(not _is_zero(b.jw[r][j]) for r in range(3))]
-        turned = [{j: em.assign("w", _sum([_mul(b.inertia[r][t], b.jw[t][j])
-                                           for t in range(3)])) for j in cols}
-                  for r in range(3)]
-        for r in range(3):
-            for a, i in enumerate(cols):
-                if _is_zero(b.jw[r][i]):
-                    continue
-                for j in cols[a:]:
-                    terms[i][j].append(_mul(b.jw[r][i], turned[r][j]))
-    m = [["0.0"] * d for _ in range(d)]
-    for i in range(d):
-        for j in range(i, d):
-            m[i][j] = m[j][i] = em.assign("m", _sum(terms[i][j]))
-    return [m[i][j] for i in range(d) for j in range(d)]
+    def __init__(self, derived: DerivedSystem, em: _Emitter, *, motion: bool,
+                 hoist: _Hoisted | None = None) -> None:
+        self.em, self.d, self.motion = em, derived.ndof, motion
+        bodies = derived.bodies
+        d = self.d
+        const = [e for b in bodies for e in (b.mass, *b.inertia, *b.centre, *b.gravity)]
+        names = (hoist.load_all(hoist.pre.exprs(const, "i")) if hoist is not None
+                 else em.exprs(const, "i"))
+        own = [[k for k in range(d) if any(b.rel_jw[r, k] != 0 or b.rel_jp[r, k] != 0
+                                           for r in range(3))] for b in bodies]
+        varying = []
+        for b, ks in zip(bodies, own):
+            varying += [*b.rel_rotation, *b.rel_position]
+            varying += [b.rel_jw[r, k] for k in ks for r in range(3)]
+            varying += [b.rel_jp[r, k] for k in ks for r in range(3)]
+            if motion:
+                varying += [*b.rel_aw, *b.rel_ap]
+        values = iter(em.exprs(varying, "j"))
+        consts = iter(names)
+        self.owner = [-1] * d
+        self.s: dict[int, Vec] = {}
+        self.u: dict[int, Vec] = {}
+        self.parent = [b.parent for b in bodies]
+        self.masses: list[str] = []
+        inertia_of: list[tuple[str, Vec, list[Vec]]] = []  # (m, h, J) about P, per body
+        wrench_of: list[tuple[Vec, Vec]] = []
+        axes: list[list[Vec]] = []
+        origins: list[Vec] = []
+        spins: list[Vec] = []
+        turns: list[Vec] = []  # angular accelerations at q'' = 0
+        accs: list[Vec] = []  # the origins' accelerations at q'' = 0
+        zero = ["0.0"] * 3
+        names_dq = [em.names[v] for v in derived.system.dq]
+        for i, (b, ks) in enumerate(zip(bodies, own)):
+            mass = next(consts)
+            inertia = [[next(consts) for _ in range(3)] for _ in range(3)]
+            centre = [next(consts) for _ in range(3)]
+            gravity = [next(consts) for _ in range(3)]
+            rel = [[next(values) for _ in range(3)] for _ in range(3)]
+            offset = [next(values) for _ in range(3)]
+            jw = {k: [next(values) for _ in range(3)] for k in ks}
+            jp = {k: [next(values) for _ in range(3)] for k in ks}
+            aw, ap = ([next(values) for _ in range(3)], [next(values) for _ in range(3)]) \
+                if motion else (zero, zero)
+            up = b.parent
+            if up < 0:
+                R = rel
+                r = offset
+                o = offset
+            else:
+                R = self.matmul(axes[up], rel)
+                r = self.matvec(axes[up], offset)
+                o = self.add(origins[up], r)
+            axes.append(R)
+            origins.append(o)
+            if i == 0:
+                self.P = o
+            to_p = zero if i == 0 else self.sub(self.P, o)
+            for k in ks:
+                self.owner[k] = i
+                self.s[k] = self.matvec(axes[up], jw[k]) if up >= 0 else jw[k]
+                t = self.matvec(axes[up], jp[k]) if up >= 0 else jp[k]
+                self.u[k] = self.add(t, self.cross(self.s[k], to_p))
+            # the centre, and the body's inertia in world axes and about P
+            arm = self.matvec(R, centre)
+            lever = self.sub(self.add(o, arm), self.P)
+            rot_inertia = self.congruent(R, inertia)
+            h = [em.assign("t", _mul(mass, lever[j])) for j in range(3)]
+            square = _sum([_mul(lever[j], lever[j]) for j in range(3)])
+            J = [[em.assign("t", _sum([rot_inertia[a][c], _mul(mass, _bracket(_sum(
+                [square if a == c else "0.0", _neg(_mul(lever[a], lever[c]))])))]))
+                  for c in range(3)] for a in range(3)]
+            inertia_of.append((mass, h, J))
+            if not motion:
+                continue
+            w_rel = [em.assign("t", _sum([_mul(jw[k][j], names_dq[k]) for k in ks]))
+                     for j in range(3)]
+            v_rel = [em.assign("t", _sum([_mul(jp[k][j], names_dq[k]) for k in ks]))
+                     for j in range(3)]
+            if up < 0:
+                w, alpha = w_rel, aw
+                a = ap
+            else:
+                w_world = self.matvec(axes[up], w_rel)
+                v_world = self.matvec(axes[up], v_rel)
+                w = self.add(spins[up], w_world)
+                alpha = self.add(self.add(turns[up], self.cross(spins[up], w_world)),
+                                 self.matvec(axes[up], aw))
+                a = self.add(accs[up], self.add(
+                    self.add(self.cross(turns[up], r),
+                             self.cross(spins[up], self.cross(spins[up], r))),
+                    self.add(self.scale("2.0", self.cross(spins[up], v_world)),
+                             self.matvec(axes[up], ap))))
+            spins.append(w)
+            turns.append(alpha)
+            accs.append(a)
+            a_c = self.add(a, self.add(self.cross(alpha, arm),
+                                       self.cross(w, self.cross(w, arm))))
+            f = [em.assign("t", _mul(mass, _bracket(_sum([a_c[j], _neg(gravity[j])]))))
+                 for j in range(3)]
+            torque = self.add(self.matvec(rot_inertia, alpha),
+                              self.cross(w, self.matvec(rot_inertia, w)))
+            wrench_of.append((self.add(torque, self.cross(lever, f)), f))
+        self.inertia = self.subtree_sums(inertia_of)
+        self.wrench = self.subtree_sums(wrench_of) if motion else []
 
+    # -- 3-vectors and 3 x 3 matrices of names
+    def add(self, a: Vec, b: Vec) -> Vec:
+        return [self.em.assign("t", _sum([a[j], b[j]])) for j in range(3)]
 
-def _body_forces(em: _Emitter, parts: list[_BodyNames], velocities: list[str]) -> list[str]:
-    """The bodies' part of the forces: -(Jv^T m (av - g) + Jw^T (I aw + w x I w)) summed over
-    the bodies, w = Jw q' (see :class:`~biped_opt.systems.derive.DerivedBody`)."""
-    d = len(velocities)
-    terms: list[list[str]] = [[] for _ in range(d)]
-    for b in parts:
-        push = [em.assign("w", _mul(b.mass, _bracket(_sum([b.av[r], _neg(b.gravity[r])]))))
-                for r in range(3)]
-        for r in range(3):
-            for i in range(d):
-                terms[i].append(_mul(b.jv[r][i], push[r]))
-        if all(_is_zero(x) for row in b.jw for x in row):
-            continue
-        w = [em.assign("w", _sum([_mul(b.jw[r][k], velocities[k]) for k in range(d)]))
-             for r in range(3)]
-        spin = [em.assign("w", _sum([_mul(b.inertia[r][t], w[t]) for t in range(3)]))
-                for r in range(3)]
-        twist = [em.assign("w", _sum([*(_mul(b.inertia[r][t], b.aw[t]) for t in range(3)),
-                                      _mul(w[(r + 1) % 3], spin[(r + 2) % 3]),
-                                      _neg(_mul(w[(r + 2) % 3], spin[(r + 1) % 3]))]))
-                 for r in range(3)]
-        for r in range(3):
-            for i in range(d):
-                terms[i].append(_mul(b.jw[r][i], twist[r]))
-    return [em.assign("g", _neg(_sum(terms[i]))) for i in range(d)]
+    def sub(self, a: Vec, b: Vec) -> Vec:
+        return [self.em.assign("t", _sum([a[j], _neg(b[j])])) for j in range(3)]
+
+    def scale(self, c: str, a: Vec) -> Vec:
+        return [self.em.assign("t", _mul(c, a[j])) for j in range(3)]
+
+    def cross(self, a: Vec, b: Vec) -> Vec:
+        return [self.em.assign("t", _sum([_mul(a[(j + 1) % 3], b[(j + 2) % 3]),
+                                          _neg(_mul(a[(j + 2) % 3], b[(j + 1) % 3]))]))
+                for j in range(3)]
+
+    def matvec(self, m: list[Vec], v: Vec) -> Vec:
+        return [self.em.assign("t", _sum([_mul(m[j][t], v[t]) for t in range(3)]))
+                for j in range(3)]
+
+    def matmul(self, a: list[Vec], b: list[Vec]) -> list[Vec]:
+        return [[self.em.assign("t", _sum([_mul(a[i][t], b[t][j]) for t in range(3)]))
+                 for j in range(3)] for i in range(3)]
+
+    def congruent(self, R: list[Vec], inertia: list[Vec]) -> list[Vec]:
+        """R I R^T, symmetric (the upper triangle mirrored)."""
+        ri = self.matmul(R, inertia)
+        out = [["0.0"] * 3 for _ in range(3)]
+        for i in range(3):
+            for j in range(i, 3):
+                out[i][j] = out[j][i] = self.em.assign(
+                    "t", _sum([_mul(ri[i][t], R[j][t]) for t in range(3)]))
+        return out
+
+    def subtree_sums(self, items: list[Any]) -> list[Any]:
+        """Each body's item plus its descendants' (children are declared after parents)."""
+        terms = [[item] for item in items]
+        for i in reversed(range(len(items))):
+            if self.parent[i] >= 0:
+                terms[self.parent[i]] += terms[i]
+
+        def total(parts: list[Any]) -> Any:
+            if isinstance(parts[0], str):
+                return self.em.assign("t", _sum(list(parts)))
+            return [total([p[j] for p in parts]) for j in range(len(parts[0]))]
+
+        return [total(t) for t in terms]
+
+    def _ancestors(self, i: int) -> list[int]:
+        out = []
+        while i >= 0:
+            out.append(i)
+            i = self.parent[i]
+        return out
+
+    def mass_matrix(self) -> list[str]:
+        d, em = self.d, self.em
+        m = [["0.0"] * d for _ in range(d)]
+        for col in range(d):
+            b = self.owner[col]
+            if b < 0:
+                continue
+            mass, h, J = self.inertia[b]
+            s, u = self.s[col], self.u[col]
+            spin = [em.assign("t", _sum([*(_mul(J[j][t], s[t]) for t in range(3))]))
+                    for j in range(3)]
+            L = self.add(spin, self.cross(h, u))
+            p = self.add(self.scale(mass, u), self.cross(s, h))
+            line = set(self._ancestors(b))
+            for k in range(d):
+                if self.owner[k] in line and (self.owner[k] != b or k <= col):
+                    m[k][col] = m[col][k] = em.assign("m", _sum(
+                        [*(_mul(self.s[k][j], L[j]) for j in range(3)),
+                         *(_mul(self.u[k][j], p[j]) for j in range(3))]))
+        return [m[i][j] for i in range(d) for j in range(d)]
+
+    def forces(self) -> list[str]:
+        """The bodies' generalised forces (weights and velocity products)."""
+        out = []
+        for k in range(self.d):
+            b = self.owner[k]
+            if b < 0:
+                out.append("0.0")
+                continue
+            n, f = self.wrench[b]
+            out.append(self.em.assign("g", _neg(_sum(
+                [*(_mul(self.s[k][j], n[j]) for j in range(3)),
+                 *(_mul(self.u[k][j], f[j]) for j in range(3))]))))
+        return out
 
 
 def _neg(text: str) -> str:
@@ -624,6 +796,25 @@ class _Hoisted:
             f"        {v}," for v in self.slots] + ["    ], dtype=np.float64)"]
 
 
+#: the vector field computes sine and cosine by inlined polynomials (runtime.sincos) for at most
+#: this many angles, by the library's calls beyond: each inlined pair costs compile time, and a
+#: field with many angles (the quadruped's 17: a fifth of its compile) does so much else that
+#: the pairs' share of its evaluation is small
+SINCOS_ANGLES = 12
+
+
+def _angles(derived: DerivedSystem) -> set[sp.Expr]:
+    """The distinct arguments of sin and cos in what the vector field evaluates."""
+    values: list[sp.Basic] = [*derived.jacobian, *derived.jacobian_rate]
+    for f in {sp.ImmutableMatrix(f) for f in derived.applied}:
+        values += list(f)
+    if derived.bodies:
+        values += [e for b in derived.bodies for e in (*b.rel_rotation, *b.rel_position)]
+    else:
+        values += list(derived.mass_matrix)
+    return {f.args[0] for f in _atoms([sp.sympify(v) for v in values], (sp.sin, sp.cos))}
+
+
 def _vector_field(derived: DerivedSystem) -> tuple[list[str], list[str]]:
     """Eq. (1a) for the current mode, branch-free: the forces mixed by 0/1 mode factors, and
     the reactions from the Schur complement of *all* constraints with the inactive ones' rows
@@ -635,18 +826,24 @@ def _vector_field(derived: DerivedSystem) -> tuple[list[str], list[str]]:
            "def vector_field(p, mode, y, yo, u, out, off, lam, lo):",
            '    """(q\', q\'\') of mode ``mode`` at y[yo:yo + 2d] to out[off:off + 2d], the',
            '    reactions to lam[lo:lo + n] (0 for inactive constraints), Eq. (1a)."""']
-    em = _Emitter(_symbol_names(derived.system), sincos=True)
+    em = _Emitter(_symbol_names(derived.system), sincos=len(_angles(derived)) <= SINCOS_ANGLES)
     _bindings(derived, em, velocities=True, inputs=True)
     hoist = _Hoisted(derived, em)
     const_m = not derived.bodies and hoist.constant(derived.mass_matrix)
     const_da = n == 0 or hoist.constant(derived.jacobian)
     m_em = hoist.pre if const_m else em
-    parts = _body_parts(derived, em, motion=True, hoist=hoist) if derived.bodies else []
-    m = (_body_mass(em, parts, d) if parts else
+    tree = _Tree(derived, em, motion=True, hoist=hoist) if derived.bodies else None
+    m = (tree.mass_matrix() if tree is not None else
          m_em.exprs([derived.mass_matrix[i, j] for i in range(d) for j in range(d)], "m"))
     L = _cholesky(m_em, [[m[i * d + j] for j in range(d)] for i in range(d)], "c")
     if const_m:
-        L = _Inverse(hoist.load_all(L)) if isinstance(L, _Inverse) else hoist.load_all(L)
+        loaded = hoist.load_all(L)
+        if isinstance(L, _Permuted):
+            permuted = _Permuted(loaded)
+            permuted.order = L.order
+            L = permuted
+        else:
+            L = _Inverse(loaded) if isinstance(L, _Inverse) else loaded
     da_em = hoist.pre if const_da else em
     da = da_em.exprs(list(derived.jacobian), "a") if n else []
     Da = [[da[j * d + i] for i in range(d)] for j in range(n)]
@@ -656,8 +853,8 @@ def _vector_field(derived: DerivedSystem) -> tuple[list[str], list[str]]:
     for i in range(d):
         em.line(f"out[off + {i}] = y[yo + {d + i}]")
     f = _mode_mixed(em, derived)
-    if parts:
-        inertial = _body_forces(em, parts, [em.names[v] for v in derived.system.dq])
+    if tree is not None:
+        inertial = tree.forces()
         f = [em.assign("f", _sum([a, b])) for a, b in zip(f, inertial)]
     x = _solve(em, L, f, "x")
     acc = x

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -46,21 +46,58 @@ class DerivedManeuver:
 
 @dataclass(frozen=True)
 class DerivedBody:
-    """A rigid body's part of Eq. (1a) (SYSTEMS.md Sec. 1a): its centre's velocity Jacobian
-    Jv (3 x d, world axes) and its angular velocity's Jw (3 x d, the body's axes: w = Jw q'),
-    the accelerations at q'' = 0, av = (d/dt Jv) q' and aw = (d/dt Jw) q', its mass and
-    inertia I (3 x 3, body axes, parameters only), and the gravity g that acts on it (world,
-    zeros if none). Its contributions: m Jv^T Jv + Jw^T I Jw to M, and
+    """A rigid body of a tree (SYSTEMS.md Sec. 1a): its mass, inertia I (3 x 3, its own axes,
+    parameters only) and centre (its own frame), the gravity g acting on it (world, zeros if
+    none), its parent's index (-1: the world) and its frame's pose in the parent's, the
+    relative angular velocity (parent's axes) and origin velocity per coordinate rate
+    (3 x d each) and their accelerations at q'' = 0, and its frame's axes and origin in the
+    world. The compiled code follows the tree from these (render's ``_Tree``).
+
+    In world terms (for :class:`NumericSystem` and the symbolic M and forces, derived when
+    first asked for): the centre's velocity Jacobian Jv (3 x d, world axes), the angular
+    velocity's Jw (3 x d, the body's axes: w = Jw q'), and av = (d/dt Jv) q', aw = (d/dt Jw) q'
+    at q'' = 0; the body adds m Jv^T Jv + Jw^T I Jw to M and
     -(Jv^T m (av - g) + Jw^T (I aw + w x I w)) to the forces of every mode."""
 
     name: str
     mass: sp.Expr
     inertia: sp.Matrix  # (3, 3)
-    jv: sp.Matrix  # (3, d)
-    jw: sp.Matrix  # (3, d); all zero for a body without a rotation
-    av: sp.Matrix  # (3,)
-    aw: sp.Matrix  # (3,)
     gravity: sp.Matrix  # (3,)
+    parent: int
+    rel_rotation: sp.Matrix  # (3, 3)
+    rel_position: sp.Matrix  # (3,)
+    centre: sp.Matrix  # (3,)
+    rel_jw: sp.Matrix  # (3, d)
+    rel_jp: sp.Matrix  # (3, d)
+    rel_aw: sp.Matrix  # (3,)
+    rel_ap: sp.Matrix  # (3,)
+    axes: sp.Matrix  # (3, 3)
+    origin: sp.Matrix  # (3,)
+    calculus: _Calculus = field(repr=False, compare=False)
+
+    @functools.cached_property
+    def jv(self) -> sp.Matrix:
+        position = self.origin + self.axes * self.centre
+        return sp.Matrix([[self.calculus.partial[k](position[r])
+                           for k in range(self.calculus.d)] for r in range(3)])
+
+    @functools.cached_property
+    def jw(self) -> sp.Matrix:
+        jw = sp.zeros(3, self.calculus.d)
+        for k, partial in enumerate(self.calculus.partial):  # (R^T dR/dq_k below the diagonal)
+            rate = self.axes.applyfunc(partial)
+            if not rate.is_zero_matrix:
+                for r, (i, j) in enumerate(((2, 1), (0, 2), (1, 0))):
+                    jw[r, k] = sum(self.axes[t, i] * rate[t, j] for t in range(3))
+        return jw
+
+    @functools.cached_property
+    def av(self) -> sp.Matrix:
+        return (self.jv * self.calculus.dq).applyfunc(self.calculus.along)
+
+    @functools.cached_property
+    def aw(self) -> sp.Matrix:
+        return (self.jw * self.calculus.dq).applyfunc(self.calculus.along)
 
     # (both unevaluated: SymPy's distributing of coefficients over these large sums would
     # take longer than the whole derivation; the values are the same)
@@ -76,6 +113,16 @@ class DerivedBody:
             spin = self.inertia * w
             torque = self.inertia * self.aw + w.cross(spin)
             return -(self.jv.T * (self.mass * (self.av - self.gravity)) + self.jw.T * torque)
+
+
+@dataclass(frozen=True)
+class _Calculus:
+    """A system's differentiators, shared by its derivation and its bodies' world terms."""
+
+    partial: list[_Derivative]  # d/dq_k
+    along: _Derivative  # d/dt at q'' = 0
+    dq: sp.Matrix
+    d: int
 
 
 @dataclass(frozen=True)
@@ -392,13 +439,15 @@ def _bodies(system: System, normalise: Callable[[Any], Any],
             check_symbols: Callable[[str, Any, set[sp.Symbol], str], None],
             config: set[sp.Symbol], params: set[sp.Symbol], partial: list[_Derivative],
             along: _Derivative) -> tuple[DerivedBody, ...]:
-    """Each body's Jacobians and accelerations at q'' = 0 (see :class:`DerivedBody`), by
-    differentiating its position and rotation: w^ = R^T R' (the body-axes angular velocity,
-    read off the skew matrix's entries below the diagonal as (w^_21, w^_02, w^_10)), and
-    d/dt (J q') = (d(J q')/dq) q'."""
+    """Each body's pose relative to its parent, its relative angular and origin velocities per
+    coordinate rate and their accelerations at q'' = 0, and its world pose (see
+    :class:`DerivedBody`), by differentiating its position and rotation: w^ = R' R^T (the
+    relative angular velocity in the parent's axes, read off the skew matrix below its
+    diagonal as (w^_21, w^_02, w^_10)), and d/dt (J q') = (d(J q')/dq) q'."""
     where = system.where()
     dq = sp.Matrix(system.dq)
     d = len(system.q)
+    calculus = _Calculus(partial, along, dq, d)
     gravity = sp.zeros(3, 1)
     if system.gravity is not None:
         try:
@@ -408,35 +457,58 @@ def _bodies(system: System, normalise: Callable[[Any], Any],
         if gravity.shape != (3, 1):
             raise SystemDescriptionError(f"{where}: gravity: must be (x, y, z)")
         check_symbols("gravity", gravity, params, "a parameter")
-    out = []
+    out: list[DerivedBody] = []
+    index: dict[str, int] = {}
+    mover: dict[sp.Symbol, str] = {}  # which body each coordinate moves
     for body in system.bodies.values():
         item = f"body {body.name!r}"
         mass = normalise(body.mass)
         check_symbols(f"{item}: mass", mass, params, "a parameter")
         inertia = normalise(sp.Matrix(body.inertia))
         check_symbols(f"{item}: inertia", inertia, params, "a parameter")
-        position = normalise(sp.Matrix(body.position))
-        check_symbols(f"{item}: position", position, config, "a coordinate or a parameter")
-        jv = sp.Matrix([[partial[k](position[r]) for k in range(d)] for r in range(3)])
-        av = (jv * dq).applyfunc(along)
+        centre = normalise(sp.Matrix(body.centre))
+        check_symbols(f"{item}: centre", centre, params, "a parameter")
+        offset = normalise(sp.Matrix(body.position))
+        check_symbols(f"{item}: position", offset, config, "a coordinate or a parameter")
         if body.rotation is None:
-            jw, aw = sp.zeros(3, d), sp.zeros(3, 1)
+            turn = sp.eye(3)
         else:
-            rot = normalise(sp.Matrix(body.rotation))
-            check_symbols(f"{item}: rotation", rot, config, "a coordinate or a parameter")
-            _check_rotation(system, item, rot)
-            columns = []
-            for k in range(d):
-                turn = rot.applyfunc(partial[k])
-                if turn.is_zero_matrix:
-                    columns.append(sp.zeros(3, 1))
-                    continue
-                # the entries of R^T dR/dq_k below the diagonal: (w^_21, w^_02, w^_10)
-                columns.append(sp.Matrix([sum(rot[i, r] * turn[i, c] for i in range(3))
-                                          for r, c in ((2, 1), (0, 2), (1, 0))]))
-            jw = sp.Matrix.hstack(*columns)
-            aw = (jw * dq).applyfunc(along)
-        out.append(DerivedBody(body.name, mass, inertia, jv, jw, av, aw, gravity))
+            turn = normalise(sp.Matrix(body.rotation))
+            check_symbols(f"{item}: rotation", turn, config, "a coordinate or a parameter")
+            _check_rotation(system, item, turn)
+        for c in sorted((offset.free_symbols | turn.free_symbols) & set(system.q), key=str):
+            if c in mover:
+                raise SystemDescriptionError(
+                    f"{where}: {item}: coordinate {c} already moves body {mover[c]!r}: each "
+                    "coordinate moves one body relative to its parent (declare the other "
+                    "body as this one's child)")
+            mover[c] = body.name
+        # relative to the parent: the angular velocity (parent's axes, w^ = R_rel' R_rel^T)
+        # and the origin's velocity per coordinate rate, and their accelerations at q'' = 0
+        rel_jw = sp.zeros(3, d)
+        rel_jp = sp.Matrix([[partial[k](offset[r]) for k in range(d)] for r in range(3)])
+        for k in range(d):
+            rate = turn.applyfunc(partial[k])
+            if not rate.is_zero_matrix:  # (below the diagonal: (w^_21, w^_02, w^_10))
+                for r, (i, j) in enumerate(((2, 1), (0, 2), (1, 0))):
+                    rel_jw[r, k] = sum(rate[i, t] * turn[j, t] for t in range(3))
+        rel_aw = (rel_jw * dq).applyfunc(along)
+        rel_ap = (rel_jp * dq).applyfunc(along)
+        # in the world: the frame's axes and origin
+        parent = -1 if body.parent is None else index[body.parent]
+        if parent < 0:
+            axes, origin = turn, offset
+        else:
+            up = out[parent]
+            axes, origin = up.axes * turn, up.origin + up.axes * offset
+        index[body.name] = len(out)
+        out.append(DerivedBody(body.name, mass, inertia, gravity, parent, turn, offset, centre,
+                               rel_jw, rel_jp, rel_aw, rel_ap, axes, origin, calculus))
+    idle = [str(c) for c in system.q if c not in mover] if out else []
+    if idle:
+        raise SystemDescriptionError(
+            f"{where}: coordinate {idle[0]} moves no body: M would be singular (every "
+            "coordinate of a system of bodies moves one of them)")
     return tuple(out)
 
 

@@ -132,15 +132,19 @@ class Frame:
 
 @dataclass(frozen=True)
 class Body:
-    """A rigid body (SYSTEMS.md Sec. 1a): its mass, its centre of mass (world x, y, z) and its
-    orientation R (3 x 3, its axes' world components as columns), expressions of q and the
-    parameters, and its inertia about the centre in its own axes (3 x 3, parameters only)."""
+    """A rigid body of a tree of bodies (SYSTEMS.md Sec. 1a): the pose of its frame in its
+    parent's frame (the world's for a root), its origin ``position`` (x, y, z) and its axes'
+    components ``rotation`` (3 x 3, columns; None: the parent's axes), expressions of q and the
+    parameters; its mass, its centre of mass ``centre`` in its own frame and its inertia about
+    that centre in its own axes (3 x 3), parameters only."""
 
     name: str
     mass: Any
     position: tuple[Any, Any, Any]
-    rotation: tuple[tuple[Any, ...], ...] | None  # None: fixed axes (a point mass, a slider)
+    rotation: tuple[tuple[Any, ...], ...] | None
     inertia: tuple[tuple[Any, ...], ...]
+    parent: str | None = None
+    centre: tuple[Any, Any, Any] = (0, 0, 0)
 
 
 @dataclass(frozen=True)
@@ -244,24 +248,31 @@ class System:
                                          _triple(self, f"constraint {name!r}: normal", normal))
         return self
 
-    def body(self, name: str, mass: Any, *, position: Sequence[Any],
-             rotation: Any = None, inertia: Any = (0, 0, 0)) -> System:
-        """A rigid body (see :class:`Body`), instead of giving ``mass_matrix``: M(q) is then
-        the sum of the bodies' m Jv^T Jv + Jw^T I Jw, and their velocity products (Coriolis,
-        centrifugal, gyroscopic) and weight (``gravity``) join the forces of every mode
-        (SYSTEMS.md Sec. 1a). ``inertia`` is (Ixx, Iyy, Izz) or a symmetric 3 x 3 matrix in
-        the body's axes; ``rotation`` None keeps the body's axes fixed (then only its mass
-        counts)."""
+    def body(self, name: str, mass: Any = 0, *, position: Sequence[Any] = (0, 0, 0),
+             rotation: Any = None, inertia: Any = (0, 0, 0), parent: str | None = None,
+             centre: Sequence[Any] = (0, 0, 0)) -> System:
+        """A rigid body (see :class:`Body`), instead of giving ``mass_matrix``: the bodies
+        form a tree (``parent``: a body declared before, None: the world), each coordinate
+        moving one body relative to its parent (a joint: a hinge, a slider, a ball, a free
+        base); M(q) is then the sum of the bodies' m Jv^T Jv + Jw^T I Jw, and their velocity
+        products (Coriolis, centrifugal, gyroscopic) and weight (``gravity``) join the forces
+        of every mode (SYSTEMS.md Sec. 1a). ``inertia`` is (Ixx, Iyy, Izz) or a symmetric
+        3 x 3 matrix in the body's axes. A massless body is a frame between joints."""
         _check_name("body name", name, self.name)
         if name in self.bodies:
             raise SystemDescriptionError(f"{self.name}: body {name!r} is given twice")
         item = f"{self.name}: body {name!r}"
+        if parent is not None and parent not in self.bodies:
+            raise SystemDescriptionError(
+                f"{item}: parent {parent!r} is not a body declared before it (bodies: "
+                f"{', '.join(self.bodies) or 'none'})")
         matrix = _matrix3(item + ": inertia", inertia)
         if matrix != tuple(zip(*matrix)):
             raise SystemDescriptionError(f"{item}: inertia: must be symmetric")
         rot = None if rotation is None else _matrix3(item + ": rotation", rotation)
         self.bodies[name] = Body(name, mass, _triple(self, f"body {name!r}: position", position),
-                                 rot, matrix)
+                                 rot, matrix, parent,
+                                 _triple(self, f"body {name!r}: centre", centre))
         return self
 
     def frame(self, name: str, *, x: Any = 0, y: Any = 0, z: Any = 0, roll: Any = 0,

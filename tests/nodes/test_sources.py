@@ -27,7 +27,7 @@ BAR_PROBLEM = "maneuver: drop\ndecisions: {u_th: [-0.5, 0.5]}\n"
                                 "node serves at most 6 and 16"),
 ])
 def test_a_request_naming_what_no_compile_can_serve_is_refused(names, message, monkeypatch):
-    # sizes come from the name alone: building the quadruped's description takes a minute, so
+    # sizes come from the name alone: building the quadruped's description takes seconds, so
     # none is built (a factory that raises proves it)
     from biped_opt.systems import library
 
@@ -43,7 +43,7 @@ def test_a_request_naming_what_no_compile_can_serve_is_refused(names, message, m
 
 def test_a_library_system_built_only_when_named_waits_for_the_compiler(monkeypatch):
     """Within the limits, the quadruped's name passes the service's check unbuilt, as a file's
-    does: its description (a minute of Kane's method) is the compiler process's work."""
+    does: its description (seconds of SymPy) is the compiler process's work."""
     from biped_opt.systems import library
 
     def never(*_args, **_kwargs):

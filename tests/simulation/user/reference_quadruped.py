@@ -1,6 +1,6 @@
 """Independent reference for the library's quadruped: SciPy's solve_ivp (DOP853) on equations of
-motion computed numerically, by a recursive pass over the kinematic tree, instead of SymPy's
-Kane's method. Imports nothing from biped_opt.
+motion computed numerically, by a recursive pass over the kinematic tree, instead of the
+library's symbolic derivation and generated code. Imports nothing from biped_opt.
 
 The tree: three slides (x, y, z) and three hinges (yaw about the world's z, pitch about the new
 y, roll about the new x) carry the front trunk half from the spine joint; two hinges (spine
