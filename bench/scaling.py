@@ -197,14 +197,14 @@ def _time(v: float) -> str:
 
 
 def table(rows: list[dict[str, Any]]) -> str:
-    head = (f"{'system':<20}{'d':>3}{'modes':>6}{'cold':>9}{'cached':>9}{'per traj.':>11}"
+    head = (f"{'system':<20}{'d':>3}{'modes':>6}{'cold':>9}{'cached':>11}{'per traj.':>11}"
             f"{'batch':>11}{'SciPy':>11}{'SciPy start':>12}  ratios cold/cached/traj/batch"
             f"{'max |err|':>11}")
     lines = [head]
     for r in rows:
         lines.append(
             f"{r['system']:<20}{r['d']:>3}{r['modes']:>6}{_time(r['cold_s']):>9}"
-            f"{_time(r['cached_s']):>9}{_time(r['per_trajectory_s']):>11}"
+            f"{_time(r['cached_s']):>11}{_time(r['per_trajectory_s']):>11}"
             f"{_time(r['batch_per_trajectory_s']):>11}{_time(r['reference_per_trajectory_s']):>11}"
             f"{_time(r['reference_start_s']):>12}  {r['ratio_cold']:.2f} / {r['ratio_cached']:.2f}"
             f" / {r['ratio_per_trajectory']:.3f} / {r['ratio_batch']:.3f}"
