@@ -6,7 +6,7 @@ nothing from biped_opt; the library's description declares its ten bodies (SYSTE
 and ``derive`` sums M and the forces from their Jacobians. The derived system is checked point
 by point against it without compiling anything, the generated code run as Python against
 Eq. (1) of the derived system, and the compiled simulator against the reference's solve_ivp
-(a cold compile of the quadruped takes about a minute on two cores, SYSTEMS.md Sec. 3b; the
+(a cold compile of the quadruped takes about 35 s on two cores, SYSTEMS.md Sec. 3b; the
 compiled tests share one compile on one worker).
 """
 
