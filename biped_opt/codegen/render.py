@@ -429,7 +429,7 @@ class _Tree:
 
     def __init__(self, derived: DerivedSystem, em: _Emitter, *, motion: bool,
                  hoist: _Hoisted | None = None) -> None:
-        self.em, self.d, self.motion = em, derived.ndof, motion
+        self.em, self.d = em, derived.ndof
         bodies = derived.bodies
         d = self.d
         const = [e for b in bodies for e in (b.mass, *b.inertia, *b.centre, *b.gravity)]
@@ -450,7 +450,6 @@ class _Tree:
         self.s: dict[int, Vec] = {}
         self.u: dict[int, Vec] = {}
         self.parent = [b.parent for b in bodies]
-        self.masses: list[str] = []
         inertia_of: list[tuple[str, Vec, list[Vec]]] = []  # (m, h, J) about P, per body
         wrench_of: list[tuple[Vec, Vec]] = []
         axes: list[list[Vec]] = []
@@ -596,7 +595,7 @@ class _Tree:
                 continue
             mass, h, J = self.inertia[b]
             s, u = self.s[col], self.u[col]
-            spin = [em.assign("t", _sum([*(_mul(J[j][t], s[t]) for t in range(3))]))
+            spin = [em.assign("t", _sum([_mul(J[j][t], s[t]) for t in range(3)]))
                     for j in range(3)]
             L = self.add(spin, self.cross(h, u))
             p = self.add(self.scale(mass, u), self.cross(s, h))

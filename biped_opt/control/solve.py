@@ -333,7 +333,8 @@ class _Runner:
 
 
 def _acting(problem: Problem, compiled: CompiledSystem, modes: Sequence[int]) -> list[str]:
-    where = input_modes(problem.description, compiled.derived.forces)
+    # (the applied forces: a system of bodies adds terms of no input to every mode)
+    where = input_modes(problem.description, compiled.derived.applied)
     visited = set(modes)
     return [d for d in problem.decision_names if where[d] & visited]
 

@@ -78,18 +78,12 @@ class DerivedBody:
     @functools.cached_property
     def jv(self) -> sp.Matrix:
         position = self.origin + self.axes * self.centre
-        return sp.Matrix([[self.calculus.partial[k](position[r])
-                           for k in range(self.calculus.d)] for r in range(3)])
+        return sp.Matrix([[partial(position[r]) for partial in self.calculus.partial]
+                          for r in range(3)])
 
     @functools.cached_property
     def jw(self) -> sp.Matrix:
-        jw = sp.zeros(3, self.calculus.d)
-        for k, partial in enumerate(self.calculus.partial):  # (R^T dR/dq_k below the diagonal)
-            rate = self.axes.applyfunc(partial)
-            if not rate.is_zero_matrix:
-                for r, (i, j) in enumerate(((2, 1), (0, 2), (1, 0))):
-                    jw[r, k] = sum(self.axes[t, i] * rate[t, j] for t in range(3))
-        return jw
+        return _spin_jacobian(self.axes, self.calculus.partial, body_axes=True)
 
     @functools.cached_property
     def av(self) -> sp.Matrix:
@@ -122,7 +116,6 @@ class _Calculus:
     partial: list[_Derivative]  # d/dq_k
     along: _Derivative  # d/dt at q'' = 0
     dq: sp.Matrix
-    d: int
 
 
 @dataclass(frozen=True)
@@ -435,6 +428,24 @@ def _check_rotation(system: System, item: str, rot: sp.Matrix) -> None:
                 "det R = 1) at every configuration")
 
 
+def _spin_jacobian(rotation: sp.Matrix, partial: list[_Derivative], *, body_axes: bool
+                   ) -> sp.Matrix:
+    """The angular velocity of a frame turned by ``rotation`` per coordinate rate (3 x d):
+    column k read off the skew matrix R^T dR/dq_k (in the frame's own axes) or dR/dq_k R^T
+    (in the axes ``rotation`` is given in) below its diagonal, (w^_21, w^_02, w^_10); only
+    those three entries are formed."""
+    out = sp.zeros(3, len(partial))
+    for k, along_k in enumerate(partial):
+        rate = rotation.applyfunc(along_k)
+        if rate.is_zero_matrix:
+            continue
+        # both are sum_t a[t, i] b[t, j]: (R, dR) in the frame's axes, (dR^T, R^T) else
+        a, b = (rotation, rate) if body_axes else (rate.T, rotation.T)
+        for r, (i, j) in enumerate(((2, 1), (0, 2), (1, 0))):
+            out[r, k] = sum(a[t, i] * b[t, j] for t in range(3))
+    return out
+
+
 def _bodies(system: System, normalise: Callable[[Any], Any],
             check_symbols: Callable[[str, Any, set[sp.Symbol], str], None],
             config: set[sp.Symbol], params: set[sp.Symbol], partial: list[_Derivative],
@@ -447,7 +458,7 @@ def _bodies(system: System, normalise: Callable[[Any], Any],
     where = system.where()
     dq = sp.Matrix(system.dq)
     d = len(system.q)
-    calculus = _Calculus(partial, along, dq, d)
+    calculus = _Calculus(partial, along, dq)
     gravity = sp.zeros(3, 1)
     if system.gravity is not None:
         try:
@@ -485,13 +496,8 @@ def _bodies(system: System, normalise: Callable[[Any], Any],
             mover[c] = body.name
         # relative to the parent: the angular velocity (parent's axes, w^ = R_rel' R_rel^T)
         # and the origin's velocity per coordinate rate, and their accelerations at q'' = 0
-        rel_jw = sp.zeros(3, d)
+        rel_jw = _spin_jacobian(turn, partial, body_axes=False)
         rel_jp = sp.Matrix([[partial[k](offset[r]) for k in range(d)] for r in range(3)])
-        for k in range(d):
-            rate = turn.applyfunc(partial[k])
-            if not rate.is_zero_matrix:  # (below the diagonal: (w^_21, w^_02, w^_10))
-                for r, (i, j) in enumerate(((2, 1), (0, 2), (1, 0))):
-                    rel_jw[r, k] = sum(rate[i, t] * turn[j, t] for t in range(3))
         rel_aw = (rel_jw * dq).applyfunc(along)
         rel_ap = (rel_jp * dq).applyfunc(along)
         # in the world: the frame's axes and origin

@@ -169,7 +169,8 @@ def test_the_falling_box_flies_as_newton_and_euler_say(falling):
         yaw, pitch, roll = before[3:6]
         ours = _rotation(yaw, pitch, roll) @ _rates_matrix(pitch, roll) @ before[9:12]
         np.testing.assert_allclose(ours, spin, rtol=0, atol=1e-9)
-        # the corner is on the ground then
+        # the corner is on the ground then (the touchdown is located to rounding of the
+        # guard; 1e-12 m leaves room for the corner's rounding from the state)
         corner = before[0:3] + _rotation(yaw, pitch, roll) @ (-np.array(EDGES) / 2)
         assert abs(corner[2]) < 1e-12
 
@@ -177,9 +178,10 @@ def test_the_falling_box_flies_as_newton_and_euler_say(falling):
 def test_the_chain_described_by_its_bodies_is_the_library_chain():
     """chain (one link per leg) again as a tree of bodies: the middle link (x, z, th) and a leg
     hinged at each of its ends. M and the forces of every mode agree with the library's
-    explicit description to 1e-13 of their size at random states, both through NumericSystem
-    (flat sums over the bodies' world Jacobians) and through the generated code run as Python
-    (the tree's recursive sums): three derivations, different sums."""
+    explicit description to 1e-13 of their size at random states, through NumericSystem (flat
+    sums over the bodies' world Jacobians), through the derived system's symbolic sums and
+    through the generated code run as Python (the tree's recursive sums): four derivations,
+    different sums."""
     lib = chain()
     s = System("chain_bodies", [str(c) for c in lib.q], s="tilt", restitution=0.6,
                parameters=dict(lib.defaults))
@@ -201,14 +203,25 @@ def test_the_chain_described_by_its_bodies_is_the_library_chain():
     for name, expr in lib.constraints.items():
         s.constraint(name, expr)
     s.maneuver("drop", initial={z: 1.2}, terminal=s.dq[1], outcome=s.dq[2])  # (for render)
-    ours, theirs = derive(s).numeric(), derive(lib).numeric()
-    generated = _python_module(derive(s))
+    derived = derive(s)
+    ours, theirs = derived.numeric(), derive(lib).numeric()
+    generated = _python_module(derived)
+    # (and the symbolic sums a user may ask a derived system of bodies for)
+    values_p = {sym: lib.defaults[str(sym)] for sym in s.p}
+    symbolic_m = sp.lambdify(list(s.q), derived.mass_matrix.xreplace(values_p), "numpy")
+    symbolic_f = sp.lambdify(list(s.q) + list(s.dq),
+                             derived.forces[3].xreplace(values_p), "numpy")
     values = generated.prepare_parameters(np.array([lib.defaults[k] for k in s.p.names()]))
     rng = np.random.default_rng(7)
     for _ in range(5):
         q, dq = rng.uniform(-1.5, 1.5, 5), rng.uniform(-3, 3, 5)
         m1, m2 = ours.mass_matrix(q), theirs.mass_matrix(q)
         np.testing.assert_allclose(m1, m2, rtol=0, atol=1e-13 * np.abs(m2).max())
+        np.testing.assert_allclose(np.array(symbolic_m(*q), dtype=float), m2, rtol=0,
+                                   atol=1e-13 * np.abs(m2).max())
+        f3 = theirs.forces(q, dq, [], 3)
+        np.testing.assert_allclose(np.array(symbolic_f(*q, *dq), dtype=float).ravel(), f3,
+                                   rtol=0, atol=1e-13 * np.abs(f3).max())
         for mode in range(4):
             f1, f2 = ours.forces(q, dq, [], mode), theirs.forces(q, dq, [], mode)
             np.testing.assert_allclose(f1, f2, rtol=0, atol=1e-13 * np.abs(f2).max())

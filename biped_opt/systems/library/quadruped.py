@@ -82,9 +82,8 @@ def quadruped() -> System:
 
     base_frames = {"front": front, "rear": rear}
     bodies = []
-    # the tree of bodies: name -> (parent, its frame, its frame's origin), and each body's
-    # parent, frame, origin and centre (in its frame's components)
-    joints: list[tuple[str, str | None, me.ReferenceFrame, me.Point, me.Vector]] = []
+    # the tree: each body's parent, its frame's origin and its centre from that origin
+    joints: dict[str, tuple[str | None, me.Point, me.Vector]] = {}
 
     def rod_inertia(frame: me.ReferenceFrame, mass: sp.Expr, length: sp.Expr) -> me.Dyadic:
         across = mass * length**2 / 12
@@ -98,8 +97,8 @@ def quadruped() -> System:
         inertia = me.inertia(frame, m * (p.w**2 * 4 + p.h_trunk**2) / 12,
                              m * (p.L**2 + p.h_trunk**2) / 12, m * (p.L**2 + p.w**2 * 4) / 12)
         bodies.append(me.RigidBody(f"{half}_trunk", centre, frame, m, (inertia, centre)))
-        joints.append((f"{half}_trunk", None if half == "front" else "front_trunk", frame,
-                       spine, sign * p.L / 2 * frame.x))
+        joints[f"{half}_trunk"] = (None if half == "front" else "front_trunk", spine,
+                                   sign * p.L / 2 * frame.x)
 
     feet = {}
     hips = {}
@@ -126,9 +125,9 @@ def quadruped() -> System:
                                    (rod_inertia(shank, p.m_shank, p.l2), shank_c)))
         hips[leg] = hip_point
         feet[leg] = (knee_point, foot)
-        joints.append((f"{leg}_thigh", f"{'front' if leg[0] == 'f' else 'rear'}_trunk", thigh,
-                       hip_point, -p.l1 / 2 * thigh.z))
-        joints.append((f"{leg}_shank", f"{leg}_thigh", shank, knee_point, -p.l2 / 2 * shank.z))
+        joints[f"{leg}_thigh"] = (f"{'front' if leg[0] == 'f' else 'rear'}_trunk", hip_point,
+                                  -p.l1 / 2 * thigh.z)
+        joints[f"{leg}_shank"] = (f"{leg}_thigh", knee_point, -p.l2 / 2 * shank.z)
 
     # -- the bodies: each one's centre and axes in the world, in the description's symbols
     t = me.dynamicsymbols._t
@@ -140,15 +139,15 @@ def quadruped() -> System:
 
     # each body's frame in its parent's (the front half's in the world's): a free base, the
     # spine's two hinges, and each leg's abduction and hip (thigh), then knee (shank)
-    frames = {name: (frame, point) for name, _parent, frame, point, _c in joints}
-    for (name, parent, frame, point, centre), body in zip(joints, sorted(
-            bodies, key=lambda b: [j[0] for j in joints].index(b.name))):
+    frames = {body.name: (body.frame, joints[body.name][1]) for body in bodies}
+    for body in bodies:  # (parents first)
+        parent, point, centre = joints[body.name]
         up_frame, up_point = (world, origin) if parent is None else frames[parent]
         offset = point.pos_from(up_point).to_matrix(up_frame).applyfunc(to_plain)
-        axes = up_frame.dcm(frame).applyfunc(to_plain)
-        s.body(name, body.mass, parent=parent, position=offset, rotation=axes,
-               centre=centre.to_matrix(frame).applyfunc(to_plain),
-               inertia=body.inertia[0].to_matrix(frame))
+        axes = up_frame.dcm(body.frame).applyfunc(to_plain)
+        s.body(body.name, body.mass, parent=parent, position=offset, rotation=axes,
+               centre=centre.to_matrix(body.frame).applyfunc(to_plain),
+               inertia=body.inertia[0].to_matrix(body.frame))
     s.gravity = (0, 0, -p.g)
     rest = {"spine_pitch": 0, "spine_yaw": 0, "abd": 0, "hip": p.phi, "knee": -2 * p.phi}
     stiffness = {"spine_pitch": p.k_spine, "spine_yaw": p.k_spine, "abd": p.k_abd,
