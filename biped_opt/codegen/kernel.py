@@ -17,16 +17,20 @@ The algorithm: an adaptive Dormand-Prince 8(5,3) integrator with its 7th-order d
 guard that dips below zero inside a step is not missed); event times as roots of the guard on the
 dense output (regula falsi with the Anderson-Bjorck modification, bracket < 1e-13 of the step:
 event times good to ~1e-12); contact guards within SIMULTANEOUS_TOL of zero and moving toward
-it flip together with the first (simultaneous events, MODEL.md Sec. 3), the terminal guard never
-(it is ordered by time); a constraint in the air whose rate shows a lowest point inside a step
-has that point checked; a flipped guard at ~0 stays disarmed until it is farther than
-REARM_TOL from zero, and is watched inside each step meanwhile (its flight's apex, dense-output
-probes), so that a bounce and a return within one step are two events; restitution: after an
-impact with gamma > 0 a constraint whose velocity Da_j q'+ is positive separates at once; the
-mode after an event is the one the complementarity conditions allow (``_consistent_mode``);
-an air constraint found below its surface at an event ends the run (CONSTRAINT_VIOLATED).
-docs/SYSTEMS.md, "Events", states these rules. Everything lives in flat float arrays; nothing
-allocates per step.
+it flip together with the first (simultaneous events, MODEL.md Sec. 3), armed or not: a
+constraint in the air that approaches its surface there joins the impact whatever earlier
+events did to it; the terminal guard never joins (it is ordered by time); a constraint in the
+air whose rate shows a lowest point inside a step has that point checked; a flipped guard at ~0
+stays disarmed until it is farther than REARM_TOL from zero, and is watched inside each step
+meanwhile (its flight's apex, dense-output probes), so that a bounce and a return within one
+step are two events; restitution: after an impact with gamma > 0 a constraint whose velocity
+Da_j q'+ is positive separates at once; the mode after an event is the one the complementarity
+conditions allow (``_consistent_mode``); contacts whose rows of Da are linearly dependent
+(a face's four corners) continue in an independent subset, the basis, that satisfies them
+(``_consistent_basis``), the others held on their surface at zero reaction; an air constraint
+found below its surface at an event ends the run (CONSTRAINT_VIOLATED), as does a held contact
+that leaves its surface. docs/SYSTEMS.md, "Events", states these rules. Everything lives in
+flat float arrays; nothing allocates per step.
 
 Layouts: ``events[k] = [t, kind, touchdown_mask, liftoff_mask, mode_before, mode_after,
 y_before (2d), y_after (2d)]``; ``samples[k] = [t, y (2d), mode, lambda (n)]``.
@@ -473,6 +477,181 @@ def _consistent_mode(p, sv, mode, u, y, f, lam, tmp, tmp2, rates):
     return -1
 
 
+# --- dependent constraints (SYSTEMS.md Sec. 5, "Dependent contacts") ---------------------------
+
+#: a constraint's row of Da whose distance from the span of other rows is below this fraction
+#: of its length depends on them (exactly dependent rows, such as a flat face's fourth corner,
+#: leave ~1e-16; rows of independent contacts are apart by far more than 1e-9)
+DEPENDENT_TOL = 1e-9
+
+
+@nb.njit(**HOT_PATH)
+def _count(mask):
+    """The number of constraints in a mask."""
+    c = 0
+    while mask:
+        c += mask & 1
+        mask >>= 1
+    return c
+
+
+@nb.njit(**HOT_PATH)
+def _jacobian(p, sv, y, tmp, rates, Da):
+    """Da(q) at the configuration of y, row j the constraint j: column k is the rates Da q' at
+    the unit velocity q' = e_k (exact: the rates are linear in q')."""
+    d = sv[SV_NSTATE] // 2
+    for m in range(d):
+        tmp[m] = y[m]
+    for k in range(d):
+        for m in range(d):
+            tmp[d + m] = 0.0
+        tmp[d + k] = 1.0
+        sys_constraint_rates(sv, p, tmp, 0, rates)
+        for j in range(Da.shape[0]):
+            Da[j, k] = rates[j]
+
+
+@nb.njit(**HOT_PATH)
+def _orthogonalise(Q, k, d):
+    """Q[k] minus its projection on the orthonormal rows Q[:k] (twice, for rounding); returns
+    the squared length left."""
+    for _ in range(2):
+        for r in range(k):
+            c = 0.0
+            for i in range(d):
+                c += Q[r, i] * Q[k, i]
+            for i in range(d):
+                Q[k, i] -= c * Q[r, i]
+    left = 0.0
+    for i in range(d):
+        left += Q[k, i] * Q[k, i]
+    return left
+
+
+@nb.njit(**HOT_PATH)
+def _independent(Da, Q, members, first):
+    """A largest independent subset of the constraints in ``members``, greedily: a row is
+    taken when it does not depend on the rows taken before it (DEPENDENT_TOL), the rows of
+    ``first`` before the others, each group in declared order. Q[:k] receives the taken rows
+    orthonormalised. Returns (the mask taken, k)."""
+    ncon, d = Da.shape
+    taken = 0
+    k = 0
+    for sweep in range(2):
+        for j in range(ncon):
+            if not members >> j & 1 or (first >> j & 1) != (sweep == 0):
+                continue
+            length = 0.0
+            for i in range(d):
+                Q[k, i] = Da[j, i]
+                length += Da[j, i] * Da[j, i]
+            left = _orthogonalise(Q, k, d)
+            if length > 0.0 and left > DEPENDENT_TOL * DEPENDENT_TOL * length:
+                scale = 1.0 / math.sqrt(left)
+                for i in range(d):
+                    Q[k, i] *= scale
+                taken |= 1 << j
+                k += 1
+    return taken, k
+
+
+@nb.njit(**HOT_PATH)
+def _depends(Da, Q, k, j):
+    """Whether row j of Da lies in the span of the orthonormal rows Q[:k] (Q[k]: scratch)."""
+    d = Da.shape[1]
+    length = 0.0
+    for i in range(d):
+        Q[k, i] = Da[j, i]
+        length += Da[j, i] * Da[j, i]
+    return _orthogonalise(Q, k, d) <= DEPENDENT_TOL * DEPENDENT_TOL * length
+
+
+@nb.njit(**HOT_PATH)
+def _held(p, sv, y, basis, gv, tmp, rates, Da, Q, have_da):
+    """The constraints outside ``basis`` within SIMULTANEOUS_TOL of their surface (gv: the
+    guards at y in the mode ``basis``) whose rows depend on the basis: the basis holds them on
+    their surface (they are in contact, at zero reaction). Da is computed here unless
+    ``have_da``."""
+    ncon = sv[SV_NCON]
+    near = 0
+    for j in range(ncon):
+        if not basis >> j & 1 and abs(gv[j]) <= SIMULTANEOUS_TOL:
+            near |= 1 << j
+    if near == 0 or basis == 0:
+        return 0
+    if not have_da:
+        _jacobian(p, sv, y, tmp, rates, Da)
+    _b, k = _independent(Da, Q, basis, basis)
+    held = 0
+    for j in range(ncon):
+        if near >> j & 1 and _depends(Da, Q, k, j):
+            held |= 1 << j
+    return held
+
+
+#: a reaction at ~0 falling faster than this (relative to the largest reaction) makes its basis
+#: pull at once; the central difference that estimates the rate is good to ~1e-10 of that scale
+_FALLING_TOL = 1e-7
+
+
+@nb.njit(**HOT_PATH)
+def _basis_fits(p, sv, basis, surface, u, code, y, f, lam, tmp, tmp2, rates, lam_tmp, Da, Q, k):
+    """Whether the independent set ``basis`` (its rows orthonormal in Q[:k]) of the dependent
+    set ``surface`` satisfies complementarity at y: every reaction lambda_j >= 0 (to 1e-10),
+    and not falling when it is ~0 (the basis would pull at once: another basis of the same
+    contacts carries the load), and every constraint of ``surface`` that the basis does not
+    hold (released) not accelerating into its surface. f and lam receive the basis's vector
+    field and reactions."""
+    ncon = sv[SV_NCON]
+    sys_field_at(sv, p, basis, y, 0, u, f, 0, lam, 0)
+    scale = 1.0
+    for j in range(ncon):
+        if basis >> j & 1:
+            scale = max(scale, abs(lam[j]))
+    for j in range(ncon):
+        if not surface >> j & 1:
+            continue
+        if basis >> j & 1:
+            if lam[j] < -_COMPLEMENTARITY_TOL:
+                return False
+            if lam[j] <= _COMPLEMENTARITY_TOL and _guard_rate(
+                    p, sv, basis, u, code, y, f, j, tmp2, lam_tmp) < -_FALLING_TOL * scale:
+                return False
+        elif not _depends(Da, Q, k, j):
+            if _separation_rate(p, sv, basis, u, y, f, j, tmp2, rates) < -_COMPLEMENTARITY_TOL:
+                return False
+    return True
+
+
+@nb.njit(**HOT_PATH)
+def _consistent_basis(p, sv, surface, first, u, code, y, f, lam, tmp, tmp2, rates, lam_tmp, Da,
+                      Q):
+    """The mode to continue in when the constraints ``surface`` at rest on their surface have
+    dependent rows (Da computed at y): an independent subset, the basis, that satisfies
+    complementarity (:func:`_basis_fits`); the constraints of ``surface`` that depend on it
+    stay in contact at zero reaction. Largest first: the greedy basis (the constraints of
+    ``first``, the previous basis, before the others), then every other independent subset of
+    that size in mask order, then smaller ones. Returns the basis (f and lam hold its field and
+    reactions), or -1 when none fits."""
+    ncon = sv[SV_NCON]
+    greedy, rank = _independent(Da, Q, surface, first)
+    for size in range(rank, -1, -1):
+        for trial in range(-1, 1 << ncon):
+            cand = greedy if trial < 0 else trial
+            if trial >= 0 and (cand == greedy or cand & ~surface):
+                continue
+            if _count(cand) != size:
+                continue
+            b, k = _independent(Da, Q, cand, cand)
+            if b != cand:
+                continue
+            if _basis_fits(p, sv, cand, surface, u, code, y, f, lam, tmp, tmp2, rates, lam_tmp,
+                           Da, Q, k):
+                return cand
+    sys_field_at(sv, p, greedy, y, 0, u, f, 0, lam, 0)
+    return -1
+
+
 @nb.njit(**HOT_PATH)
 def _record_sample(sv, samples, ns, t, y, mode, lam):
     if ns < samples.shape[0]:
@@ -526,6 +705,10 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
     s then unused). One compiled call per trajectory, and one function: a wrapper around the
     kernel cost a second compile, in which LLVM optimises the linked step again (~1 s).
 
+    The contact mode (what events, samples and the result report) is ``basis | held``:
+    ``basis``, the mode the system's functions are called in, has independent rows; ``held``
+    are the contacts whose rows depend on the basis's (0 unless some do, SYSTEMS.md Sec. 5).
+
     Returns (status, t_final, mode_final, n_events, n_samples, nfev, nsteps, nrejected,
     outcome at the final state).
     """
@@ -544,9 +727,10 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
     nlam = max(ncon, 1)
 
     n = sv[SV_NSTATE]
+    d = n // 2
     workspace = sv[SV_WORKSPACE]
     # one allocation carved into views (a dozen small arrays cost more than a step)
-    buf = np.zeros(workspace + 13 * n + 6 * nlam + 3 * nguards)
+    buf = np.zeros(workspace + 13 * n + 6 * nlam + 3 * nguards + (2 * ncon + 1) * d)
     W = buf[:workspace]
     o = workspace
     F = buf[o:o + 7 * n].reshape((7, n))
@@ -568,6 +752,9 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
     gv = buf[o:o + nguards]
     gv_new = buf[o + nguards:o + 2 * nguards]
     probe = buf[o + 2 * nguards:o + 3 * nguards]
+    o += 3 * nguards
+    Da = buf[o:o + ncon * d].reshape((ncon, d))  # the constraints' Jacobian, at events
+    Q = buf[o + ncon * d:o + (2 * ncon + 1) * d].reshape((ncon + 1, d))  # its rows, orthonormal
     flags = np.zeros(2 * nguards, dtype=np.bool_)
     armed = flags[:nguards]
     flips = flags[nguards:]
@@ -588,24 +775,40 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
     term_enabled = not term_after_touchdown
     sampling = sample_dt > 0.0
     next_sample = 0
+    finished = False
+    held = 0
+    if _count(mode) >= 2:
+        # an initial mode with dependent rows continues in a basis of it
+        _jacobian(p, sv, y, tmp, rates, Da)
+        independent, _k = _independent(Da, Q, mode, mode)
+        if independent != mode:
+            chosen = _consistent_basis(p, sv, mode, 0, u, code, y, f, lam, tmp, tmp2, rates,
+                                       lam_tmp, Da, Q)
+            nfev += 1 << ncon
+            if chosen < 0:
+                status = INCONSISTENT
+                finished = True
+            else:
+                _all_guards(p, sv, chosen, u, code, y, lam, gv)
+                held = _held(p, sv, y, chosen, gv, tmp, rates, Da, Q, True)
+                mode = chosen
 
     sys_field_at(sv, p, mode, y, 0, u, f, 0, lam, 0)
     nfev += 1
     _all_guards(p, sv, mode, u, code, y, lam, gv)
     sys_constraint_rates(sv, p, y, 0, rate0)
     for i in range(nguards):
-        armed[i] = gv[i] > REARM_TOL
+        armed[i] = gv[i] > REARM_TOL and not held >> i & 1
     if not term_enabled:
         armed[term] = False
     if sampling:
-        ns = _record_sample(sv, samples, ns, t, y, mode, lam)
+        ns = _record_sample(sv, samples, ns, t, y, mode | held, lam)
         next_sample = 1
 
     h = _initial_step(p, sv, mode, u, y, f, rtol, atol, h_max, tmp, tmp2, lam_tmp)
     nfev += 1
     trial = True
     step_rejected = False
-    finished = False
 
     while not finished:
         if nsteps >= _MAX_STEPS or h < 1e-14 * max(1.0, t):
@@ -641,12 +844,12 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
         # the air that is above the ground at both ends but was moving down at the start and
         # up at the end (its lowest point is inside the step: is it below the ground?); a
         # constraint disarmed after an event that ends the step at or below the ground (it
-        # may have left and come back within the step)
+        # may have left and come back within the step). Held contacts are no guards.
         any_candidate = False
         for i in range(nguards):
             if armed[i] and gv[i] > 0.0 and (gv_new[i] <= 0.0 or probe[i] <= 1.0):
                 any_candidate = True
-            elif i < ncon and not mode >> i & 1:
+            elif i < ncon and not (mode | held) >> i & 1:
                 if armed[i]:
                     if gv[i] > 0.0 and rate0[i] < 0.0 and rate1[i] > 0.0:
                         any_candidate = True
@@ -689,7 +892,7 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
                     x_first = x
                     first = i
             for i in range(ncon):
-                if armed[i] or mode >> i & 1 or gv_new[i] > 0.0:
+                if armed[i] or (mode | held) >> i & 1 or gv_new[i] > 0.0:
                     continue
                 x_end = min(x_first, 1.0)
                 g_end = gv_new[i]
@@ -723,7 +926,7 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
                 _dense_eval(F, y, (ts - t) / h_step, tmp)
                 sys_field_at(sv, p, mode, tmp, 0, u, tmp2, 0, lam_tmp, 0)
                 nfev += 1
-                ns = _record_sample(sv, samples, ns, ts, tmp, mode, lam_tmp)
+                ns = _record_sample(sv, samples, ns, ts, tmp, mode | held, lam_tmp)
                 next_sample += 1
 
         if first < 0:
@@ -736,12 +939,16 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
                 rate0[j] = rate1[j]
             for i in range(nguards):
                 gv[i] = gv_new[i]
-                if not armed[i] and (i < term or term_enabled):
+                if held >> i & 1:
+                    if abs(gv[i]) > VIOLATION_TOL:
+                        status = CONSTRAINT_VIOLATED  # a held contact left its surface
+                        finished = True
+                elif not armed[i] and (i < term or term_enabled):
                     if gv[i] > REARM_TOL:
                         armed[i] = True
                     elif i < term and mode >> i & 1 and gv[i] < -REARM_TOL:
                         wrong_way = True  # a contact's reaction turned to pulling at once
-            if wrong_way:
+            if wrong_way and not finished:
                 status = INCONSISTENT  # a disarmed contact guard went the wrong way
                 finished = True
             continue
@@ -756,13 +963,30 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
         _all_guards(p, sv, mode, u, code, y, lam, gv_new)
         # contact guards near zero and moving toward it flip with a contact guard (MODEL.md
         # Sec. 3); the terminal guard is ordered by time: it never joins contact events
+        rates_known = False
         for i in range(nguards):
             flips[i] = i == first
-            if i != first and armed[i] and i != term and first != term:
-                if abs(gv_new[i]) <= SIMULTANEOUS_TOL:
-                    flips[i] = _guard_rate(p, sv, mode, u, code, y, f, i, tmp, lam_tmp) < 0.0
+            if i == first or i == term or first == term or held >> i & 1:
+                continue
+            if abs(gv_new[i]) > SIMULTANEOUS_TOL:
+                continue
+            if armed[i]:
+                flips[i] = _guard_rate(p, sv, mode, u, code, y, f, i, tmp, lam_tmp) < 0.0
+            elif not mode >> i & 1:
+                # a constraint that an earlier event left at ~0 with a velocity >= 0 (a
+                # bounce, a liftoff, a release) and that approaches its surface now has flown
+                # and comes back: it joins, however low its flight (arming only keeps a reset
+                # constraint from flipping at its own reset)
+                if not rates_known:
+                    sys_constraint_rates(sv, p, y, 0, rates)
+                    rates_known = True
+                flips[i] = rates[i] < -SEPARATION_TOL
         for j in range(ncon):
-            if not flips[j] and not mode >> j & 1 and gv_new[j] < -VIOLATION_TOL:
+            if held >> j & 1:
+                if abs(gv_new[j]) > VIOLATION_TOL:
+                    status = CONSTRAINT_VIOLATED  # a held contact left its surface
+                    finished = True
+            elif not flips[j] and not mode >> j & 1 and gv_new[j] < -VIOLATION_TOL:
                 status = CONSTRAINT_VIOLATED  # (a root missed before this event)
                 finished = True
         touchdown = 0
@@ -779,50 +1003,93 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
             row[1] = EVENT_CONTACT
             row[2] = touchdown
             row[3] = liftoff
-            row[4] = mode
+            contact = mode | held
+            row[4] = contact
             for k in range(n):
                 row[6 + k] = y[k]
             if sampling:
-                ns = _record_sample(sv, samples, ns, t, y, mode, lam)
+                ns = _record_sample(sv, samples, ns, t, y, contact, lam)
             term_was_armed = armed[term] and gv_new[term] > 0.0
-            mode = mode ^ (touchdown | liftoff)
+            before = mode
+            # the constraints at rest on their surface after the event's resets
+            surface = (contact | touchdown) & ~liftoff
+            have_da = False
             if touchdown:
-                sys_apply_impact(sv, p, mode, y)
+                impacted = surface
+                if _count(surface) >= 2:
+                    # Eq. (1b) for a set with dependent rows: any basis of it gives the same
+                    # velocities (the rows' dependence carries over to their velocities)
+                    _jacobian(p, sv, y, tmp, rates, Da)
+                    have_da = True
+                    impacted, _k = _independent(Da, Q, surface, mode)
+                sys_apply_impact(sv, p, impacted, y)
                 # restitution: an impacted constraint moving apart leaves the mode at once
                 sys_constraint_rates(sv, p, y, 0, rates)
                 for j in range(ncon):
                     if touchdown >> j & 1 and rates[j] > SEPARATION_TOL:
-                        mode &= ~(1 << j)
-            sys_field_at(sv, p, mode, y, 0, u, f, 0, lam, 0)
-            nfev += 1
-            # complementarity: the next mode has every active constraint pressing (lambda >=
-            # 0) and every released one not accelerating into its surface; when the mode the
-            # event suggests has a pulling contact, the others are tried
-            for j in range(ncon):
-                if mode >> j & 1 and lam[j] < 0.0:
-                    chosen = _consistent_mode(p, sv, mode, u, y, f, lam, tmp, tmp2, rates)
-                    nfev += 1 << ncon
-                    if chosen < 0:
-                        status = INCONSISTENT  # no mode fits: every one pulls or penetrates
-                        finished = True
-                    else:
-                        mode = chosen
-                    break
-            row[5] = mode
+                        surface &= ~(1 << j)
+            dependent = False
+            if _count(surface) >= 2:
+                if not have_da:
+                    _jacobian(p, sv, y, tmp, rates, Da)
+                    have_da = True
+                independent, _k = _independent(Da, Q, surface, mode)
+                dependent = independent != surface
+            if not dependent:
+                mode = surface
+                sys_field_at(sv, p, mode, y, 0, u, f, 0, lam, 0)
+                nfev += 1
+                # complementarity: the next mode has every active constraint pressing
+                # (lambda >= 0) and every released one not accelerating into its surface;
+                # when the mode the event suggests has a pulling contact, the others are tried
+                for j in range(ncon):
+                    if mode >> j & 1 and lam[j] < 0.0:
+                        chosen = _consistent_mode(p, sv, mode, u, y, f, lam, tmp, tmp2, rates)
+                        nfev += 1 << ncon
+                        if chosen < 0:
+                            status = INCONSISTENT  # no mode fits: every one pulls or penetrates
+                            finished = True
+                        else:
+                            mode = chosen
+                        break
+            else:
+                # dependent rows: continue in a basis that satisfies complementarity
+                chosen = _consistent_basis(p, sv, surface, mode, u, code, y, f, lam, tmp, tmp2,
+                                           rates, lam_tmp, Da, Q)
+                nfev += 1 << ncon
+                if chosen < 0:
+                    status = INCONSISTENT
+                    finished = True
+                    mode = surface  # (reported as the mode no basis of which fits)
+                else:
+                    mode = chosen
+            held = 0
+            if not finished:
+                _all_guards(p, sv, mode, u, code, y, lam, gv)
+                # contacts whose rows depend on the basis stay on their surface with it
+                held = _held(p, sv, y, mode, gv, tmp, rates, Da, Q, have_da)
+            elif not dependent:
+                _all_guards(p, sv, mode, u, code, y, lam, gv)
+            row[5] = mode | held
             for k in range(n):
                 row[6 + n + k] = y[k]
-            n_events += 1
+            if touchdown or mode | held != contact or finished:
+                n_events += 1
+            # (else only the basis of the same contacts changed: not a contact event)
             if sampling:
-                ns = _record_sample(sv, samples, ns, t, y, mode, lam)
+                ns = _record_sample(sv, samples, ns, t, y, mode | held, lam)
             if touchdown and term_after_touchdown:
                 term_enabled = True
-            _all_guards(p, sv, mode, u, code, y, lam, gv)
             sys_constraint_rates(sv, p, y, 0, rate0)
             for i in range(nguards):
-                if flips[i] or not armed[i]:
+                if held >> i & 1:
+                    armed[i] = False  # (a held contact has no guard)
+                elif flips[i] or not armed[i] or (i < term and (before ^ mode) >> i & 1):
                     # events can follow each other without a plain step between them (a bar's
                     # impacts 1e-7 apart): a guard away from zero since is armed again here;
-                    # one at ~0 (a reset constraint) is watched by the next steps instead
+                    # one at ~0 (a reset constraint) is watched by the next steps instead; a
+                    # constraint whose guard changed kind (released or taken into the basis
+                    # without flipping) starts afresh
                     armed[i] = gv[i] > REARM_TOL and (i < term or term_enabled)
             h *= _EVENT_STEP_FRACTION
             trial = True
@@ -837,21 +1104,21 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
             row[1] = EVENT_TERMINAL
             row[2] = 0
             row[3] = 0
-            row[4] = mode
-            row[5] = mode
+            row[4] = mode | held
+            row[5] = mode | held
             for k in range(n):
                 row[6 + k] = y[k]
                 row[6 + n + k] = y[k]
-            if term_mode >= 0 and mode != term_mode:
+            if term_mode >= 0 and mode | held != term_mode:
                 status = APEX_IN_CONTACT
             finished = True
 
     if sampling:
-        ns = _record_sample(sv, samples, ns, t, y, mode, lam)
+        ns = _record_sample(sv, samples, ns, t, y, mode | held, lam)
     for k in range(n):
         y_out[k] = y[k]
     outcome = sys_outcome_value(sv, code, p, y_out, 0)
-    return status, t, mode, n_events, ns, nfev, nsteps, nrejected, outcome
+    return status, t, mode | held, n_events, ns, nfev, nsteps, nrejected, outcome
 
 
 @nb.njit(**HOT_PATH, nogil=True)
