@@ -55,7 +55,9 @@ from scipy.integrate import solve_ivp
 
 from biped_opt.errors import InvalidInputError, SimulationError
 from biped_opt.simulation.compiled import CompiledSystem
+from biped_opt.simulation.contacts import DependentContactsError, rank, require_independent
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
+from biped_opt.simulation.trajectory import constraint_names
 
 __all__ = [
     "OutcomeGradient",
@@ -81,6 +83,9 @@ _SAME_STATE = 1e-9
 #: guards that reach zero within this time of each other reach it together (the simulator
 #: locates event times to ~1e-13)
 _TIE = 1e-12
+#: what a refusal on dependent contacts names (biped_opt.simulation.contacts)
+_METHOD = ("the B-derivative (the saltation matrices of Theorem 1's orderings of simultaneous "
+           "events)")
 #: flips in one instant before the resolution is declared a Zeno cascade
 _MAX_FLIPS_PER_CONSTRAINT = 8
 _STENCIL = ((2.0, -1.0), (1.0, 8.0), (-1.0, -8.0), (-2.0, 1.0))
@@ -442,6 +447,12 @@ class _Branch:
         dg = mdl.guard_gradient(st.mode, y, i)
         if touchdown:
             entered = st.mode | bit
+            if entered.bit_count() >= 2 and rank(mdl.compiled, entered, y) < entered.bit_count():
+                names = "+".join(constraint_names(entered, mdl.compiled.constraints))
+                raise DependentContactsError(
+                    f"{self.where}: the branch {None if self.v is None else self.v.tolist()} "
+                    f"enters the contact mode {names}, whose constraints are dependent: "
+                    f"{_METHOD} assumes independent constraints")
             y_after = mdl.impact(entered, y)
             mode = entered & ~mdl.separated(entered, y_after, bit)
             dr = mdl.impact_jacobian(entered, y)
@@ -551,6 +562,7 @@ def outcome_gradient(
     traj = compiled.simulate(maneuver, s, u, options=options)
     if not traj.success:
         raise SimulationError(f"{where}: the simulation ended with status {traj.status.name}")
+    require_independent(compiled, traj, _METHOD)
     model = _Model(compiled, maneuver, u)
     n, m = model.n, model.m
     y0 = np.zeros(n)

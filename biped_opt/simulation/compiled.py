@@ -496,7 +496,9 @@ class CompiledSystem:
             except (TypeError, ValueError):
                 raise InvalidInputError(
                     f"{self._where}: inputs must be numbers, got {inputs!r}") from None
-            if values.size > len(self.inputs):
+            if values.size > len(self.inputs) and not (
+                    # (the zero-padded vector of a system without inputs, this method's own)
+                    not self.inputs and values.size == 1 and values[0] == 0.0):
                 raise InvalidInputError(
                     f"{self._where}: {values.size} inputs given, the system has "
                     f"{len(self.inputs)} ({', '.join(self.inputs) or 'none'})")
