@@ -44,15 +44,21 @@ def describe(spec: str) -> dict:
 def check(spec: str) -> list[dict]:
     """The energy check of ``spec`` (:func:`biped_opt.simulation.energy.energy_drift`), a row
     per maneuver; a system that declares no energy says so."""
+    from biped_opt.errors import InvalidInputError
     from biped_opt.simulation.compiled import compile_system
     from biped_opt.simulation.energy import energy_drift
 
     compiled = compile_system(spec)
-    if compiled.system.energy is None:
+    if compiled.system.energy is None and not compiled.derived.bodies:
         return [{"name": spec, "checked": False, "ok": True,
                  "reason": "declares no energy (system.energy)"}]
-    return [{"name": spec, "checked": True, **energy_drift(compiled, m).as_dict()}
-            for m in compiled.maneuvers]
+    rows = []
+    for m in compiled.maneuvers:
+        try:
+            rows.append({"name": spec, "checked": True, **energy_drift(compiled, m).as_dict()})
+        except InvalidInputError as exc:  # (bodies whose applied forces do work)
+            return [{"name": spec, "checked": False, "ok": True, "reason": str(exc)}]
+    return rows
 
 
 def run(args: argparse.Namespace) -> int:
@@ -68,8 +74,10 @@ def run(args: argparse.Namespace) -> int:
                 if not c["checked"]:
                     print(f"{c['name']}: not checked: {c['reason']}")
                     continue
+                what = "" if c["source"] == "declared" else " (the bodies')"
                 print(f"{c['name']}: {c['maneuver']} at s = {c['s']:.6g}, inputs 0, "
-                      f"t in [0, {c['t_end']:.6g}] ({c['samples']} samples): energy "
+                      f"t in [0, {c['t_end']:.6g}] ({c['samples']} samples): energy"
+                      f"{what} "
                       f"{c['energy']:.10g}, drift {c['drift']:.3g} ({c['relative']:.3g} of "
                       f"its scale, tolerance {c['tolerance']:.0e}): "
                       f"{'ok' if c['ok'] else 'FAILED, a force does not match the energy'}")

@@ -11,7 +11,15 @@ from biped_opt.systems.derive import DerivedSystem, NumericSystem, derive, mode_
 from biped_opt.systems.description import ManeuverDescription, System, SystemDescriptionError
 from biped_opt.systems.files import load_system
 from biped_opt.systems.library import LIBRARY, biped, rocking_bar, walker
+from biped_opt.systems.rotations import (
+    rotation_rpy,
+    rotation_x,
+    rotation_xz,
+    rotation_y,
+    rotation_z,
+)
 
 __all__ = ["System", "ManeuverDescription", "SystemDescriptionError", "DerivedSystem",
            "NumericSystem", "derive", "mode_mask", "load_system", "LIBRARY", "biped",
-           "rocking_bar", "walker"]
+           "rocking_bar", "walker", "rotation_x", "rotation_y", "rotation_z", "rotation_rpy",
+           "rotation_xz"]

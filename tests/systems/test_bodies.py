@@ -346,3 +346,67 @@ def test_what_a_description_of_bodies_may_not_do(build, message):
         build(s)
         s.forces = [0, 0]
         derive(s)
+
+
+# -- the examples of SYSTEMS.md Sec. 1a, built as written there --------------------------------
+
+def _doc_example(name: str, folder: Path) -> Path:
+    """The fenced example of docs/SYSTEMS.md whose first line is ``# <name>``, as a file."""
+    import re
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "SYSTEMS.md").read_text()
+    blocks = [b for b in re.findall(r"```python\n(.*?)```", text, re.S)
+              if b.startswith(f"# {name}")]
+    assert len(blocks) == 1, f"docs/SYSTEMS.md should hold one example {name}"
+    path = folder / name
+    path.write_text(blocks[0])
+    return path
+
+
+def test_the_planar_rod_of_the_docs_is_the_library_rocking_bar(tmp_path):
+    """The rod of SYSTEMS.md Sec. 1a (bodies, rotation_xz) is the rocking bar of Sec. 2 (M
+    given): same parameters, so the same trajectories. 1e-12: both integrate the same
+    equations with other arithmetic (the tree's sums against the given diagonal M), and event
+    times are located to ~1e-13 of a step."""
+    from biped_opt.simulation.compiled import compile_system
+
+    rod = compile_system(str(_doc_example("rod.py", tmp_path)))
+    bar = compile_system("rocking_bar")
+    for s in (0.0, 1e-6, 0.05, 0.2, -0.15):
+        a, b = rod.simulate("drop", s), bar.simulate("drop", s)
+        assert a.status.name == b.status.name == "OK"
+        assert [e.mask_entered for e in a.contact_events] == \
+            [e.mask_entered for e in b.contact_events]
+        assert a.outcome == pytest.approx(b.outcome, abs=1e-12)
+        assert np.allclose(a.event_times, b.event_times, rtol=0, atol=1e-12)
+    assert rod.simulate("drop", 0.0).contact_events[0].entered == ("left", "right")
+
+
+def test_the_free_box_of_the_docs_lands_on_its_face_and_rests(tmp_path):
+    """The box of SYSTEMS.md Sec. 1a, plastic (e = 0): level (s = 0) its four corners land at
+    once, at the free fall's time sqrt(2 h0 / g), and it rests on them (its four dependent
+    corners, SYSTEMS.md Sec. 5: all four in the final mode); rolled by s it lands on one edge,
+    then on the other, and rests the same. Its height ends at c, every rate at 0 (to 1e-12:
+    the plastic impacts leave rounding), the clock at T; and the bodies' energy is conserved
+    in flight (systems --check)."""
+    from biped_opt.simulation.compiled import compile_system
+    from biped_opt.simulation.energy import energy_drift
+
+    box_ = compile_system(str(_doc_example("box.py", tmp_path)))
+    names = box_.coordinates
+    level = box_.simulate("drop", 0.0)
+    assert level.status.name == "OK"
+    (landing,) = level.contact_events
+    assert landing.t == pytest.approx(math.sqrt(2 * 0.3 / 1.0), abs=1e-12)
+    assert set(landing.entered) == set(landing.mode_after) == {"fl", "fr", "rl", "rr"}
+    for s in (0.05, -0.12):
+        tr = box_.simulate("drop", s)
+        assert tr.status.name == "OK", tr.message
+        assert [len(e.entered) for e in tr.contact_events] == [2, 2]
+        assert tr.mode_names(tr.mode_final) == {"fl", "fr", "rl", "rr"}
+        q, dq = tr.y_final[:len(names)], tr.y_final[len(names):]
+        assert q[names.index("z")] == pytest.approx(0.15, abs=1e-12)
+        assert q[names.index("tau")] == pytest.approx(2.0, abs=1e-12)
+        assert np.abs(dq[:6]).max() < 1e-12
+    drift = energy_drift(box_, "drop")
+    assert drift.source == "bodies" and drift.ok and drift.relative < 1e-12
