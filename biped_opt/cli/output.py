@@ -131,7 +131,9 @@ def trajectory_json(tr: Trajectory) -> dict[str, Any]:
                   for seg in tr.segments],
         "events": [
             {"t": e.t, "kind": e.kind, "touchdown": _legs(e.mask_entered),
-             "liftoff": _legs(e.mask_left), "mode_after": _mode_name(e.mask_after)}
+             "liftoff": _legs(e.mask_left), "mode_before": _mode_name(e.mask_before),
+             "mode_after": _mode_name(e.mask_after),
+             "state_before": e.state_before.tolist(), "state_after": e.state_after.tolist()}
             for e in tr.contact_events
         ],
         "state": {"q": tr.q_final.tolist(), "qdot": tr.qdot_final.tolist()},
@@ -155,10 +157,15 @@ def show_trajectory(tr: Trajectory, as_json: bool) -> int:
     return 0 if tr.success else 1
 
 
+def _state(names: tuple[str, ...], y: Any) -> dict[str, dict[str, float]]:
+    """A state y = (q, q') by coordinate name."""
+    d = len(names)
+    return {"q": dict(zip(names, map(float, y[:d]))), "qdot": dict(zip(names, map(float, y[d:])))}
+
+
 def system_trajectory_json(compiled: CompiledSystem, tr: Trajectory) -> dict[str, Any]:
     """The JSON form of any system's trajectory (coordinates and constraints by name)."""
     names = compiled.coordinates
-    d = len(names)
     return {
         "system": tr.system, "maneuver": tr.maneuver, "s": tr.s,
         "inputs": dict(zip(compiled.inputs, tr.inputs)),
@@ -168,10 +175,12 @@ def system_trajectory_json(compiled: CompiledSystem, tr: Trajectory) -> dict[str
         "modes": [_names(seg.mask, tr.constraints) for seg in tr.segments],
         "event_times": list(tr.event_times),
         "events": [{"t": e.t, "touchdown": list(e.entered), "liftoff": list(e.left),
-                    "mode_after": _names(e.mask_after, tr.constraints)}
+                    "mode_before": _names(e.mask_before, tr.constraints),
+                    "mode_after": _names(e.mask_after, tr.constraints),
+                    "state_before": _state(names, e.state_before),
+                    "state_after": _state(names, e.state_after)}
                    for e in tr.contact_events],
-        "state": {"q": dict(zip(names, tr.y_final[:d])),
-                  "qdot": dict(zip(names, tr.y_final[d:]))},
+        "state": _state(names, tr.y_final),
         "nfev": tr.nfev, "nsteps": tr.nsteps}
 
 

@@ -189,6 +189,17 @@ class Trajectory:
                     "terminal event (raise horizon on the maneuver, or --horizon)")
         else:
             text = status.message
+        events = self.contact_events
+        if status is Status.INCONSISTENT and events:
+            last = events[-1]
+            text += (f"; after the event at t = {last.t:.10g} no subset of the contacts "
+                     f"{{{', '.join(constraint_names(last.mask_after, self.constraints))}}} "
+                     "fits")
+        elif status is Status.CONSTRAINT_VIOLATED and _zeno(events):
+            text += (f"; the last impacts of {'+'.join(events[-1].entered)} come ever closer "
+                     "together (a Zeno cascade: infinitely many impacts before a finite time, "
+                     "which an event-driven simulation cannot follow to its end; a smaller "
+                     "restitution shortens it)")
         if status is not Status.OK and self.n_events:
             text += "; last events: " + ", ".join(
                 _describe(e, self.constraints) for e in self.contact_events[-3:])
@@ -247,6 +258,16 @@ class Trajectory:
     def nevents(self) -> int:
         """As :attr:`n_events`."""
         return self.n_events
+
+
+def _zeno(events: tuple[Event, ...], count: int = 5) -> bool:
+    """Whether the last ``count`` events are touchdowns of the same constraints at intervals
+    that shrink every time."""
+    last = events[-count:]
+    if len(last) < count or len({e.mask_entered for e in last}) != 1 or not last[0].mask_entered:
+        return False
+    gaps = [b.t - a.t for a, b in zip(last, last[1:])]
+    return all(0.0 < b < a for a, b in zip(gaps, gaps[1:]))
 
 
 def _describe(e: Event, names: tuple[str, ...]) -> str:
