@@ -10,7 +10,8 @@ systems reaches it at run time in one int64 vector, the *system vector* ``sv``:
   and its shape (a 1-D array as ``double*, int64``, a 2-D one as ``double*, int64, int64``), an
   integer as int64, a float as double.
 - ``sv[NFUNC:]``: the system's table (:func:`system_table`): the state's length, the number of
-  constraints and maneuvers, the DOP853 workspace's length, which guards are one state component
+  constraints and maneuvers, the DOP853 workspace's length, whether some constraints' rows are
+  dependent for every configuration, which guards are one state component
   (a constraint's height in the air, a maneuver's terminal velocity: their event roots
   interpolate that one component), and each maneuver's initial mode, final mode and whether its
   terminal guard is armed only after the first touchdown.
@@ -31,7 +32,8 @@ import hashlib
 from collections.abc import Sequence
 
 __all__ = ["FUNCTIONS", "NFUNC", "INDEX", "SV_NSTATE", "SV_NCON", "SV_NMAN", "SV_WORKSPACE",
-           "SV_GUARDS", "MANEUVER_WIDTH", "CFG_T_END", "CFG_MAX_EVENTS", "CFG_RTOL", "CFG_ATOL",
+           "SV_DEPENDENT", "SV_GUARDS", "MANEUVER_WIDTH", "CFG_T_END", "CFG_MAX_EVENTS",
+           "CFG_RTOL", "CFG_ATOL",
            "CFG_H_MAX", "CFG_SAMPLE_DT", "CFG_TOUCHED_DOWN", "CFG_SIZE", "ENTRY_SIGNATURES",
            "digest",
            "system_table", "cfunc_source", "direct_binding", "binding_names"]
@@ -61,9 +63,13 @@ SV_NSTATE = NFUNC
 SV_NCON = NFUNC + 1
 SV_NMAN = NFUNC + 2
 SV_WORKSPACE = NFUNC + 3
+#: 1 when the constraints' rows of Da are linearly dependent at a generic configuration (some
+#: contact sets are dependent for every q, a face's four corners: the kernel then looks for
+#: dependent sets at its events, SYSTEMS.md, "Dependent contacts"), else 0
+SV_DEPENDENT = NFUNC + 4
 #: (k, sign) per guard of a constraint in the air: the component k of the state (-1 if none)
 #: and its sign (+-1) when the guard is sign * y[k]; then MANEUVER_WIDTH entries per maneuver
-SV_GUARDS = NFUNC + 4
+SV_GUARDS = NFUNC + 5
 #: a maneuver's entries: terminal guard's (k, sign), armed after touchdown (0/1), final mode
 #: (-1: any), initial mode
 MANEUVER_WIDTH = 5
@@ -104,14 +110,15 @@ def digest() -> str:
 
 def system_table(nstate: int, ncon: int, workspace: int,
                  constraint_components: Sequence[tuple[int, float] | None],
-                 maneuvers: Sequence[tuple[tuple[int, float] | None, bool, int, int]]
-                 ) -> list[int]:
+                 maneuvers: Sequence[tuple[tuple[int, float] | None, bool, int, int]],
+                 *, dependent: bool = False) -> list[int]:
     """The table part of ``sv``. ``maneuvers``: per maneuver (terminal guard's component,
-    armed after touchdown, final mode or -1, initial mode)."""
+    armed after touchdown, final mode or -1, initial mode); ``dependent``: see
+    :data:`SV_DEPENDENT`."""
     def component(one: tuple[int, float] | None) -> list[int]:
         return [-1, 1] if one is None else [int(one[0]), 1 if one[1] > 0 else -1]
 
-    table = [nstate, ncon, len(maneuvers), workspace]
+    table = [nstate, ncon, len(maneuvers), workspace, int(dependent)]
     for one in constraint_components:
         table += component(one)
     for terminal, after_touchdown, final, initial in maneuvers:

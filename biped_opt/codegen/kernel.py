@@ -59,6 +59,7 @@ from biped_opt.codegen.abi import (
     CFG_TOUCHED_DOWN,
     INDEX,
     MANEUVER_WIDTH,
+    SV_DEPENDENT,
     SV_GUARDS,
     SV_NCON,
     SV_NSTATE,
@@ -68,7 +69,7 @@ from biped_opt.codegen.status import EVENT_CONTACT, EVENT_TERMINAL, Status
 
 #: the digest of the table (biped_opt.codegen.abi) this file's calls were written for: Numba's
 #: cache of this module is keyed on this file alone, so a change of the table must change it
-ABI = "5f73d6523e8cda3d"
+ABI = "3159dbb543ae038e"
 if abi.digest() != ABI:
     raise ImportError(f"biped_opt.codegen.kernel was written for the system table {ABI}, "
                       f"biped_opt.codegen.abi is {abi.digest()}: update both together")
@@ -777,7 +778,10 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
     next_sample = 0
     finished = False
     held = 0
-    if _count(mode) >= 2:
+    # dependent contact sets are looked for only in systems that have them (SV_DEPENDENT): the
+    # others take the paths they took before, to the last bit and at no cost
+    may_depend = sv[SV_DEPENDENT] != 0
+    if may_depend and _count(mode) >= 2:
         # an initial mode with dependent rows continues in a basis of it
         _jacobian(p, sv, y, tmp, rates, Da)
         independent, _k = _independent(Da, Q, mode, mode)
@@ -1016,7 +1020,7 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
             have_da = False
             if touchdown:
                 impacted = surface
-                if _count(surface) >= 2:
+                if may_depend and _count(surface) >= 2:
                     # Eq. (1b) for a set with dependent rows: any basis of it gives the same
                     # velocities (the rows' dependence carries over to their velocities)
                     _jacobian(p, sv, y, tmp, rates, Da)
@@ -1029,7 +1033,7 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
                     if touchdown >> j & 1 and rates[j] > SEPARATION_TOL:
                         surface &= ~(1 << j)
             dependent = False
-            if _count(surface) >= 2:
+            if may_depend and _count(surface) >= 2:
                 if not have_da:
                     _jacobian(p, sv, y, tmp, rates, Da)
                     have_da = True
@@ -1067,7 +1071,8 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
             if not finished:
                 _all_guards(p, sv, mode, u, code, y, lam, gv)
                 # contacts whose rows depend on the basis stay on their surface with it
-                held = _held(p, sv, y, mode, gv, tmp, rates, Da, Q, have_da)
+                if may_depend:
+                    held = _held(p, sv, y, mode, gv, tmp, rates, Da, Q, have_da)
             elif not dependent:
                 _all_guards(p, sv, mode, u, code, y, lam, gv)
             row[5] = mode | held

@@ -50,6 +50,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, cast
 
+import numpy as np
 import sympy as sp
 from sympy.printing.pycode import PythonCodePrinter
 
@@ -1623,6 +1624,42 @@ INLINE_FIELD_LINES = 110
 LOOP_STEP_LINES = 150
 
 
+def _dependent_rows(derived: DerivedSystem) -> bool:
+    """Whether the constraints' rows of Da are linearly dependent at generic configurations
+    (biped_opt.codegen.abi.SV_DEPENDENT): the rank of Da at three pseudo-random q (and the
+    default parameters) below n at each. Rows that depend on each other for every q (a face's
+    corners) give rank < n everywhere; a set dependent only at some configurations (a leg
+    stretched straight) is not found here, and a random q never lands on one."""
+    system = derived.system
+    n, d = derived.nconstraints, derived.ndof
+    if n < 2:
+        return False
+    if n > d:
+        return True
+    jacobian = sp.lambdify([*system.q, *system.p], derived.jacobian.tolist(), modules="math",
+                           cse=True)
+    rng = np.random.default_rng(20261129)
+    params = [float(system.defaults[name]) for name in system.p.names()]
+    found = 0
+    for _ in range(3):
+        for _attempt in range(20):  # (a q where an expression is undefined is drawn again)
+            try:
+                da = np.array(jacobian(*rng.uniform(-1.0, 1.0, d), *params), dtype=np.float64)
+            except (ValueError, ZeroDivisionError, OverflowError):
+                continue
+            if np.all(np.isfinite(da)):
+                break
+        else:
+            return False
+        lengths = np.linalg.norm(da, axis=1)
+        if np.any(lengths == 0.0):
+            found += 1
+            continue
+        singular = np.linalg.svd(da / lengths[:, None], compute_uv=False)
+        found += int(singular[-1] <= 1e-9)
+    return found == 3
+
+
 def render(derived: DerivedSystem) -> str:
     """The whole module's source (see the module docstring)."""
     system = derived.system
@@ -1634,7 +1671,8 @@ def render(derived: DerivedSystem) -> str:
         2 * d, n, 18 * (2 * d + max(n, 1)),
         [_as_component(derived, a) for a in derived.constraints],
         [(_as_component(derived, m.terminal), bool(a), f, m.mode)
-         for m, a, f in zip(maneuvers, after, final)])
+         for m, a, f in zip(maneuvers, after, final)],
+        dependent=_dependent_rows(derived))
     head = [
         f'"""Compiled simulator of the system {system.name!r}.',
         "",
