@@ -351,16 +351,15 @@ def _rate_on_dense(p, sv, F, y, x, j, tmp, rates):
 
 
 @nb.njit(**HOT_PATH)
-def _extremum(p, sv, mode, u, code, F, y, j, ra, rb, above, tmp, lam, rates):
-    """Toward the extremum of constraint j's height a_j inside the step, where its rate on the
-    interpolant (ra at the start, rb at the end, of opposite signs) is zero: the apex of a
-    flight (ra > 0) or a lowest point (ra < 0). Regula falsi on the rate (Illinois), which
-    stops at the first iterate where a_j is above the ground (``above`` = 1.0) or at or below
-    it (``above`` = 0.0; a float: a literal bool would compile one copy per value): that is
-    all the caller needs, and a flight's rate is close to linear, so it mostly stops at the
-    first iterate. Returns (x, a_j(x)) of the last iterate (the
-    extremum to 1e-12 of the step when no iterate stopped it)."""
-    xa, xb = 0.0, 1.0
+def _extremum(p, sv, mode, u, code, F, y, j, xa, ra, xb, rb, above, tmp, lam, rates):
+    """Toward the extremum of constraint j's height a_j in [xa, xb] of the step, where its rate
+    on the interpolant (ra at xa, rb at xb, of opposite signs) is zero: the apex of a flight
+    (ra > 0) or a lowest point (ra < 0). Regula falsi on the rate (Illinois), which stops at
+    the first iterate where a_j is above the ground (``above`` = 1.0) or at or below it
+    (``above`` = 0.0; a float: a literal bool would compile one copy per value): that is all
+    the caller needs, and a flight's rate is close to linear, so it mostly stops at the first
+    iterate. Returns (x, a_j(x)) of the last iterate (the extremum to 1e-12 of the step when
+    no iterate stopped it)."""
     side = 0
     x = 0.5
     g = 0.0
@@ -412,10 +411,27 @@ def _separation_point(p, sv, mode, u, code, F, y, j, r0, r1, x_end, tmp, lam, ra
     flight when its rate went from separating (r0 > 0) to approaching (r1 < 0); else at the
     first of _PROBES - 1 probes with a_j > 0. -1.0 when a_j never rose above 0 (it went the
     wrong way, or the flight is shorter than the guard's rounding)."""
-    if r0 < 0.0 and _guard_on_dense(p, sv, mode, u, code, F, y, 0.0, j, tmp, lam) > 0.0:
+    if abs(r0) <= SEPARATION_TOL and r1 < 0.0:
+        # at rest on its surface at the start (released by a plastic landing or by
+        # complementarity; the sign of its rate is rounding): a hop rises at first, so its
+        # rate is positive somewhere near the start, found by halving toward it; its apex lies
+        # between that point and the first later one where the rate is negative
+        xb, rb = 1.0, r1
+        x = 0.5
+        for _ in range(60):
+            r = _rate_on_dense(p, sv, F, y, x, j, tmp, rates)
+            if r > 0.0:
+                x, g = _extremum(p, sv, mode, u, code, F, y, j, x, r, xb, rb, 1.0, tmp, lam,
+                                 rates)
+                if g > 0.0 and x < x_end:
+                    return x
+                break
+            xb, rb = x, r
+            x *= 0.5
+    elif r0 < 0.0 and _guard_on_dense(p, sv, mode, u, code, F, y, 0.0, j, tmp, lam) > 0.0:
         return 0.0
-    if r0 > 0.0 and r1 < 0.0:
-        x, g = _extremum(p, sv, mode, u, code, F, y, j, r0, r1, 1.0, tmp, lam, rates)
+    elif r0 > 0.0 and r1 < 0.0:
+        x, g = _extremum(p, sv, mode, u, code, F, y, j, 0.0, r0, 1.0, r1, 1.0, tmp, lam, rates)
         if g > 0.0 and x < x_end:
             return x
     return _first_probe(p, sv, mode, u, code, F, y, j, 0.0, x_end, _PROBES - 1, 1.0, tmp, lam)[0]
@@ -654,6 +670,32 @@ def _consistent_basis(p, sv, surface, first, u, code, y, f, lam, tmp, tmp2, rate
 
 
 @nb.njit(**HOT_PATH)
+def _pivot(p, sv, basis, held, lifted, u, code, y, f, lam, tmp, tmp2, rates, lam_tmp, Da, Q):
+    """Another basis of the same contacts when the reactions of ``lifted`` (members of
+    ``basis``) fell through 0 while ``held`` contacts depend on the basis (Da computed at y):
+    the lifted ones replaced by as many held ones, independent, every reaction >= 0 and none
+    ~0 and falling (:func:`_basis_fits`). The contacts do not change: the support moved to
+    another vertex of the admissible reactions (a table whose load crosses a diagonal of its
+    legs), a pivot in the simplex method's words. Returns the basis (f and lam hold its field
+    and reactions), or -1 when none carries the load (then they lift)."""
+    ncon = sv[SV_NCON]
+    need = _count(lifted)
+    kept = basis & ~lifted
+    contact = basis | held
+    for extra in range(1, 1 << ncon):
+        if extra & ~held or _count(extra) != need:
+            continue
+        cand = kept | extra
+        b, k = _independent(Da, Q, cand, cand)
+        if b != cand:
+            continue
+        if _basis_fits(p, sv, cand, contact, u, code, y, f, lam, tmp, tmp2, rates, lam_tmp, Da,
+                       Q, k):
+            return cand
+    return -1
+
+
+@nb.njit(**HOT_PATH)
 def _record_sample(sv, samples, ns, t, y, mode, lam):
     if ns < samples.shape[0]:
         samples[ns, 0] = t
@@ -885,8 +927,8 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
                         continue
                 elif i < ncon and not mode >> i & 1 and rate0[i] < 0.0 and rate1[i] > 0.0:
                     # its lowest point is inside the step: at or below the ground?
-                    xb, gb = _extremum(p, sv, mode, u, code, F, y, i, rate0[i], rate1[i], 0.0,
-                                       tmp, lam_tmp, rates)
+                    xb, gb = _extremum(p, sv, mode, u, code, F, y, i, 0.0, rate0[i], 1.0,
+                                       rate1[i], 0.0, tmp, lam_tmp, rates)
                     if gb > 0.0:
                         continue
                 else:
@@ -917,7 +959,10 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
                     xb = x_end
                     gb = g_end
                 x = _root_on_dense(p, sv, mode, u, code, F, y, i, xa, ga, xb, gb, tmp, lam_tmp)
-                if x < x_first:
+                # a return approaches its surface; a root where the constraint moves away (or
+                # rests) is the rounding of a gap at ~0 (a release's first instants), no landing
+                if x < x_first and _rate_on_dense(p, sv, F, y, x, i, tmp, rates) \
+                        < -SEPARATION_TOL:
                     x_first = x
                     first = i
         t_stop = t + h_step if first < 0 else t + x_first * h_step
@@ -1018,6 +1063,22 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
             # the constraints at rest on their surface after the event's resets
             surface = (contact | touchdown) & ~liftoff
             have_da = False
+            pivot = -1
+            if may_depend and liftoff and held and not touchdown:
+                # a reaction of the basis fell through 0 while some contacts are held: another
+                # basis of the same contacts may carry the load (no contact changes: a pivot);
+                # else the held contacts that only the lifted ones supported lift with them
+                _jacobian(p, sv, y, tmp, rates, Da)
+                have_da = True
+                pivot = _pivot(p, sv, mode, held, liftoff, u, code, y, f, lam, tmp, tmp2, rates,
+                               lam_tmp, Da, Q)
+                nfev += 1 << _count(held)
+                if pivot < 0:
+                    kept = mode & ~liftoff
+                    _b, k = _independent(Da, Q, kept, kept)
+                    for j in range(ncon):
+                        if held >> j & 1 and not _depends(Da, Q, k, j):
+                            surface &= ~(1 << j)
             if touchdown:
                 impacted = surface
                 if may_depend and _count(surface) >= 2:
@@ -1032,14 +1093,9 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
                 for j in range(ncon):
                     if touchdown >> j & 1 and rates[j] > SEPARATION_TOL:
                         surface &= ~(1 << j)
-            dependent = False
-            if may_depend and _count(surface) >= 2:
-                if not have_da:
-                    _jacobian(p, sv, y, tmp, rates, Da)
-                    have_da = True
-                independent, _k = _independent(Da, Q, surface, mode)
-                dependent = independent != surface
-            if not dependent:
+            if pivot >= 0:
+                mode = pivot  # (f and lam hold its field and reactions)
+            elif not may_depend:
                 mode = surface
                 sys_field_at(sv, p, mode, y, 0, u, f, 0, lam, 0)
                 nfev += 1
@@ -1057,7 +1113,12 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
                             mode = chosen
                         break
             else:
-                # dependent rows: continue in a basis that satisfies complementarity
+                # a system with dependent sets: continue in a basis of the surface's contacts
+                # that satisfies complementarity (the surface itself first when it is
+                # independent), none of whose reactions is ~0 and falling
+                if not have_da:
+                    _jacobian(p, sv, y, tmp, rates, Da)
+                    have_da = True
                 chosen = _consistent_basis(p, sv, surface, mode, u, code, y, f, lam, tmp, tmp2,
                                            rates, lam_tmp, Da, Q)
                 nfev += 1 << ncon
@@ -1067,13 +1128,17 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
                     mode = surface  # (reported as the mode no basis of which fits)
                 else:
                     mode = chosen
-            held = 0
-            if not finished:
+            if pivot >= 0:
+                held = contact & ~mode
+                _all_guards(p, sv, mode, u, code, y, lam, gv)
+            else:
+                held = 0
+            if not finished and pivot < 0:
                 _all_guards(p, sv, mode, u, code, y, lam, gv)
                 # contacts whose rows depend on the basis stay on their surface with it
                 if may_depend:
                     held = _held(p, sv, y, mode, gv, tmp, rates, Da, Q, have_da)
-            elif not dependent:
+            elif finished and not may_depend:
                 _all_guards(p, sv, mode, u, code, y, lam, gv)
             row[5] = mode | held
             for k in range(n):

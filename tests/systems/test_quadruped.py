@@ -204,14 +204,12 @@ def test_drop_against_the_reference(th0, quad):
     np.testing.assert_allclose(first.state_after, after, rtol=0, atol=1e-9)
 
 
-@pytest.mark.xfail(strict=True, reason="the kernel ends INCONSISTENT: a foot released at rest "
-                   "after its plastic landing (its rate -5e-16, approaching by rounding) hops "
-                   "0.12 ms, 3e-10 high, and the watch of a released constraint does not find "
-                   "a point above the ground in that step (SYSTEMS.md Sec. 5, 'Disarming')")
 def test_a_released_foot_s_short_hop(quad):
     """th0 = 0.11: the front left foot lands at t = 0.1060647, is released at once (it would
     pull in contact), hops and lands again 0.116 ms later; the reference follows it with short
-    steps while the foot sits at zero."""
+    steps while the foot sits at zero. The hop starts at rest (rate -5e-16, rounding) and is
+    3e-10 high: the kernel finds its apex by halving toward the start (SYSTEMS.md Sec. 5;
+    it once ended this run INCONSISTENT)."""
     ref = reference.simulate(reference.Quadruped(), 0.11)
     assert [sorted(down) for _t, down, *_rest in ref.events][2:4] == [[0], [0]]
     assert_agrees(quad.simulate("drop", 0.11), ref, "th0 = 0.11")
