@@ -497,9 +497,12 @@ def _consistent_mode(p, sv, mode, u, y, f, lam, tmp, tmp2, rates):
 # --- dependent constraints (SYSTEMS.md Sec. 5, "Dependent contacts") ---------------------------
 
 #: a constraint's row of Da whose distance from the span of other rows is below this fraction
-#: of its length depends on them (exactly dependent rows, such as a flat face's fourth corner,
-#: leave ~1e-16; rows of independent contacts are apart by far more than 1e-9)
-DEPENDENT_TOL = 1e-9
+#: of its length depends on them. Exactly dependent rows (a flat face's fourth corner) leave
+#: ~1e-16; closer than 1e-6 the Schur complement's pivot is below 1e-12 of its diagonal, where
+#: reactions and impulses are left to rounding (two contacts whose normals coincide at this
+#: very configuration, 1e-9 apart, gave NaN), so such a set is treated as dependent: its
+#: motion is well defined, its reactions are not
+DEPENDENT_TOL = 1e-6
 
 
 @nb.njit(**HOT_PATH)
@@ -510,6 +513,15 @@ def _count(mask):
         c += mask & 1
         mask >>= 1
     return c
+
+
+@nb.njit(**HOT_PATH)
+def _finite(y):
+    """Whether every entry of y is a finite number."""
+    for k in range(y.shape[0]):
+        if not abs(y[k]) < math.inf:
+            return False
+    return True
 
 
 @nb.njit(**HOT_PATH)
@@ -989,9 +1001,14 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
             for i in range(nguards):
                 gv[i] = gv_new[i]
                 if held >> i & 1:
-                    if abs(gv[i]) > VIOLATION_TOL:
-                        status = CONSTRAINT_VIOLATED  # a held contact left its surface
+                    if gv[i] < -VIOLATION_TOL:
+                        status = CONSTRAINT_VIOLATED  # a held contact went through its surface
                         finished = True
+                    elif gv[i] > VIOLATION_TOL:
+                        # it rose off its surface: held only where its row coincided with the
+                        # basis's (not for every q); it is in the air from here, at zero force
+                        held &= ~(1 << i)
+                        armed[i] = True
                 elif not armed[i] and (i < term or term_enabled):
                     if gv[i] > REARM_TOL:
                         armed[i] = True
@@ -1032,9 +1049,11 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
                 flips[i] = rates[i] < -SEPARATION_TOL
         for j in range(ncon):
             if held >> j & 1:
-                if abs(gv_new[j]) > VIOLATION_TOL:
-                    status = CONSTRAINT_VIOLATED  # a held contact left its surface
+                if gv_new[j] < -VIOLATION_TOL:
+                    status = CONSTRAINT_VIOLATED  # a held contact went through its surface
                     finished = True
+                elif gv_new[j] > VIOLATION_TOL:
+                    held &= ~(1 << j)  # (it rose off its surface, as at a step end)
             elif not flips[j] and not mode >> j & 1 and gv_new[j] < -VIOLATION_TOL:
                 status = CONSTRAINT_VIOLATED  # (a root missed before this event)
                 finished = True
@@ -1088,6 +1107,16 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
                     have_da = True
                     impacted, _k = _independent(Da, Q, surface, mode)
                 sys_apply_impact(sv, p, impacted, y)
+                if not may_depend and _count(surface) >= 2 and not _finite(y):
+                    # rows that coincide at this very configuration (not for every q, so the
+                    # table does not flag the system): the impact again, with an independent
+                    # subset of the impacted set, from the state before it
+                    for k in range(n):
+                        y[k] = row[6 + k]
+                    _jacobian(p, sv, y, tmp, rates, Da)
+                    have_da = True
+                    impacted, _k = _independent(Da, Q, surface, mode)
+                    sys_apply_impact(sv, p, impacted, y)
                 # restitution: an impacted constraint moving apart leaves the mode at once
                 sys_constraint_rates(sv, p, y, 0, rates)
                 for j in range(ncon):
@@ -1102,8 +1131,11 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
                 # complementarity: the next mode has every active constraint pressing
                 # (lambda >= 0) and every released one not accelerating into its surface;
                 # when the mode the event suggests has a pulling contact, the others are tried
+                # (and when its reactions are not numbers: rows that coincide at this very
+                # configuration, a singular Schur complement, which no candidate with both
+                # passes)
                 for j in range(ncon):
-                    if mode >> j & 1 and lam[j] < 0.0:
+                    if mode >> j & 1 and not lam[j] >= 0.0:
                         chosen = _consistent_mode(p, sv, mode, u, y, f, lam, tmp, tmp2, rates)
                         nfev += 1 << ncon
                         if chosen < 0:

@@ -8,7 +8,7 @@ Theorem 1, whose orderings of simultaneous events assume independent constraints
 :func:`require_independent` first and refuse such a run with a message naming the mode.
 
 The test is the kernel's (``DEPENDENT_TOL`` of :mod:`biped_opt.codegen.kernel`): a row whose
-distance from the span of the others is below 1e-9 of its length depends on them. Here it is
+distance from the span of the others is below 1e-6 of its length depends on them. Here it is
 read off the singular values of the mode's rows, relative to each row's length.
 """
 
@@ -29,7 +29,7 @@ Array = npt.NDArray[np.float64]
 
 #: as the kernel's: rows closer than this (relative to their length) to the span of the
 #: others depend on them
-DEPENDENT_TOL = 1e-9
+DEPENDENT_TOL = 1e-6
 
 
 class DependentContactsError(SimulationError):
