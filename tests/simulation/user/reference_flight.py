@@ -313,11 +313,11 @@ def rocking_bar(th0, *, m=1.0, w=0.5, g=1.0, gamma=0.5):
     return Bar(m, w, m * (2 * w) ** 2 / 12, g, gamma, th0)
 
 
-def coincidences(make, lo, hi, num, *, xtol=1e-15):
-    """Where the event sequence of ``make(s)`` changes on [lo, hi] with events ordered by
-    time alone (band 0): a grid of ``num`` points, then bisection of every change."""
+def changes(signature, lo, hi, num, *, xtol=1e-15):
+    """Where ``signature(s)`` changes on [lo, hi]: a grid of ``num`` points, then bisection of
+    every change to ``xtol`` (relative)."""
     grid = np.linspace(lo, hi, num)
-    sigs = [simulate(make(s), band=0.0).signature for s in grid]
+    sigs = [signature(s) for s in grid]
     found = []
     for a, b, sa, sb in zip(grid[:-1], grid[1:], sigs[:-1], sigs[1:]):
         if sa == sb:
@@ -326,9 +326,15 @@ def coincidences(make, lo, hi, num, *, xtol=1e-15):
             mid = 0.5 * (a + b)
             if mid in (a, b):
                 break
-            if simulate(make(mid), band=0.0).signature == sa:
+            if signature(mid) == sa:
                 a = mid
             else:
                 b = mid
         found.append(0.5 * (a + b))
     return found
+
+
+def coincidences(make, lo, hi, num, *, xtol=1e-15):
+    """Where the event sequence of ``make(s)`` changes on [lo, hi] with events ordered by
+    time alone (band 0): :func:`changes` of its signature."""
+    return changes(lambda s: simulate(make(s), band=0.0).signature, lo, hi, num, xtol=xtol)

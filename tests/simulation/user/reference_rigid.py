@@ -1,7 +1,9 @@
 """Independent reference for rigid contacts: rigid bodies on a flat frictionless floor and a
 planar point-foot biped, with simultaneous and dependent contacts. Imports nothing from
-biped_opt: the physics and the event rules are written again here from SYSTEMS.md Secs. 1 and 5
-and MODEL.md Secs. 1-4, in plain NumPy and SciPy, in another formulation than the simulator's.
+biped_opt (only the grid-and-bisection search for coincidences is shared, with
+``reference_flight``): the physics and the event rules are written again here from SYSTEMS.md
+Secs. 1 and 5 and MODEL.md Secs. 1-4, in plain NumPy and SciPy, in another formulation than
+the simulator's.
 
 **Rigid bodies** (:class:`RigidBody`) are Newton-Euler bodies: the state is the centre of mass
 p, the rotation matrix R (its columns the body's axes in the world), the centre's velocity v
@@ -60,6 +62,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.integrate import DOP853
 from scipy.optimize import brentq, nnls
+
+from tests.simulation.user.reference_flight import changes
 
 BAND = 1e-9  # contact guards this close to zero and closing flip together
 #: the band used to locate coincidences: only events apart by rounding (a symmetric pair of
@@ -779,23 +783,9 @@ def simulate(model: Model, y0, contact=(), *, terminal: Terminal, band=BAND, t_e
 
 def coincidences(run_at, lo, hi, num, *, xtol=1e-15):
     """Where the event sequence of ``run_at(s, band)`` changes on [lo, hi] with merging off
-    (BAND_OFF): a grid of ``num`` points, then bisection of every change."""
-    grid = np.linspace(lo, hi, num)
-    sigs = [run_at(s, BAND_OFF).signature for s in grid]
-    found = []
-    for a, b, sa, sb in zip(grid[:-1], grid[1:], sigs[:-1], sigs[1:]):
-        if sa == sb:
-            continue
-        while b - a > xtol * max(1.0, abs(a)):
-            mid = 0.5 * (a + b)
-            if mid in (a, b):
-                break
-            if run_at(mid, BAND_OFF).signature == sa:
-                a = mid
-            else:
-                b = mid
-        found.append(0.5 * (a + b))
-    return found
+    (BAND_OFF): a grid of ``num`` points, then bisection of every change (the same search as
+    ``reference_flight``'s)."""
+    return changes(lambda s: run_at(s, BAND_OFF).signature, lo, hi, num, xtol=xtol)
 
 
 # -- the suite's systems, written again from their physics -------------------------------------
