@@ -181,15 +181,16 @@ def test_no_request_can_take_a_node_down(graph, probe, capfd, service, srv):
     assert "Traceback" not in err and "x" * 100 not in err
 
 
-@pytest.mark.alone  # (see the docstring)
 def test_eight_concurrent_clients_get_their_own_replies(graph, probe):
     """8 clients x 100 calls in flight together: every call is answered, once, with the answer
     to its own request. No request is ever sent twice: a reply not there within 30 s is lost.
 
-    Run alone: twice in clean-clone runs of the whole suite on two workers, and once in a
-    loaded local run, one client's first call went unanswered, with no reply dropped by the
-    service's wait for its reader (no warning logged); alone it has not failed. The cause is
-    not found; a failure now reports what the client still waits for."""
+    One client's first call once went unanswered now and then (in loaded runs): the service's
+    reply step listed its writer's matched readers through cyclonedds' binding, which raises
+    IndexError when a reader matches between its two calls (here: another client being
+    created), and the pool thread's exception went unseen. Fixed in
+    ``biped_opt.ros.dds.entities.matched_handles`` (tests/ros/test_robustness.py); the test
+    runs beside the others again."""
     angles = np.linspace(-0.2, 0.2, 9)
     expected = {}
     for th in angles:  # fill the cache, and know each angle's answer

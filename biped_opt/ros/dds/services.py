@@ -61,6 +61,7 @@ from .entities import (
     Owner,
     endpoint_id,
     ignore_deleted,
+    matched_handles,
     type_hash_user_data,
     user_data_id,
 )
@@ -234,7 +235,7 @@ class Service(_RequestReply):
                 if writer is None:
                     return "gone"
                 matched = [writer.get_matched_subscription_data(h)
-                           for h in writer.get_matched_subscriptions()]
+                           for h in matched_handles(writer)]
             if any(d is not None and user_data_id(d.qos, "clientid") == client_id
                    for d in matched):
                 self._ready_clients.add(client_id)
@@ -270,9 +271,9 @@ class Client(_RequestReply):
             if self._writer is None or self._reader is None:
                 return False
             readers = [self._writer.get_matched_subscription_data(h)
-                       for h in self._writer.get_matched_subscriptions()]
+                       for h in matched_handles(self._writer)]
             writers = [self._reader.get_matched_publication_data(h)
-                       for h in self._reader.get_matched_publications()]
+                       for h in matched_handles(self._reader)]
         needles = {user_data_id(d.qos, "serviceid") for d in readers if d is not None} - {None}
         if not needles:
             # Servers without ids (older rmw, plain DDS): matched endpoints are enough.
