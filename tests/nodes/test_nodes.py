@@ -348,3 +348,26 @@ def test_the_simulated_clock_runs_on_across_runs(graph, probe):
             assert start - ends[-1] <= 1
         ends.append(start + round(reply.t_final * NS))
     assert ends[0] < ends[1] < ends[2]
+
+
+def test_an_answer_asked_before_is_the_quick_reply(graph, probe):
+    """The optimiser gives its service the answers it has by the request's own fields: the
+    service sends them as requests arrive, never behind computations (tests/ros/
+    test_fairness.py). The quick reply is the computed one field for field; a request not
+    asked before, or asked with -0.0 for 0.0, has none."""
+    first = call(probe, ros.srvs.OptimalPolicy, "/biped/optimal_policy", maneuver="touchdown",
+                 theta0=0.0)
+    assert first.success
+    request = ros.srvs.OptimalPolicy.Request(maneuver="touchdown", theta0=0.0)
+    quick = graph.optimiser._quick_reply(request)
+    assert quick is not None
+    for field in ("success", "message", "value", "outcome", "t_final"):
+        assert getattr(quick, field) == getattr(first, field)
+    for field in ("policy", "mode_sequence", "event_times", "value_derivative", "inputs"):
+        np.testing.assert_array_equal(np.asarray(getattr(quick, field)),
+                                      np.asarray(getattr(first, field)))
+    assert graph.optimiser._quick_reply(
+        ros.srvs.OptimalPolicy.Request(maneuver="touchdown", theta0=-0.0)) is None
+    assert graph.optimiser._quick_reply(
+        ros.srvs.OptimalPolicy.Request(maneuver="touchdown", theta0=0.01)) is None
+    assert graph.optimiser._service.quick_reply == graph.optimiser._quick_reply
