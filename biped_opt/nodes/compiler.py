@@ -24,6 +24,7 @@ from collections.abc import Hashable
 from pathlib import Path
 from typing import Any
 
+from biped_opt import children
 from biped_opt.errors import BipedOptError, InvalidInputError
 from biped_opt.nodes.refusals import failure_message
 from biped_opt.nodes.sources import Names, Sources, SystemLimits
@@ -177,13 +178,14 @@ class Compiler:
             self._logger.info(f"compiled {what} in {time.monotonic() - start:.1f} s")
 
     def _compile(self, what: str, job: dict[str, Any]) -> None:
-        command = [sys.executable, "-m", "biped_opt.nodes.compiler", json.dumps(job)]
         with self._lock:
             if self._closed:
                 raise InvalidInputError(f"{what}: the node is stopping")
-            self._process = process = subprocess.Popen(
-                command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                stderr=subprocess.PIPE, text=True, start_new_session=True)
+            # (-P and a working directory of the node's own: biped_opt.children)
+            self._process = process = children.popen(
+                "biped_opt.nodes.compiler", json.dumps(job), stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                start_new_session=True)
         try:
             _, err = process.communicate(timeout=self.timeout)
         except subprocess.TimeoutExpired:

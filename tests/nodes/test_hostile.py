@@ -261,6 +261,45 @@ def test_large_systems_do_not_hold_up_a_valid_request_and_sigint_stops_the_node(
                    for pid in compiling)
 
 
+def test_no_module_of_the_working_directory_runs_in_the_compile_process(tmp_path, domain_id):
+    """The node started (as ``biped-opt node optimiser``) from a folder holding a ``json.py``:
+    one ordinary request for the rocking bar starts a compile process, which must import the
+    real json (``python -m`` would put that folder first on its path)."""
+    folder = tmp_path / "downloads"
+    folder.mkdir()
+    marker = tmp_path / "planted_json_ran"
+    (folder / "json.py").write_text(f"open({str(marker)!r}, 'w').write('ran')\n")
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(
+        [str(Path(sys.executable).with_name("biped-opt")), "node", "optimiser", "--ros-args",
+         "-p", "warm_up:=false"], env=env, cwd=folder, stderr=subprocess.PIPE,
+        stdout=subprocess.DEVNULL, text=True)
+    lines: list[str] = []
+    ready = threading.Event()
+
+    def read() -> None:
+        assert proc.stderr is not None
+        for line in proc.stderr:
+            lines.append(line.rstrip())
+            if "ready:" in line:
+                ready.set()
+
+    threading.Thread(target=read, daemon=True).start()
+    peer = Host(lambda c: ros.Node("peer", context=c), domain_id)
+    try:
+        assert ready.wait(240), lines[-5:]
+        policy = peer.node.create_client(ros.srvs.OptimalPolicy, "/biped/optimal_policy")
+        assert policy.wait_for_service(timeout_sec=30)
+        reply = _when_compiled(policy, "rocking_bar")
+        assert any("queued a compile of system rocking_bar" in line for line in lines), lines
+        assert reply.success, reply.message
+        assert not marker.exists()
+    finally:
+        peer.close()
+        proc.send_signal(signal.SIGINT)
+        proc.wait(30)
+
+
 def _goal(node, study: dict | str, out: str):
     action = ros.ActionClient(node, ros.actions.Study, "/biped/study",
                               callback_group=ros.ReentrantCallbackGroup())
