@@ -152,6 +152,8 @@ class OptimiserNode(ros.Node):
             folders = tuple(dict.fromkeys([*self._sources.system_paths,
                                            *(f.parent for f in files)]))
             self._sources = dataclasses.replace(self._sources, system_paths=folders)
+        #: what replies to peers never show (biped_opt.nodes.refusals.public)
+        self.private_paths = self._sources.system_paths
         for system in systems:  # (a .yaml problem file only adds its directory)
             if Path(system).suffix not in (".yaml", ".yml"):
                 self._warm_up_system(name_of(system))
