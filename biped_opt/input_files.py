@@ -4,7 +4,8 @@ that none can exhaust the process that reads it.
 Only regular files are read: ``/dev/zero`` never ends, a FIFO blocks until a writer comes, a
 directory or a socket is no file (:func:`open_regular` opens without blocking, then looks at
 what it opened). Text is read only up to a stated size (:func:`read_text`), so a study or
-parameter file of gigabytes is refused in one line instead of filling memory.
+parameter file of gigabytes is refused in one line instead of filling memory; a YAML document
+(:func:`read_yaml`) that does not parse is one line too, naming the file, line and column.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from pathlib import Path
 
 from biped_opt.errors import BipedOptError
 
-__all__ = ["InputFileError", "MAX_TEXT_BYTES", "open_regular", "read_text"]
+__all__ = ["InputFileError", "MAX_TEXT_BYTES", "open_regular", "read_text", "read_yaml"]
 
 #: the largest text file (study, parameters, problem) read [bytes]
 MAX_TEXT_BYTES = 16 << 20
@@ -66,3 +67,22 @@ def read_text(path: str | Path, *, limit: int = MAX_TEXT_BYTES, what: str = "fil
     except UnicodeDecodeError as exc:
         raise InputFileError(f"{path}: not UTF-8 text (byte {exc.start}: "
                              f"{data[exc.start:exc.start + 1]!r})") from None
+
+
+def read_yaml(path: str | Path, *, limit: int = MAX_TEXT_BYTES, what: str = "file") -> object:
+    """The YAML document of the regular file ``path`` (:func:`read_text`); anything the parser
+    refuses is one line naming the file and, where the parser says, the line and column (also
+    a nesting too deep, or an integer of more digits than Python converts)."""
+    import yaml  # (a file format: only when a file is read)
+
+    text = read_text(path, limit=limit, what=what)
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" line {mark.line + 1}, column {mark.column + 1}:" if mark is not None else ""
+        problem = getattr(exc, "problem", None) or type(exc).__name__
+        raise InputFileError(f"{path}:{where} not valid YAML ({problem})") from None
+    except (ValueError, RecursionError) as exc:
+        reason = str(exc).split(";")[0][:100]
+        raise InputFileError(f"{path}: not valid YAML ({type(exc).__name__}: {reason})") from None
