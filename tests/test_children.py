@@ -58,3 +58,18 @@ def test_a_background_build_is_niced_listed_and_ends_after_its_time(monkeypatch)
     assert time.monotonic() - start < 20
     assert "a test build" not in children.running_in_background()
     child.stdout.close()
+
+
+def test_a_command_says_in_one_line_what_it_leaves_running(monkeypatch, capsys):
+    """A command that leaves background builds running (niced, limited in time: above) ends
+    with one line on stderr naming them; its output and status are untouched."""
+    from biped_opt.cli.main import main
+
+    monkeypatch.setattr(children, "running_in_background",
+                        lambda: ["the compile of hop_1", "the ahead-of-time kernel of hop_1"])
+    assert main(["systems", "rocking_bar", "--json"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)[0]["name"] == "rocking_bar"
+    assert err == ("note: 2 background builds for later runs still going at low priority, "
+                   "ending within 15 min: the compile of hop_1; the ahead-of-time kernel of "
+                   "hop_1\n")
