@@ -58,7 +58,12 @@ from biped_opt.nodes.compiler import BUSY, run_check
 from biped_opt.nodes.parameters import float_parameter, int_parameter
 from biped_opt.nodes.refusals import answers, public, refusal
 from biped_opt.nodes.run import announce_ready
-from biped_opt.nodes.sources import declare_request_limits, name_of, request_study
+from biped_opt.nodes.sources import (
+    check_name,
+    declare_request_limits,
+    name_of,
+    request_study,
+)
 from biped_opt.record.study_table import StudySummary, StudyTable, spec_path
 from biped_opt.studies.study import Study, StudyRow
 
@@ -205,6 +210,12 @@ class StudyCoordinator(ros.Node):
         a system runs its file's code, which never runs in this node."""
         spec = request_study(text, self._max_request, yaml_too=True)
         fields = Study.fields_from_spec(spec, where="study", limits=self._study_limits)
+        try:  # (what needs no code run is refused here, without a process)
+            self._sources.system("system", fields["system"])
+            if fields["problem"]:
+                check_name("problem", fields["problem"], "problem")
+        except BipedOptError as exc:
+            raise InvalidInputError(f"study: {exc}") from None
         try:
             wire = json.loads(json.dumps(spec))
         except (TypeError, ValueError):
@@ -217,14 +228,19 @@ class StudyCoordinator(ros.Node):
         fields["system"], fields["problem"] = resolved["system"], resolved["problem"]
         return Study.described_elsewhere(**fields)
 
-    def goal_table(self, out: str) -> Path:
-        """Where a goal's table goes: ``out`` a plain file name in ``output_dir``."""
+    @staticmethod
+    def check_out(out: str) -> str:
+        """A goal's ``out``, if it is a plain file name."""
         if not isinstance(out, str) or not OUT_NAME.fullmatch(out):
             raise InvalidInputError(
                 f"out: {quoted(out)} is not a plain file name (letters, digits, _ . -; at most "
                 "128): the table goes into the node's output_dir")
+        return out
+
+    def goal_table(self, out: str) -> Path:
+        """Where a goal's table goes: ``out`` a plain file name in ``output_dir``."""
         self.output_dir.mkdir(parents=True, exist_ok=True)
-        return self.output_dir / out
+        return self.output_dir / self.check_out(out)
 
     def _execute(self, goal_handle: Any) -> Any:
         """A goal: the study (JSON or YAML) into the table ``out``; feedback after each point;
@@ -232,6 +248,7 @@ class StudyCoordinator(ros.Node):
         result = ros.actions.Study.Result()
         goal = goal_handle.request
         try:
+            self.check_out(goal.out)  # (before the study's check, which takes a process)
             study = self.goal_study(goal.study)
             table = self.goal_table(goal.out)
             points = study.points()
