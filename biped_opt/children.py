@@ -29,7 +29,7 @@ import time
 from typing import Any
 
 __all__ = ["BACKGROUND_LIMIT_S", "BACKGROUND_NICE", "command", "popen", "private_directory",
-           "running_in_background", "limit_background"]
+           "background_mark", "running_in_background", "limit_background"]
 
 #: the longest a background build runs [s]; it ends itself then (its cache entry stays absent,
 #: so a later start builds it again)
@@ -85,11 +85,18 @@ def _lower_priority() -> None:  # (in the child, before exec)
         pass
 
 
-def running_in_background() -> list[str]:
-    """What the background builds this process started and that still run are building."""
+def background_mark() -> int:
+    """How many background builds this process has started so far (for
+    :func:`running_in_background`'s ``since``)."""
     with _LOCK:
-        _BACKGROUND[:] = [(what, p) for what, p in _BACKGROUND if p.poll() is None]
-        return [what for what, _ in _BACKGROUND]
+        return len(_BACKGROUND)
+
+
+def running_in_background(since: int = 0) -> list[str]:
+    """What the background builds this process started (the ``since``-th and later: see
+    :func:`background_mark`) and that still run are building."""
+    with _LOCK:
+        return [what for what, p in _BACKGROUND[since:] if p.poll() is None]
 
 
 def limit_background(on_expiry: Any = None) -> None:

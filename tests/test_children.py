@@ -52,6 +52,7 @@ def test_a_background_build_is_niced_listed_and_ends_after_its_time(monkeypatch)
     child = children.popen("tests.children_probe", "wait", background="a test build",
                            stdout=subprocess.PIPE, text=True, env=_env())
     assert "a test build" in children.running_in_background()
+    assert "a test build" not in children.running_in_background(children.background_mark())
     seen = json.loads(child.stdout.readline())
     assert seen["nice"] == os.nice(0) + children.BACKGROUND_NICE or seen["nice"] == 19
     assert child.wait(30) == 4  # (ended by its limit, not after its 60 s sleep)
@@ -66,7 +67,8 @@ def test_a_command_says_in_one_line_what_it_leaves_running(monkeypatch, capsys):
     from biped_opt.cli.main import main
 
     monkeypatch.setattr(children, "running_in_background",
-                        lambda: ["the compile of hop_1", "the ahead-of-time kernel of hop_1"])
+                        lambda since: ["the compile of hop_1",
+                                       "the ahead-of-time kernel of hop_1"])
     assert main(["systems", "rocking_bar", "--json"]) == 0
     out, err = capsys.readouterr()
     assert json.loads(out)[0]["name"] == "rocking_bar"

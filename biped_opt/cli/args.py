@@ -556,12 +556,20 @@ def check_size(args: argparse.Namespace, flag: str, spec: Any) -> None:
     library system by its name, before anything is built; a file or a described system by its
     description. One error naming ``flag`` and the flag that lifts the limit."""
     from biped_opt.nodes.sources import MAX_COORDINATES, MAX_LEGS
-    from biped_opt.systems.files import library_size
 
     if spec is None or spec == "" or getattr(args, "large", False):
         return
     name = getattr(spec, "name", None) or str(spec)
-    size = library_size(str(spec)) if isinstance(spec, (str, Path)) else None
+    size = None
+    if isinstance(spec, (str, Path)):
+        from biped_opt.simulation.compiled import cached_size
+
+        # (compiled before: its size from the cache's index, nothing imported or run)
+        size = cached_size(str(spec))
+        if size is None:
+            from biped_opt.systems.files import library_size
+
+            size = library_size(str(spec))
     if size is None:
         if isinstance(spec, (str, Path)):
             from biped_opt.control.problems import describe

@@ -192,8 +192,9 @@ def _resume(study: Study, path: Path) -> tuple[set[int], str]:
         raise InvalidInputError(f"--out: {path} exists and is not a study table (no {spec.name})")
     try:
         saved = json.loads(read_text(spec, what="study file"))
-    except InputFileError as exc:
-        raise InvalidInputError(f"--out: {exc}") from None
+    except InputFileError as exc:  # (not UTF-8, a device, too large)
+        raise InvalidInputError(f"--out: {spec} is not valid JSON "
+                                f"({str(exc).split(': ', 1)[-1]})") from None
     except (ValueError, RecursionError):  # (also an integer of more digits than Python reads)
         raise InvalidInputError(f"--out: {spec} is not valid JSON") from None
     if saved != json.loads(json.dumps(study.as_dict())):
