@@ -501,11 +501,11 @@ def test_a_signal_stops_the_bridge_cleanly_while_it_queries_the_graph(domain_id,
                              "-p", "port:=0", "-p", "discovery_period:=0.01"], env=env,
                             stderr=subprocess.PIPE, text=True)
     assert proc.stderr is not None
-    lines = [proc.stderr.readline()]
-    assert "ready: serving ws://127.0.0.1:" in lines[0], lines
-    time.sleep(1.0)
-    proc.send_signal(signum)
-    try:
+    try:  # (the bridge is killed whatever fails: a leftover one would serve a later test)
+        lines = [proc.stderr.readline()]
+        assert "ready: serving ws://127.0.0.1:" in lines[0], lines
+        time.sleep(1.0)
+        proc.send_signal(signum)
         code = proc.wait(30)
     finally:
         proc.kill()
