@@ -172,6 +172,16 @@ MAX_HELD_REPLIES = 1024
 _REMEMBERED = 4096
 
 
+def _matched_data(lookup: Callable[[int], Any], handle: int) -> Any:
+    """What DDS knows of a matched endpoint, or None: gone meanwhile, or the binding's
+    conversion of its QoS failed ("Callfunc cqos errored", seen now and then while endpoints
+    are created and deleted around it; the caller looks again later)."""
+    try:
+        return lookup(handle)
+    except Exception:
+        return None
+
+
 class _FairQueue:
     """Requests waiting to be served, one queue per client, taken in turn: the client served
     goes to the back of the line, so a client that sends many waits behind every other once
@@ -383,10 +393,8 @@ class Service(_RequestReply):
             return known
         with self._lock:
             reader = self._reader
-            try:
-                data = reader.get_matched_publication_data(publication) if reader else None
-            except Exception:  # ("Callfunc cqos errored" now and then while entities change)
-                data = None
+            data = (_matched_data(reader.get_matched_publication_data, publication)
+                    if reader else None)
         if data is None:
             return None
         found = _Requester(user_data_id(data.qos, "clientid"),
@@ -446,11 +454,8 @@ class Service(_RequestReply):
                 return
             for handle in handles:
                 if handle not in self._known_readers:
-                    try:
-                        data = writer.get_matched_subscription_data(handle)
-                    except Exception:  # (the binding's conversion failed: look again later)
-                        continue
-                    if data is not None:
+                    data = _matched_data(writer.get_matched_subscription_data, handle)
+                    if data is not None:  # (else: look again at the next refresh)
                         self._known_readers[handle] = user_data_id(data.qos, "clientid")
         current = set(handles)
         for handle in [h for h in self._known_readers if h not in current]:
@@ -528,9 +533,9 @@ class Client(_RequestReply):
         with self._lock:
             if self._writer is None or self._reader is None:
                 return False
-            readers = [self._writer.get_matched_subscription_data(h)
+            readers = [_matched_data(self._writer.get_matched_subscription_data, h)
                        for h in matched_handles(self._writer)]
-            writers = [self._reader.get_matched_publication_data(h)
+            writers = [_matched_data(self._reader.get_matched_publication_data, h)
                        for h in matched_handles(self._reader)]
         needles = {user_data_id(d.qos, "serviceid") for d in readers if d is not None} - {None}
         if not needles:
