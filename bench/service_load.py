@@ -27,6 +27,19 @@ protocol's repairs, from what the node's reply writer still holds.
 
     python bench/service_load.py [--clients 8] [--calls 200] [--runs 1] [--cache-size N]
                                  [--rmw-reader] [--cached] [--lossy PERMILLE] [--json]
+    python bench/service_load.py --adversarial [--flood 2000] [--flood-seconds 5] [--deaf 40]
+
+``--adversarial`` measures what one client's misbehaviour costs another (services module doc,
+README "Who may ask what"): a second client (this process) asks the node for one answer it has
+cached, again and again, and for a fresh one now and then, while
+
+- *flood*: one client process sends ``--flood`` requests for angles nobody asked before (every
+  one an optimisation) within ``--flood-seconds``, without waiting for replies;
+- *deaf*: one client process whose reply reader is gone sends ``--deaf`` requests (for the
+  cached angle: each costs the node only its reply).
+
+It prints, per phase, the second client's latencies (cached and fresh: count, median, largest)
+and what the misbehaving client got (answered, refused busy, unanswered).
 
 The node runs on whichever backend ``biped_opt.ros`` selects; discovery is loopback only.
 """
@@ -175,6 +188,116 @@ def client_main(index: int, clients: int, calls: int, timeout: float,
     close_client(node, executor)
 
 
+# -- adversarial: one client floods or never reads, another measures ---------------------------
+
+#: the angle the measuring client keeps asking (its answer cached once asked), and where its
+#: fresh angles and the flood's come from (no two requests of a run share an angle)
+CACHED_ANGLE = 0.0123
+
+
+def flood_main(count: int, seconds: float, deaf: bool) -> None:
+    """The misbehaving client: once ``go`` arrives on stdin, ``count`` requests in ``seconds``
+    without waiting (fresh angles; ``deaf``: the cached angle, the client's reply reader
+    deleted first), then up to 60 s for the replies; one JSON line of what it got."""
+    from biped_opt import ros
+
+    node, cli, executor = optimiser_client("flooder")
+    if deaf:
+        with cli._lock:  # (built-in backend): requests still go out, replies reach nobody
+            condition, reader = cli.condition, cli._reader
+            cli.condition = cli._reader = None
+        condition.__del__()
+        reader.__del__()
+        time.sleep(0.5)
+    print("ready", flush=True)
+    sys.stdin.readline()
+    grid = np.linspace(-SPAN, SPAN, count + 1)[1:]
+    futures = []
+    t0 = time.monotonic()
+    for k in range(count):
+        th = CACHED_ANGLE if deaf else float(grid[k])
+        futures.append(cli.call_async(
+            ros.srvs.OptimalPolicy.Request(maneuver="touchdown", theta0=th)))
+        pause = t0 + (k + 1) * seconds / count - time.monotonic()
+        if pause > 0:
+            time.sleep(pause)
+    sent = time.monotonic() - t0
+    deadline = time.monotonic() + (3.0 if deaf else 600.0)
+    for future in futures:
+        future.wait(max(0.0, deadline - time.monotonic()))
+    done = [f.result() for f in futures if f.done() and not f.cancelled()]
+    print(json.dumps({
+        "sent": count, "sending_s": sent, "answered": sum(r.success for r in done),
+        "busy": sum((not r.success) and r.message.startswith("busy") for r in done),
+        "refused": sum((not r.success) and not r.message.startswith("busy") for r in done),
+        "unanswered": count - len(done), "drain_s": time.monotonic() - t0}), flush=True)
+    close_client(node, executor)
+
+
+def measure_while(cli: Any, proc: subprocess.Popen, fresh: list[float], least: float,
+                  timeout: float) -> dict:
+    """The measuring client's calls while ``proc`` runs (at least ``least`` s): the cached
+    angle every 0.2 s, a fresh angle every fifth call; latencies [s] by kind."""
+    from biped_opt import ros
+
+    out: dict[str, list[float]] = {"cached": [], "fresh": []}
+    lost = 0
+    start, k = time.monotonic(), 0
+    while proc.poll() is None or time.monotonic() - start < least:
+        kind = "fresh" if k % 5 == 4 and fresh else "cached"
+        th = fresh.pop() if kind == "fresh" else CACHED_ANGLE
+        t0 = time.monotonic()
+        future = cli.call_async(ros.srvs.OptimalPolicy.Request(maneuver="touchdown", theta0=th))
+        if future.wait(timeout) and future.result().success:
+            out[kind].append(time.monotonic() - t0)
+        else:
+            lost += 1
+        k += 1
+        time.sleep(max(0.0, 0.2 - (time.monotonic() - t0)))
+    return {**{f"{kind}_{what}": value for kind, times in out.items()
+               for what, value in (("n", len(times)),
+                                   ("p50_s", float(np.median(times)) if times else None),
+                                   ("max_s", max(times) if times else None))},
+            "unanswered": lost}
+
+
+def adversarial(args: argparse.Namespace, domain_id: int) -> dict:
+    node = start_node(domain_id, None)
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "PYTHONPATH": str(ROOT)}
+    os.environ["ROS_DOMAIN_ID"] = str(domain_id)
+    out: dict[str, Any] = {"flood": args.flood, "flood_seconds": args.flood_seconds,
+                           "deaf": args.deaf}
+    client, cli, executor = optimiser_client("measuring")
+    try:
+        from biped_opt import ros
+
+        first = cli.call_async(ros.srvs.OptimalPolicy.Request(maneuver="touchdown",
+                                                             theta0=CACHED_ANGLE))
+        assert first.wait(120.0) and first.result().success, "the node does not answer"
+        fresh = [float(v) for v in np.linspace(-0.2, 0.2, 4001)[1::2]]  # (off the flood's grid)
+        for phase, extra in (("flood", ["--flood", str(args.flood), "--flood-seconds",
+                                        str(args.flood_seconds)]),
+                             ("deaf", ["--flood", str(args.deaf), "--flood-seconds", "0.5",
+                                       "--deaf-client"])):
+            proc = subprocess.Popen([sys.executable, __file__, "--client", "-1", *extra],
+                                    env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                    text=True)
+            assert proc.stdin is not None and proc.stdout is not None
+            assert proc.stdout.readline().strip() == "ready"
+            proc.stdin.write("go\n")
+            proc.stdin.flush()
+            measured = measure_while(cli, proc, fresh, least=args.flood_seconds + 2.0,
+                                     timeout=args.timeout)
+            flooder = json.loads(proc.communicate()[0].strip().splitlines()[-1])
+            out[phase] = {"second_client": measured, "misbehaving_client": flooder}
+        out["node_rss_kib"] = rss_kib(node.pid)
+    finally:
+        close_client(client, executor)
+        node.terminate()
+        node.wait(30)
+    return out
+
+
 # -- the node and the run ------------------------------------------------------------------------
 
 def start_node(domain_id: int, cache_size: int | None, *, kind: str = "optimiser",
@@ -296,8 +419,43 @@ def main() -> int:
                              "test setting): replies must be repaired from its writer's history")
     parser.add_argument("--domain-id", type=int, default=1 + os.getpid() % 200)
     parser.add_argument("--json", action="store_true")
+    parser.add_argument("--adversarial", action="store_true",
+                        help="a second client's latency while one floods, then while one "
+                             "never reads its replies (see the module docstring)")
+    parser.add_argument("--flood", type=int, default=2000,
+                        help="--adversarial: requests the flooding client sends")
+    parser.add_argument("--flood-seconds", type=float, default=5.0,
+                        help="--adversarial: within this many seconds")
+    parser.add_argument("--deaf", type=int, default=40,
+                        help="--adversarial: requests of the client without a reply reader")
+    parser.add_argument("--deaf-client", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--client", type=int, default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.client == -1:
+        flood_main(args.flood, args.flood_seconds, args.deaf_client)
+        return 0
+    if args.adversarial:
+        result = adversarial(args, args.domain_id)
+        if args.json:
+            print(json.dumps(result), flush=True)
+            return 0
+        for phase in ("flood", "deaf"):
+            m, f = result[phase]["second_client"], result[phase]["misbehaving_client"]
+            what = (f"one client sent {f['sent']} fresh requests in {f['sending_s']:.1f} s"
+                    if phase == "flood" else
+                    f"one client without a reply reader sent {f['sent']} requests")
+
+            def sec(v: float | None) -> str:
+                return "-" if v is None else f"{v:.3f} s"
+
+            print(f"{phase}: {what}: it got {f['answered']} answers, {f['busy']} busy, "
+                  f"{f['refused']} refused, {f['unanswered']} unanswered ({f['drain_s']:.1f} s);"
+                  f" the second client's cached requests: {m['cached_n']}, median "
+                  f"{sec(m['cached_p50_s'])}, largest {sec(m['cached_max_s'])}; fresh: "
+                  f"{m['fresh_n']}, median {sec(m['fresh_p50_s'])}, largest "
+                  f"{sec(m['fresh_max_s'])}; unanswered {m['unanswered']}", flush=True)
+        print(f"node RSS {result['node_rss_kib'] / 1024:.1f} MiB")
+        return 0
     if args.client is not None:
         client_main(args.client, args.clients, args.calls, args.timeout, args.rmw_reader,
                     args.cached)

@@ -24,7 +24,8 @@ PACKAGE = Path(__file__).resolve().parent.parent / "biped_opt"
 LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("base", ("biped_opt.errors", "biped_opt.strict_json", "biped_opt._jit",
               "biped_opt.progress", "biped_opt.piecewise", "biped_opt.version",
-              "biped_opt.system_spec")),
+              "biped_opt.system_spec", "biped_opt.children",
+              "biped_opt.input_files")),
     ("descriptions", ("biped_opt.systems",)),
     ("code generation", ("biped_opt.codegen",)),
     ("hybrid simulation", ("biped_opt.simulation",)),

@@ -8,7 +8,11 @@ import time
 from pathlib import Path
 
 from biped_opt.cli.args import (
+    add_large_argument,
     assignment,
+    check_physical_args,
+    check_s,
+    check_size,
     finite_float,
     int_in_range,
     output_file,
@@ -42,6 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    type=assignment("--input"), help="a fixed input of the system (repeatable)")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    type=assignment("--param"), help="a parameter of the system (repeatable)")
+    add_large_argument(p)
     p.add_argument("--side-by-side", action="store_true",
                    help="two panels: s - delta and s + delta")
     p.add_argument("--delta", type=positive_float("--delta", maximum=1.0), default=None,
@@ -77,8 +82,11 @@ def run(args: argparse.Namespace) -> int:
             raise InvalidInputError(f"{option} must be even (video encoders need it), "
                                     f"got {value}")
     start = time.perf_counter()
+    check_size(args, "--system", args.system)
     compiled = CompiledSystem(args.system, **dict(args.param))
     compiled.code(args.maneuver)  # (an unknown maneuver: an error listing the system's)
+    check_s(compiled, args.maneuver, "--s", args.s)
+    check_physical_args(args, compiled, args.maneuver, args.s)
     unknown = [name for name, _ in args.input if name not in compiled.inputs]
     if unknown:
         raise InvalidInputError(f"--input: {compiled.name} has no input {unknown[0]!r} "

@@ -42,7 +42,8 @@ __all__ = ["BIPED_ONLY", "GRADIENT_EPS_VALUES", "GRADIENT_SAMPLE_COUNTS", "GRADI
            "finite_float", "float_in_range", "grid_from_args", "input_file", "int_in_range",
            "new_directory", "output_directory", "output_file", "parse_maneuver_arg", "path_arg",
            "positive_float", "problem_from_args", "problem_from_system_args",
-           "progress_from_args", "s_grid_from_args", "SWEEP_NUM", "uses_system"]
+           "progress_from_args", "s_grid_from_args", "SWEEP_NUM", "uses_system",
+           "add_large_argument", "check_size", "check_s", "check_physical_args"]
 
 #: the most grid points, samples or cases one command takes: a million fixed-input simulations
 #: are about a minute, 8 MB per array; a larger number is a typo, not a study
@@ -537,6 +538,82 @@ def add_system_arguments(p: argparse.ArgumentParser, *, point: bool = False,
                    type=assignment("--input"), help="a fixed input of the system (repeatable)")
     g.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    type=assignment("--param"), help="a parameter of the system (repeatable)")
+    add_large_argument(g)
+
+
+def add_large_argument(p: Any) -> None:
+    """``--large``: compile a system beyond the nodes' size limits (:func:`check_size`)."""
+    from biped_opt.nodes.sources import MAX_COORDINATES, MAX_LEGS
+
+    p.add_argument("--large", action="store_true",
+                   help=f"compile a system beyond {MAX_LEGS} constraints or {MAX_COORDINATES} "
+                        "coordinates (the nodes' limits; such a compile takes minutes or more)")
+
+
+def check_size(args: argparse.Namespace, flag: str, spec: Any) -> None:
+    """The command line compiles systems only as large as the nodes do by default (README
+    "Who may ask what": ``max_legs``, ``max_coordinates``) unless ``--large`` is given: a
+    library system by its name, before anything is built; a file or a described system by its
+    description. One error naming ``flag`` and the flag that lifts the limit."""
+    from biped_opt.nodes.sources import MAX_COORDINATES, MAX_LEGS
+
+    if spec is None or spec == "" or getattr(args, "large", False):
+        return
+    name = getattr(spec, "name", None) or str(spec)
+    size = None
+    if isinstance(spec, (str, Path)):
+        from biped_opt.simulation.compiled import cached_size
+
+        # (compiled before: its size from the cache's index, nothing imported or run)
+        size = cached_size(str(spec))
+        if size is None:
+            from biped_opt.systems.files import library_size
+
+            size = library_size(str(spec))
+    if size is None:
+        if isinstance(spec, (str, Path)):
+            from biped_opt.control.problems import describe
+
+            try:
+                spec = describe(str(spec))
+            except BipedOptError as exc:
+                raise InvalidInputError(f"{flag}: {exc}") from None
+        size = (len(spec.constraints), len(spec.q))
+    legs, coordinates = size
+    if legs > MAX_LEGS or coordinates > MAX_COORDINATES:
+        raise InvalidInputError(
+            f"{flag}: {name} has {legs} constraints and {coordinates} coordinates; the command "
+            f"line compiles at most {MAX_LEGS} and {MAX_COORDINATES}, as the nodes do (larger "
+            "systems take minutes or more to compile): add --large to compile it anyway")
+
+
+def check_s(compiled: CompiledSystem, maneuver: str, flag: str, value: float | None) -> None:
+    """``value`` of ``flag`` (--s, --s-min, --s-max) must lie in the range of s the maneuver
+    declares valid, as the biped's --theta0 must."""
+    if value is None:
+        return
+    lo, hi = compiled.s_range(maneuver)
+    if not lo <= value <= hi:
+        raise InvalidInputError(
+            f"{flag}: s = {value:g} is outside the valid range [{lo:g}, {hi:g}] of the "
+            f"{maneuver} maneuver of {compiled.name}")
+
+
+def check_physical_args(args: argparse.Namespace, compiled: CompiledSystem, maneuver: str,
+                        s: float | None = None) -> None:
+    """With --param given: the values must make a mechanical system at the maneuver's start
+    (:func:`biped_opt.systems.physical.check_physical`, at ``s`` or the range's centre)."""
+    if not getattr(args, "param", None):
+        return
+    from biped_opt.systems.physical import check_physical
+
+    if s is None:
+        lo, hi = compiled.s_range(maneuver)
+        s = (lo + hi) / 2
+    try:
+        check_physical(compiled.system, compiled.parameters, maneuver, s)
+    except BipedOptError as exc:
+        raise InvalidInputError(f"--param: {exc}") from None
 
 
 def uses_system(args: argparse.Namespace) -> bool:
@@ -576,6 +653,7 @@ def problem_from_system_args(args: argparse.Namespace, *, required: bool = True)
                     f"--problem: {system.where()} declares no problem named like --maneuver "
                     f"{args.maneuver!r} (problems: {', '.join(system.problems) or 'none'}); "
                     "give --problem NAME or a problem file")
+            check_size(args, "--system", args.system)
             problem = load_problem(args.maneuver, system=args.system)
         if args.system is not None and args.problem is not None and \
                 Path(str(args.problem)).suffix in (".yaml", ".yml", ".py"):
@@ -584,6 +662,8 @@ def problem_from_system_args(args: argparse.Namespace, *, required: bool = True)
                 raise InvalidInputError(
                     f"--problem: {args.problem} is a problem on {problem.description.name}, "
                     f"not on --system {chosen}")
+        check_size(args, "--problem" if args.problem is not None else "--system",
+                   problem.description)
         if args.param:
             merged = {**dict(problem.parameters), **dict(args.param)}
             problem = dataclasses.replace(problem, parameters=tuple(merged.items()))
@@ -594,6 +674,12 @@ def problem_from_system_args(args: argparse.Namespace, *, required: bool = True)
     if args.maneuver is not None and args.maneuver != problem.maneuver:
         raise InvalidInputError(f"--maneuver {args.maneuver!r}: the problem {problem.name} is "
                                 f"on maneuver {problem.maneuver!r}")
+    if args.param or getattr(args, "s", None) is not None:
+        from biped_opt.control.solve import compiled_for
+
+        compiled = compiled_for(problem)
+        check_s(compiled, problem.maneuver, "--s", getattr(args, "s", None))
+        check_physical_args(args, compiled, problem.maneuver, getattr(args, "s", None))
     return problem
 
 
@@ -605,7 +691,10 @@ def compiled_from_args(args: argparse.Namespace) -> CompiledSystem:
         raise InvalidInputError("--system is required")
     if args.maneuver is None:
         raise InvalidInputError("--maneuver is required")
-    return CompiledSystem(args.system, **dict(args.param))
+    check_size(args, "--system", args.system)
+    compiled = CompiledSystem(args.system, **dict(args.param))
+    check_physical_args(args, compiled, args.maneuver, getattr(args, "s", None))
+    return compiled
 
 
 def s_grid_from_args(args: argparse.Namespace, compiled: CompiledSystem, maneuver: str,
@@ -613,4 +702,6 @@ def s_grid_from_args(args: argparse.Namespace, compiled: CompiledSystem, maneuve
     """The s grid of --s-min/--s-max/--num (default ``num``) over the maneuver's range."""
     from biped_opt.analysis.nonsmooth import s_grid
 
+    check_s(compiled, maneuver, "--s-min", args.s_min)
+    check_s(compiled, maneuver, "--s-max", args.s_max)
     return s_grid(compiled, maneuver, args.num or num, args.s_min, args.s_max)

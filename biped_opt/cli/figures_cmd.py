@@ -15,6 +15,8 @@ from pathlib import Path
 from biped_opt.cli.args import (
     MAX_POINTS,
     add_system_arguments,
+    check_physical_args,
+    check_size,
     int_in_range,
     output_directory,
     path_arg,
@@ -96,9 +98,11 @@ def run_system(args: argparse.Namespace) -> int:
         if args.maneuver is None:
             raise InvalidInputError("--maneuver (fixed inputs) or --problem (optimal) is "
                                     "required with --system")
+        check_size(args, "--system", args.system)
         compiled, maneuver, kind = CompiledSystem(args.system, **dict(args.param)), \
             args.maneuver, "fixed"
         compiled.initial_mode(maneuver)  # an unknown maneuver: the system's message
+        check_physical_args(args, compiled, maneuver)
         compiled.input_vector(dict(args.input))  # an unknown input: the system's message
     grid = s_grid_from_args(args, compiled, maneuver, SYSTEM_NUM[kind])
     output_directory("--out", args.out)

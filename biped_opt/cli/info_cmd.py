@@ -32,8 +32,14 @@ def describe(path: str | Path) -> dict:
     """Plain-data summary of a recording (what ``info`` prints)."""
     from biped_opt.record.reader import read_raw, recorded_system
     from biped_opt.record.replay import qos_from_metadata
+    from biped_opt.record.writer import RecordError
 
     raw = read_raw(path)
+    try:
+        system = recorded_system(raw)
+        lost = ""
+    except RecordError as exc:  # (the description's record and message both damaged)
+        system, lost = None, str(exc).split(": ", 1)[-1]
     counts = raw.counts
     span = raw.time_range_ns
     topics = []
@@ -57,7 +63,8 @@ def describe(path: str | Path) -> dict:
         "duration_s": (span[1] - span[0]) * 1e-9 if span else 0.0,
         "sweep_points": counts.get("/biped/sweep", 0),
         "sweep": raw.metadata.get("biped_opt.sweep", {}),
-        "system": recorded_system(raw),
+        "system": system,
+        "system_lost": lost,
         "metadata_records": sorted(raw.metadata),
     }
 
@@ -81,6 +88,8 @@ def _text(info: dict) -> str:
         lines.append(f"  {t['topic']:<{width}}  {t['count']:>8}  {t['type']}  "
                      f"[{q['reliability']}, {q['durability']}, {q['history']} {q['depth']}]")
     system = info["system"]
+    if info["system_lost"]:
+        lines.append(f"system:       unknown ({info['system_lost']})")
     if system is not None:
         lines.append(f"system:       {system['system']} (from {system['source']})")
         for key in ("coordinates", "constraints", "inputs", "maneuvers"):

@@ -74,15 +74,34 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def say_background(since: int) -> None:
+    """One line on stderr naming the builds this command started in the background (the
+    ``since``-th and later of the process) that still run (the second compile process of a
+    new system, an ahead-of-time kernel): they go on at a lower priority, fill the on-disk
+    cache for later commands and end by themselves (:mod:`biped_opt.children`)."""
+    from biped_opt.children import BACKGROUND_LIMIT_S, running_in_background
+
+    running = running_in_background(since)
+    if running:
+        print(f"note: {len(running)} background build{'s' if len(running) > 1 else ''} for "
+              f"later runs still going at low priority, ending within "
+              f"{BACKGROUND_LIMIT_S / 60:g} min: {'; '.join(running)}", file=sys.stderr,
+              flush=True)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
     except KeyboardInterrupt:  # (Ctrl-C during the imports: interrupted all the same)
         print("biped-opt: interrupted", file=sys.stderr)
         return 130
+    from biped_opt.children import background_mark
+
+    mark = background_mark()
     try:
         status = int(args.func(args) or 0)
         sys.stdout.flush()
+        say_background(mark)
         return status
     except BipedOptError as exc:
         print(f"biped-opt {args.command}: error: {exc}", file=sys.stderr)

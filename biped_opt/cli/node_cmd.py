@@ -3,6 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import os
+import sys
+import threading
+import time
+from typing import Any
 
 from biped_opt.cli.args import input_file, path_arg
 
@@ -32,13 +37,32 @@ def run_node(args: argparse.Namespace) -> int:
     return 0
 
 
+#: how long ``launch`` lets its nodes stop after Ctrl-C or SIGTERM before it ends without
+#: them [s]: a callback under way (a study's work item, a first compile in C) can take minutes
+LAUNCH_STOP_S = 2.5
+
+
+def _end_after_stop(stop: Any) -> None:
+    """Once a stop is asked, give the graph :data:`LAUNCH_STOP_S`, then end the process
+    (status 0, one line saying what was left; the nodes write no file of their own)."""
+    stop.event.wait()
+    time.sleep(LAUNCH_STOP_S)
+    print(f"biped-opt launch: stopped {LAUNCH_STOP_S:g} s after the signal without waiting for "
+          "the callbacks still under way", file=sys.stderr, flush=True)
+    sys.stdout.flush()
+    os._exit(0)
+
+
 def run_launch(args: argparse.Namespace) -> int:
     from biped_opt.cli.signals import stop_requested
     from biped_opt.nodes.graph import Graph
 
     # a signal while the graph starts abandons the start; once it runs, a signal (even one that
-    # arrives while the "running" line is printed) only ends the wait below
+    # arrives while the "running" line is printed) only ends the wait below; either way the
+    # process ends within LAUNCH_STOP_S of it
     with stop_requested(interrupt=True) as stop:
+        threading.Thread(target=_end_after_stop, args=(stop,), name="launch-stop",
+                         daemon=True).start()
         try:
             graph = Graph(params_file=args.params_file)
         except KeyboardInterrupt:

@@ -5,7 +5,15 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from biped_opt.cli.args import finite_float, input_file, int_in_range, output_file, path_arg
+from biped_opt.cli.args import (
+    add_large_argument,
+    check_size,
+    finite_float,
+    input_file,
+    int_in_range,
+    output_file,
+    path_arg,
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -30,6 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    metavar="U", help="fixed inputs: the biped's u1 u2 u12 (default: the "
                                      "paper's), another system's in its declared order "
                                      "(default zeros)")
+    add_large_argument(p)
     p.set_defaults(func=run)
 
 
@@ -42,6 +51,8 @@ def run(args: argparse.Namespace) -> int:
                            theta0_max=args.theta0_max, num=args.num, optimal=args.optimal,
                            output=args.out, system=args.system, problem=args.problem,
                            fixed_inputs=tuple(args.inputs)).validated()
+    check_size(args, "--system", args.system)
+    large = {"max_legs": 1 << 20, "max_coordinates": 1 << 20} if args.large else {}
     # Ctrl-C or SIGTERM while the graph starts abandons the start; once it records, either one
     # stops the sweep after the current point, the file is finished and the summary printed
     # (the optimiser serves the operator's problem file by name from its directory)
@@ -51,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
             graph = Graph(params_file=args.params_file,
                           overrides={"simulator": {"autostart": False, "system": args.system},
                                      "optimiser": {"systems": [args.system, *problem_file]
-                                                   if args.optimal else []},
+                                                   if args.optimal else [], **large},
                                      "recorder": {"system": args.system}})
         except KeyboardInterrupt:
             return 0

@@ -57,6 +57,13 @@ def func(args: argparse.Namespace) -> int:
     counts = ", ".join(f"{t} {n}" for t, n in stats.published.items())
     print(f"{state} after {stats.seconds:.2f} s, {stats.loops} complete pass(es): {counts}; "
           f"latest publish {stats.max_late * 1e3:.2f} ms behind its recorded time")
+    if stats.cut_gaps:
+        print(f"note: {stats.cut_gaps} gaps of more than an hour between recorded times were "
+              "played as an hour", file=sys.stderr)
+    if stats.undecodable:
+        where = ", ".join(f"{t} {n}" for t, n in sorted(stats.undecodable.items()))
+        print(f"note: {sum(stats.undecodable.values())} messages that do not decode were not "
+              f"published ({where})", file=sys.stderr)
     if stats.skipped_types:
         print(f"skipped (type unknown to the backend): {', '.join(stats.skipped_types)}",
               file=sys.stderr)

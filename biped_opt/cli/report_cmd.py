@@ -27,9 +27,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def func(args: argparse.Namespace) -> int:
+    from biped_opt.record.reader import read_raw
+
+    # every file read first, before the analysis and plotting modules load: a file that is
+    # no recording is refused in a fraction of a second and of the memory
+    raws = [read_raw(path, topics=("/biped/sweep", "/biped/system_info"))
+            for path in args.files]
     from biped_opt.record.report import report
 
-    result = report(args.files, args.out, refine=args.refine)
+    result = report(raws, args.out, refine=args.refine)
     for s in result.sweeps:
         state = "complete" if s.complete else f"RECOVERED ({s.note})"
         print(f"{s.path}: {s.kind} {s.label} sweep, {s.theta0.size} points, {state}")

@@ -8,6 +8,9 @@ import dataclasses
 from biped_opt.cli.args import (
     add_maneuver_argument,
     add_system_arguments,
+    check_physical_args,
+    check_s,
+    check_size,
     checked_theta0,
     finite_float,
     int_in_range,
@@ -80,7 +83,11 @@ def run(args: argparse.Namespace) -> int:
     if args.system is not None:  # any system, through its compiled simulator
         from biped_opt.simulation.compiled import compile_system
 
+        check_size(args, "--system", args.system)
         compiled = compile_system(args.system, **dict(args.param))
+        compiled.code(args.maneuver)  # (an unknown maneuver: the system's message)
+        check_s(compiled, args.maneuver, "--s", args.s)
+        check_physical_args(args, compiled, args.maneuver, args.s)
         tr = compiled.simulate(args.maneuver, args.s, dict(args.input),
                                options=budget(args, compiled.maneuver_options(args.maneuver)))
         return show_system_trajectory(compiled, tr, args.json)

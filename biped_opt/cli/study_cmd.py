@@ -64,7 +64,7 @@ def load_study(path: Path):
     from biped_opt.control.problems import read_yaml
     from biped_opt.studies.study import Study
 
-    if not path.is_file():
+    if not path.exists() or path.is_dir():  # (a device or a FIFO: read_yaml says what it is)
         raise InvalidInputError(f"{path}: no such study file")
     try:
         return Study.from_spec(read_yaml(path), where=str(path))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from biped_opt.cli.args import add_large_argument, check_size
 from biped_opt.cli.output import emit_json
 
 
@@ -19,6 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="integrate each maneuver of each system up to its first event with "
                         "every input at zero and report the drift of the energy it declares "
                         "(status 1 when a drift exceeds the tolerance: a force is wrong)")
+    add_large_argument(p)
     p.set_defaults(func=run)
 
 
@@ -65,6 +67,8 @@ def run(args: argparse.Namespace) -> int:
     from biped_opt.systems import LIBRARY
 
     names = args.names or [*LIBRARY, "walker2_decoupled"]
+    for name in names:
+        check_size(args, "NAME", name)
     if args.check:
         checks = [row for name in names for row in check(name)]
         if args.json:

@@ -40,6 +40,7 @@ import warnings
 from pathlib import Path
 from types import ModuleType
 
+from biped_opt import children
 from biped_opt.codegen.abi import ENTRY_SIGNATURES
 
 __all__ = ["SIGNATURE", "enabled", "extension_path", "load", "build", "build_once", "start",
@@ -182,11 +183,11 @@ def start(path: Path, module_name: str, name: str) -> subprocess.Popen | None:
     lock = _claim(path.parent, name)
     if lock is None:
         return None
-    try:
-        return subprocess.Popen(
-            [sys.executable, "-m", "biped_opt.codegen.aot", str(path), module_name, name],
-            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-            start_new_session=True)
+    try:  # (niced, limited in time, -P and a directory of its own: biped_opt.children)
+        return children.popen(
+            "biped_opt.codegen.aot", str(path), module_name, name,
+            background=f"the ahead-of-time kernel of {name}", stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     except OSError:
         lock.unlink(missing_ok=True)
         return None
@@ -203,15 +204,20 @@ def load_module(path: Path, module_name: str) -> ModuleType:
     return module
 
 
-def build_once(path: Path, name: str) -> Path | None:
-    """:func:`build` here, unless :func:`_claim` says no."""
+def build_once(path: Path, name: str, held: list[Path] | None = None) -> Path | None:
+    """:func:`build` here, unless :func:`_claim` says no; ``held`` lists the build's lock while
+    it is taken (for a time limit that ends the process to remove)."""
     lock = _claim(path.parent, name)
     if lock is None:
         return None
+    if held is not None:
+        held.append(lock)
     try:
         return build(path, name)
     finally:
         lock.unlink(missing_ok=True)
+        if held is not None:
+            held.remove(lock)
 
 
 def wait_built(folder: Path, name: str, timeout: float) -> bool:
@@ -229,6 +235,7 @@ def main(argv: list[str] | None = None) -> int:
     path_text, _module_name, name = (sys.argv[1:] if argv is None else argv)[:3]
     path = Path(path_text)
     lock = _lock(path.parent, name)  # (taken by start())
+    children.limit_background(lambda: lock.unlink(missing_ok=True))
     try:
         build(path, name)
     finally:

@@ -30,6 +30,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
+from biped_opt import children
 from biped_opt.codegen import abi, aot
 from biped_opt.codegen.aot import load_module
 
@@ -55,11 +56,11 @@ def start(path: Path, module_name: str) -> subprocess.Popen | None:
     None when turned off. It runs detached: nothing waits for it."""
     if not enabled():
         return None
-    try:
-        return subprocess.Popen(
-            [sys.executable, "-m", "biped_opt.codegen.precompile", str(path), module_name],
-            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-            start_new_session=True)
+    try:  # (niced, limited in time, -P and a directory of its own: biped_opt.children)
+        return children.popen(
+            "biped_opt.codegen.precompile", str(path), module_name,
+            background=f"the compile of {Path(path).stem}", stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     except OSError:
         return None  # (no process to spare: the first one compiles everything itself)
 
@@ -67,6 +68,13 @@ def start(path: Path, module_name: str) -> subprocess.Popen | None:
 def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
     path, module_name = args[:2]
+    held: list[Path] = []  # (the build lock, while this process holds it)
+
+    def release() -> None:
+        for lock in held:
+            lock.unlink(missing_ok=True)
+
+    children.limit_background(release)
     wait = float(args[2]) if len(args) > 2 else WAIT_S
     module = load_module(Path(path), module_name)
     # what does not call the vector field, in the opposite of the first process's order; then,
@@ -86,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
                       for name in abi.FUNCTIONS), timeout=wait)
     with contextlib.suppress(OSError):
         os.nice(10)
-    aot.build_once(Path(path), Path(path).stem)
+    aot.build_once(Path(path), Path(path).stem, held=held)
     return 0
 
 

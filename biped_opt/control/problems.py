@@ -306,16 +306,16 @@ def get_problem(system: System | str, name: str) -> Problem:
 
 
 def read_yaml(path: Path) -> Any:
-    """The YAML document of ``path``; a syntax error is one line naming the file and place."""
-    import yaml  # file format: only when a file is read
+    """The YAML document of the regular file ``path``; anything that keeps it from being read
+    (a syntax error, text that is not UTF-8, a device, too many bytes) is one line naming the
+    file (:func:`biped_opt.input_files.read_yaml`)."""
+    from biped_opt.input_files import InputFileError
+    from biped_opt.input_files import read_yaml as read
 
     try:
-        return yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        what = getattr(exc, "problem", None) or type(exc).__name__
-        raise InvalidParameterError(f"{path}:{where}: not valid YAML ({what})") from None
+        return read(path)
+    except InputFileError as exc:
+        raise InvalidParameterError(str(exc)) from None
 
 
 def load_problem(spec: str | Path, *, system: System | str | None = None) -> Problem:

@@ -24,11 +24,12 @@ from collections.abc import Hashable
 from pathlib import Path
 from typing import Any
 
+from biped_opt import children
 from biped_opt.errors import BipedOptError, InvalidInputError
 from biped_opt.nodes.refusals import failure_message
 from biped_opt.nodes.sources import Names, Sources, SystemLimits
 
-__all__ = ["BUSY", "Busy", "Compiler", "prepare", "main"]
+__all__ = ["BUSY", "Busy", "Compiler", "prepare", "check_study", "run_check", "main"]
 
 #: the start of a refusal that a retry may cure (a client or coordinator waits and asks again)
 BUSY = "busy: "
@@ -177,13 +178,14 @@ class Compiler:
             self._logger.info(f"compiled {what} in {time.monotonic() - start:.1f} s")
 
     def _compile(self, what: str, job: dict[str, Any]) -> None:
-        command = [sys.executable, "-m", "biped_opt.nodes.compiler", json.dumps(job)]
         with self._lock:
             if self._closed:
                 raise InvalidInputError(f"{what}: the node is stopping")
-            self._process = process = subprocess.Popen(
-                command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                stderr=subprocess.PIPE, text=True, start_new_session=True)
+            # (-P and a working directory of the node's own: biped_opt.children)
+            self._process = process = children.popen(
+                "biped_opt.nodes.compiler", json.dumps(job), stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                start_new_session=True)
         try:
             _, err = process.communicate(timeout=self.timeout)
         except subprocess.TimeoutExpired:
@@ -218,11 +220,67 @@ def _watch_parent() -> None:
             os._exit(3)
 
 
+#: how long the check of a study goal may take in its process [s] (describing the largest
+#: library system takes seconds; a system file may take what its code takes)
+CHECK_TIMEOUT_S = 120.0
+
+
+def check_study(job: dict[str, Any]) -> dict[str, Any]:
+    """A study goal's system and problem resolved by name and the study built and checked
+    (in the compile process: a system file's code runs there, not in the node that asks).
+    ``job``: ``spec`` (the goal's study), the node's ``system_paths``, its system and study
+    limits. Returns the resolved ``system`` and ``problem``."""
+    from biped_opt.studies.study import Study, StudyLimits
+
+    limits = StudyLimits(**job["study_limits"])
+    fields = Study.fields_from_spec(job["spec"], where="study", limits=limits)
+    try:
+        fields["system"], fields["problem"] = _sources(job).study(fields["system"],
+                                                                  fields["problem"])
+    except BipedOptError as exc:
+        raise InvalidInputError(f"study: {exc}") from None
+    Study(**fields)
+    return {"system": fields["system"], "problem": fields["problem"]}
+
+
+def run_check(job: dict[str, Any], timeout: float = CHECK_TIMEOUT_S) -> dict[str, Any]:
+    """:func:`check_study` in a compile process of its own, waited for here (at most
+    ``timeout``); its failure is an :class:`InvalidInputError` with the process's reason."""
+    process = children.popen("biped_opt.nodes.compiler", "--check-study", json.dumps(job),
+                             stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        out, err = process.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        _kill(process)
+        process.communicate()
+        raise InvalidInputError(f"study: checking its system took more than {timeout:g} s"
+                                ) from None
+    except BaseException:  # (the node stopping: no process left behind)
+        _kill(process)
+        raise
+    if process.returncode != 0:
+        lines = [line for line in (err or "").splitlines() if line.strip()]
+        raise InvalidInputError(lines[-1] if lines and process.returncode == 2 else
+                                f"study: the check ended with status {process.returncode}")
+    result: dict[str, Any] = json.loads(out.strip().splitlines()[-1])
+    return result
+
+
 def main(argv: list[str] | None = None) -> int:
-    """The compile process: ``python -m biped_opt.nodes.compiler JOB_JSON``; status 2 and one
-    line on stderr when the job fails."""
+    """The compile process: ``python -m biped_opt.nodes.compiler JOB_JSON`` (or
+    ``--check-study JOB_JSON``: :func:`check_study`, its result as JSON on stdout); status 2
+    and one line on stderr when the job fails."""
     threading.Thread(target=_watch_parent, daemon=True).start()
-    job = json.loads((sys.argv[1:] if argv is None else argv)[0])
+    args = sys.argv[1:] if argv is None else argv
+    if args[0] == "--check-study":
+        try:
+            print(json.dumps(check_study(json.loads(args[1]))), flush=True)
+        except BaseException as exc:  # (a system file's SystemExit too): one line, status 2
+            print(failure_message(exc, "study"), file=sys.stderr, flush=True)
+            return 2
+        return 0
+    job = json.loads(args[0])
     try:
         prepare(job)
     except BaseException as exc:  # (a system file's SystemExit too): one line, status 2

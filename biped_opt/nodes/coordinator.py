@@ -21,8 +21,9 @@ An item a node answers with ``busy: ...`` (it is compiling the study's system,
 :data:`RETRY_S`.
 
 The study is served as the ROS 2 action ``/biped/study`` (``Study.action``: goal the study and the
-table, feedback points done/total and the last point, result the paths and a summary; cancel ends
-it after the items under way), and :meth:`StudyCoordinator.run_study` runs one from Python.
+table, feedback points done/total and the last point, result the file names and a summary;
+cancel ends it after the items under way), and :meth:`StudyCoordinator.run_study` runs one from
+Python.
 
 A goal is a request from anyone on the domain, so it chooses nothing outside what the operator
 configured: its study names a library system or one in the parameter ``system_paths`` (and a
@@ -53,11 +54,16 @@ from typing import Any
 
 from biped_opt import ros
 from biped_opt.errors import BipedOptError, InvalidInputError, InvalidParameterError, quoted
-from biped_opt.nodes.compiler import BUSY
+from biped_opt.nodes.compiler import BUSY, run_check
 from biped_opt.nodes.parameters import float_parameter, int_parameter
-from biped_opt.nodes.refusals import answers, refusal
+from biped_opt.nodes.refusals import answers, public, refusal
 from biped_opt.nodes.run import announce_ready
-from biped_opt.nodes.sources import declare_request_limits, name_of, request_study
+from biped_opt.nodes.sources import (
+    check_name,
+    declare_request_limits,
+    name_of,
+    request_study,
+)
 from biped_opt.record.study_table import StudySummary, StudyTable, spec_path
 from biped_opt.studies.study import Study, StudyRow
 
@@ -154,6 +160,8 @@ class StudyCoordinator(ros.Node):
         self.output_dir = Path(output or default_output_dir()).expanduser().resolve()
         if self.output_dir.exists() and not self.output_dir.is_dir():
             raise InvalidParameterError(f"output_dir: {output} is not a directory")
+        #: what replies to peers never show (biped_opt.nodes.refusals.public)
+        self.private_paths = (*self._sources.system_paths, self.output_dir)
         self._group = ros.ReentrantCallbackGroup()
         self._busy = threading.Lock()  # one study at a time
         #: dispatches per point in the last study (a re-dispatched point counts twice), and the
@@ -196,25 +204,43 @@ class StudyCoordinator(ros.Node):
         return ros.GoalResponse.ACCEPT
 
     def goal_study(self, text: str) -> Study:
-        """The study of a goal (JSON or YAML): bounded by the node's limits, its system and
-        problem resolved by name (see the module docstring), checked before it is built."""
+        """The study of a goal (JSON or YAML): bounded by the node's limits, then its system
+        and problem resolved by name (see the module docstring) and the study built and
+        checked in a compile process (:func:`biped_opt.nodes.compiler.run_check`): describing
+        a system runs its file's code, which never runs in this node."""
         spec = request_study(text, self._max_request, yaml_too=True)
         fields = Study.fields_from_spec(spec, where="study", limits=self._study_limits)
-        try:
-            fields["system"], fields["problem"] = self._sources.study(fields["system"],
-                                                                      fields["problem"])
+        try:  # (what needs no code run is refused here, without a process)
+            self._sources.system("system", fields["system"])
+            if fields["problem"]:
+                check_name("problem", fields["problem"], "problem")
         except BipedOptError as exc:
             raise InvalidInputError(f"study: {exc}") from None
-        return Study(**fields)
+        try:
+            wire = json.loads(json.dumps(spec))
+        except (TypeError, ValueError):
+            raise InvalidInputError("study: holds values JSON cannot carry") from None
+        resolved = run_check({
+            "spec": wire, "system_paths": [str(p) for p in self._sources.system_paths],
+            "max_legs": self._sources.limits.max_legs,
+            "max_coordinates": self._sources.limits.max_coordinates,
+            "study_limits": dataclasses.asdict(self._study_limits)})
+        fields["system"], fields["problem"] = resolved["system"], resolved["problem"]
+        return Study.described_elsewhere(**fields)
 
-    def goal_table(self, out: str) -> Path:
-        """Where a goal's table goes: ``out`` a plain file name in ``output_dir``."""
+    @staticmethod
+    def check_out(out: str) -> str:
+        """A goal's ``out``, if it is a plain file name."""
         if not isinstance(out, str) or not OUT_NAME.fullmatch(out):
             raise InvalidInputError(
                 f"out: {quoted(out)} is not a plain file name (letters, digits, _ . -; at most "
-                f"128): the table goes into the node's output_dir {self.output_dir}")
+                "128): the table goes into the node's output_dir")
+        return out
+
+    def goal_table(self, out: str) -> Path:
+        """Where a goal's table goes: ``out`` a plain file name in ``output_dir``."""
         self.output_dir.mkdir(parents=True, exist_ok=True)
-        return self.output_dir / out
+        return self.output_dir / self.check_out(out)
 
     def _execute(self, goal_handle: Any) -> Any:
         """A goal: the study (JSON or YAML) into the table ``out``; feedback after each point;
@@ -222,6 +248,7 @@ class StudyCoordinator(ros.Node):
         result = ros.actions.Study.Result()
         goal = goal_handle.request
         try:
+            self.check_out(goal.out)  # (before the study's check, which takes a process)
             study = self.goal_study(goal.study)
             table = self.goal_table(goal.out)
             points = study.points()
@@ -238,12 +265,13 @@ class StudyCoordinator(ros.Node):
                 raise
             message = refusal(exc)
             self.get_logger().warning(f"study goal failed: {message}")
-            result.success, result.message = False, message
+            result.success, result.message = False, public(message, self.private_paths)
             goal_handle.abort()
             return result
         result.success = not summary.stopped
         result.message = "done" if result.success else "stopped before every point was done"
-        result.table, result.spec = str(summary.path), str(spec_path(summary.path))
+        # (by name: where the node keeps its files is not the domain's business)
+        result.table, result.spec = summary.path.name, spec_path(summary.path).name
         result.points, result.computed = summary.points, summary.computed
         result.resumed, result.rows, result.stopped = summary.resumed, summary.rows, \
             summary.stopped

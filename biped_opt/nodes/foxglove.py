@@ -30,8 +30,8 @@ the order they came.
 Parameters: ``port`` (default 8765; 0 = any free port, see :attr:`FoxgloveNode.port` and the
 ready line), ``host`` (default 127.0.0.1: this machine only; 0.0.0.0 serves the network),
 ``topics`` (the topics to serve; empty = every topic of a known type), ``discovery_period`` [s]
-(default 2). A bad value stops the node at start-up with one line naming it, as does a port it
-cannot listen on.
+(default 2), ``client_queue_bytes`` and ``max_message_bytes`` (below). A bad value stops the
+node at start-up with one line naming it, as does a port it cannot listen on.
 
 The server is read-only and bounded, whatever a client or a DDS peer sends:
 
@@ -39,8 +39,15 @@ The server is read-only and bounded, whatever a client or a DDS peer sends:
   with an error status and drops its messages), no services, no parameters, no connection
   graph, no assets;
 - at most :data:`MAX_CHANNELS` topics are bridged (the others are left out, each said once in
-  the log); each client has a queue of :data:`BACKLOG` outgoing messages, beyond which the SDK drops
-  the oldest data message (and disconnects a client whose control queue fills);
+  the log);
+- each client's queue of outgoing messages holds at most ``client_queue_bytes`` (parameter,
+  default :data:`CLIENT_QUEUE_BYTES`): the SDK counts its queue in messages, so no message
+  larger than ``max_message_bytes`` (parameter, default :data:`MAX_MESSAGE_BYTES`) is forwarded
+  (each such topic said once in the log, the messages counted) and the queue is
+  ``client_queue_bytes // max_message_bytes`` messages long (at most :data:`BACKLOG`), beyond
+  which the SDK drops the oldest data message (and disconnects a client whose control queue
+  fills). A client that never reads thus costs the bridge at most that budget, whatever a peer
+  publishes;
 - each subscription keeps at most :data:`QUEUE_DEPTH` samples; a transient-local topic's kept
   messages are as many as its publishers keep (their depth), at most :data:`LATCHED_MESSAGES`,
   and at most :data:`LATCHED_BYTES`;
@@ -72,12 +79,16 @@ from biped_opt.nodes.run import announce_ready, run_node
 from biped_opt.ros.interfaces import InterfaceError, load_interfaces
 
 __all__ = ["FoxgloveNode", "main", "MAX_CHANNELS", "BACKLOG", "QUEUE_DEPTH", "LATCHED_MESSAGES",
-           "LATCHED_BYTES", "ros2msg_schema", "cdr_bytes", "adapted_qos"]
+           "LATCHED_BYTES", "CLIENT_QUEUE_BYTES", "MAX_MESSAGE_BYTES", "ros2msg_schema",
+           "cdr_bytes", "adapted_qos", "backlog"]
 
 #: most topics one bridge serves
 MAX_CHANNELS = 256
-#: outgoing messages queued per client (the SDK drops the oldest data message beyond)
+#: the most outgoing messages queued per client (the SDK drops the oldest data message beyond)
 BACKLOG = 1024
+#: defaults of the parameters client_queue_bytes (what one client's queue may hold) and
+#: max_message_bytes (the largest message forwarded) [bytes]: 256 messages a client
+CLIENT_QUEUE_BYTES, MAX_MESSAGE_BYTES = 16 << 20, 64 << 10
 #: samples a subscription holds between two takes
 QUEUE_DEPTH = 100
 #: messages of a transient-local topic kept for clients that subscribe later, and their bytes
@@ -126,6 +137,13 @@ def adapted_qos(offered: list[Any]) -> Any:
                      else ros.ReliabilityPolicy.BEST_EFFORT),
         durability=(ros.DurabilityPolicy.TRANSIENT_LOCAL if latched
                     else ros.DurabilityPolicy.VOLATILE))
+
+
+def backlog(client_queue_bytes: int, max_message_bytes: int) -> int:
+    """Messages a client's queue may hold so that it never holds more than
+    ``client_queue_bytes`` of messages of at most ``max_message_bytes`` (at most
+    :data:`BACKLOG`)."""
+    return min(BACKLOG, client_queue_bytes // max_message_bytes)
 
 
 def _profile_key(profile: Any) -> tuple[int, int, int]:
@@ -216,6 +234,8 @@ class FoxgloveNode(ros.Node):
         self.declare_parameter("host", "127.0.0.1")
         self.declare_parameter("topics", [])
         self.declare_parameter("discovery_period", 2.0)
+        self.declare_parameter("client_queue_bytes", CLIENT_QUEUE_BYTES)
+        self.declare_parameter("max_message_bytes", MAX_MESSAGE_BYTES)
         port = int_parameter(self, "port", 0)
         if port > 65535:
             raise InvalidParameterError(f"port must be an integer in 0..65535, got {port}")
@@ -233,6 +253,15 @@ class FoxgloveNode(ros.Node):
             raise InvalidParameterError(
                 f"topics: at most {MAX_CHANNELS} topics, got {len(topics)}")
         period = float_parameter(self, "discovery_period")
+        #: the largest message forwarded, and what one client's queue may hold [bytes]
+        self.max_message_bytes = int_parameter(self, "max_message_bytes", 1024)
+        self.client_queue_bytes = int_parameter(self, "client_queue_bytes", 1024)
+        if self.client_queue_bytes < self.max_message_bytes:
+            raise InvalidParameterError(
+                f"client_queue_bytes ({self.client_queue_bytes}) must hold at least one message "
+                f"of max_message_bytes ({self.max_message_bytes})")
+        #: messages not forwarded for being larger than max_message_bytes, by topic
+        self.oversized: dict[str, int] = {}
         self.wanted: frozenset[str] = frozenset(topics)
         self._skipped: set[str] = set()  # topics said once not to be served
         self._listener = _Listener()
@@ -251,7 +280,8 @@ class FoxgloveNode(ros.Node):
             return foxglove.start_server(
                 name="biped_opt", host=host, port=port, capabilities=[],
                 server_listener=self._listener, supported_encodings=[], services=None,
-                context=self._context, message_backlog_size=BACKLOG)
+                context=self._context,
+                message_backlog_size=backlog(self.client_queue_bytes, self.max_message_bytes))
         except Exception as exc:  # the SDK's error for an address it cannot bind
             text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             text = text.removeprefix("FoxgloveError: ")
@@ -333,7 +363,8 @@ class FoxgloveNode(ros.Node):
             entry.latched_bytes = sum(len(d) for d, _ in entry.latched or ())
         cls, entry.encode, options = _message_class(ros_type)
         entry.subscription = self.create_subscription(
-            cls, name, lambda msg, e=entry: self._forward(e, msg), profile, **options)
+            cls, name, lambda msg, e=entry, n=name: self._forward(e, msg, n), profile,
+            **options)
         entry.profile = profile
         reliable = profile.reliability == ros.ReliabilityPolicy.RELIABLE
         self.get_logger().info(
@@ -361,8 +392,14 @@ class FoxgloveNode(ros.Node):
         self.get_logger().info(f"stopped serving {name}: no publisher left")
 
     # -- messages -------------------------------------------------------------------------
-    def _forward(self, entry: _Bridged, msg: Any) -> None:
+    def _forward(self, entry: _Bridged, msg: Any, name: str = "") -> None:
         data = entry.encode(msg)
+        if len(data) > self.max_message_bytes:  # (else one client's queue could exceed its budget)
+            self.oversized[name] = self.oversized.get(name, 0) + 1
+            self._say_once(f"{name} (size)", f"not forwarding messages of {name} larger than "
+                                              f"max_message_bytes = {self.max_message_bytes} "
+                                              f"(one of {len(data)} bytes)")
+            return
         now = time.time_ns()
         entry.channel.log(data, log_time=now)
         entry.keep(data, now)

@@ -64,6 +64,7 @@ import json
 import os
 import re
 import socket
+import struct
 import threading
 import time
 from collections import OrderedDict
@@ -136,6 +137,8 @@ class OptimiserNode(ros.Node):
                 f"cache_size must be >= 0 (0: no cache), got {self._cache_size}")
         self._sources, self._study_limits, self._max_request = declare_request_limits(self)
         self._cache: OrderedDict[tuple, Answer] = OrderedDict()
+        #: the same answers by the request's own fields, for the service's quick reply
+        self._answers: OrderedDict[tuple, Answer] = OrderedDict()
         self._lock = threading.Lock()
         self._compiler = Compiler(self.get_logger(),
                                   queue_size=int_parameter(self, "compile_queue", 0),
@@ -149,6 +152,8 @@ class OptimiserNode(ros.Node):
             folders = tuple(dict.fromkeys([*self._sources.system_paths,
                                            *(f.parent for f in files)]))
             self._sources = dataclasses.replace(self._sources, system_paths=folders)
+        #: what replies to peers never show (biped_opt.nodes.refusals.public)
+        self.private_paths = self._sources.system_paths
         for system in systems:  # (a .yaml problem file only adds its directory)
             if Path(system).suffix not in (".yaml", ".yml"):
                 self._warm_up_system(name_of(system))
@@ -157,6 +162,8 @@ class OptimiserNode(ros.Node):
             ros.srvs.OptimalPolicy, "/biped/optimal_policy", self._on_request,
             callback_group=self._group,
         )
+        if hasattr(self._service, "quick_reply"):  # (the built-in backend's services)
+            self._service.quick_reply = self._quick_reply
         self._studies: OrderedDict[str, tuple[Any, list[dict[str, float]]]] = OrderedDict()
         worker = str(self.get_parameter("worker").value).strip() or default_worker_name()
         if not re.fullmatch(r"[A-Za-z_]\w*", worker):
@@ -260,6 +267,25 @@ class OptimiserNode(ros.Node):
             if not answers(exc):
                 raise
             return refuse(self, "/biped/optimal_policy", response, exc)
+        if self._cache_size:
+            with self._lock:
+                self._answers[_request_key(request)] = answer
+                while len(self._answers) > self._cache_size:
+                    self._answers.popitem(last=False)
+        answer.fill(response)
+        return response
+
+    def _quick_reply(self, request: Any) -> Any:
+        """The answer to a request asked before, from the cache, or None: the service sends it
+        as the request arrives, never behind the computations of other requests (a request
+        the same field for field gets the same answer: the node's problems are fixed at
+        start)."""
+        with self._lock:
+            answer = self._answers.get(_request_key(request))
+            if answer is None:
+                return None
+            self._answers.move_to_end(_request_key(request))
+        response = ros.srvs.OptimalPolicy.Response()
         answer.fill(response)
         return response
 
@@ -325,6 +351,12 @@ class OptimiserNode(ros.Node):
         if getattr(self, "_compiler", None) is not None:  # (a bad parameter stops it sooner)
             self._compiler.close()
         super().destroy_node()
+
+
+def _request_key(request: Any) -> tuple[str, bytes, str, str]:
+    """A request's fields as a cache key (theta0 by its bits: -0.0 is not 0.0)."""
+    return (request.maneuver, struct.pack("<d", float(request.theta0)), request.system,
+            request.problem)
 
 
 def default_worker_name() -> str:

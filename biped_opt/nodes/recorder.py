@@ -213,12 +213,10 @@ class RecorderNode(ros.Node):
         self.last_summary: SweepSummary | None = None
         self.error: BaseException | None = None
         autostart = bool(self.get_parameter("autostart").value)
-        if autostart:
-            try:  # (a sweep the parameters cannot give stops the node: status 2)
-                self.request_from_parameters().validated()
-            except BipedOptError as exc:
-                raise InvalidParameterError(f"cannot record from the parameters: {exc}") \
-                    from None
+        try:  # (a sweep the parameters cannot give stops the node, autostart or not: status 2)
+            self.request_from_parameters().validated()
+        except BipedOptError as exc:
+            raise InvalidParameterError(f"cannot record from the parameters: {exc}") from None
         announce_ready(self, calls=("/biped/optimal_policy", "/biped/simulate"),
                        publishes=("/biped/sweep",))
         if autostart:

@@ -5,12 +5,16 @@ or a bug costs one request, never the node."""
 
 from __future__ import annotations
 
+import os
+import re
 import threading
+from collections.abc import Iterable
+from pathlib import Path
 from typing import Any
 
 from biped_opt.errors import BipedOptError
 
-__all__ = ["LOG_THROTTLE_S", "answers", "failure_message", "refusal", "refuse"]
+__all__ = ["LOG_THROTTLE_S", "answers", "failure_message", "public", "refusal", "refuse"]
 
 #: at most one log line per call site and this many seconds for rejected requests
 LOG_THROTTLE_S = 1.0
@@ -42,9 +46,23 @@ def refusal(exc: BaseException) -> str:
     return message if isinstance(exc, BipedOptError) else f"internal error: {message}"
 
 
+#: an absolute path in a message: its directories, then its last part (kept)
+_ABSOLUTE = re.compile(r"(?<![\w.~/])/(?:[^\s/'\"():;,]+/)+([^\s/'\"():;,]+)")
+
+
+def public(message: str, private: Iterable[Path | str] = ()) -> str:
+    """``message`` as a peer on the domain may read it: a file in one of the node's ``private``
+    directories (system_paths, output_dir) named relative to it, any other absolute path by its
+    last part. Where the node's files live is the operator's business, not the domain's."""
+    for folder in sorted((str(p) for p in private), key=len, reverse=True):
+        message = message.replace(folder.rstrip(os.sep) + os.sep, "")
+    return _ABSOLUTE.sub(lambda match: match.group(1), message)
+
+
 def refuse(node: Any, service: str, response: Any, exc: BaseException) -> Any:
-    """``response`` as a refusal (:func:`refusal`: ``success = false`` and why): a bad request
-    or a bug costs one request, not the node. Logged, one line a second at most."""
+    """``response`` as a refusal (:func:`refusal`: ``success = false`` and why, with no path
+    of the node's in it: :func:`public`, the node's ``private_paths``): a bad request or a bug
+    costs one request, not the node. Logged (with the paths), one line a second at most."""
     message = refusal(exc)
     if isinstance(exc, BipedOptError):
         node.get_logger().warning(f"rejected {service} request: {message}",
@@ -52,5 +70,6 @@ def refuse(node: Any, service: str, response: Any, exc: BaseException) -> Any:
     else:
         node.get_logger().error(f"{service} request failed: {message}",
                                 throttle_duration_sec=LOG_THROTTLE_S)
-    response.success, response.message = False, message
+    response.success = False
+    response.message = public(message, getattr(node, "private_paths", ()))
     return response

@@ -97,6 +97,18 @@ def _beside(text: str) -> bool:
     return text.endswith(".py") and _NAME.fullmatch(text[:-3]) is not None
 
 
+def _inside(field: str, folder: Path, path: Path) -> Path:
+    """``path`` (a file found in ``folder`` of system_paths) resolved, if it stays in
+    ``folder``: a symbolic link to a file elsewhere is refused, since the node would run
+    whatever it points to and the operator listed only the directory."""
+    real = path.resolve()
+    if not real.is_relative_to(folder.resolve()):
+        raise InvalidInputError(
+            f"{field}: {path.name} in the node's system_paths is a link to a file outside "
+            "its directory; refused (only files in a listed directory are served)")
+    return real
+
+
 def directories(values: Iterable[Any]) -> tuple[Path, ...]:
     """The ``system_paths`` parameter's directories, absolute; a missing one is an error."""
     out = []
@@ -204,9 +216,9 @@ class Sources:
         for folder in self.system_paths:
             path = folder / f"{name}.py"
             if path.is_file():
-                return str(path)
-        where = (f"nor {name}.py in system_paths ({', '.join(map(str, self.system_paths))})"
-                 if self.system_paths else "and this node has no system_paths")
+                return str(_inside(field, folder, path))
+        where = (f"nor {name}.py in the node's system_paths" if self.system_paths
+                 else "and this node has no system_paths")
         raise InvalidInputError(
             f"{field}: unknown system {quoted(name)}: not a library system "
             f"({', '.join(LIBRARY)}, {LIBRARY_PATTERNS}) {where}")
@@ -221,7 +233,7 @@ class Sources:
             for suffix in PROBLEM_SUFFIXES:
                 path = folder / f"{name}{suffix}"
                 if path.is_file():
-                    return path
+                    return _inside("problem", folder, path)
         return None
 
     def check_request(self, system: str, problem: str, maneuver: str | None = None
@@ -328,7 +340,7 @@ class Sources:
             return source or "biped"
         text = str(value)
         if _beside(text):
-            return str(path.parent / text)
+            return str(_inside(f"{path.name}: system", path.parent, path.parent / text))
         return self.system(f"{path.name}: system", text)
 
     def study(self, system: str, problem: str | None) -> tuple[str, str | None]:

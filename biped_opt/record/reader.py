@@ -20,14 +20,17 @@ read.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import math
+import mmap
+import os
 import struct
 import zlib
 from collections import defaultdict
-from collections.abc import Iterable
-from dataclasses import dataclass, field, replace
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -37,16 +40,16 @@ import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, ChunkIndex, Message, Metadata, Schema
-from mcap.stream_reader import breakup_chunk
 
+from biped_opt.input_files import InputFileError, open_regular
 from biped_opt.record.writer import METADATA_CRC, SYSTEM_METADATA, RecordError, metadata_crc
 from biped_opt.ros.interfaces import load_interfaces
 
 __all__ = [
     "RawChannel", "RawMessage", "RawRecording", "RecordedMessage", "Recording", "checked_metadata",
-    "read_raw", "read_recording", "recorded_system", "system_description",
+    "read_raw", "read_recording", "recorded_system", "system_description", "decode_messages",
+    "undecodable_note", "MAX_LOG_TIME_NS",
 ]
 
 
@@ -122,11 +125,15 @@ def recorded_system(raw: RawRecording) -> dict[str, Any] | None:
     described = system_description(raw.metadata)
     if described is not None or raw.channels.get("/biped/system_info") is None:
         return described
-    message = next((m for m in raw.messages if m.topic == "/biped/system_info"), None)
-    if message is None:
+    infos, bad = decode_messages(raw, (m for m in raw.messages
+                                       if m.topic == "/biped/system_info"))
+    if not infos:
+        if bad:
+            raise RecordError(f"{raw.path}: the system's description is lost: its metadata "
+                              "record is missing or damaged and no /biped/system_info "
+                              "message decodes")
         return None
-    typestore = load_interfaces().typestore
-    info = typestore.deserialize_cdr(message.data, raw.channels["/biped/system_info"].type)
+    info = infos[0][1]
     return {key: (getattr(info, key) if key in _PLAIN else
                   [float(v) if key in _NUMBER_LISTS else str(v) for v in getattr(info, key)])
             for key in (*_PLAIN, *_NAME_LISTS, *_NUMBER_LISTS)}
@@ -280,15 +287,38 @@ def checked_metadata(records: Iterable[tuple[str, dict[str, str]]]
 
 
 def read_recording(path: str | Path) -> Recording:
-    """Decode a recording; recover what can be recovered from an unfinished file."""
+    """Decode a recording; recover what can be recovered from an unfinished file. A message
+    that does not decode (its CRCs can be intact: a writer may have written anything) is left
+    out and counted in the note."""
     raw = read_raw(path)
+    messages, bad = decode_messages(raw, raw.messages)
+    note = raw.note + undecodable_note(bad)
+    return _recording(raw.path, [RecordedMessage(m.topic, m.log_time_ns, msg)
+                                 for m, msg in messages], raw.metadata,
+                      complete=raw.complete and not bad, note=note)
+
+
+def decode_messages(raw: RawRecording, messages: Iterable[RawMessage]
+                    ) -> tuple[list[tuple[RawMessage, Any]], dict[str, int]]:
+    """(message, decoded) for each of ``messages`` of ``raw`` that decodes with its channel's
+    type, and how many did not, by topic."""
     typestore = load_interfaces().typestore
-    messages = [
-        RecordedMessage(m.topic, m.log_time_ns,
-                        typestore.deserialize_cdr(m.data, raw.channels[m.topic].type))
-        for m in raw.messages
-    ]
-    return _recording(raw.path, messages, raw.metadata, complete=raw.complete, note=raw.note)
+    out: list[tuple[RawMessage, Any]] = []
+    bad: dict[str, int] = defaultdict(int)
+    for m in messages:
+        try:
+            out.append((m, typestore.deserialize_cdr(m.data, raw.channels[m.topic].type)))
+        except Exception:  # (any decoding failure: a short, cut or hostile message)
+            bad[m.topic] += 1
+    return out, dict(bad)
+
+
+def undecodable_note(bad: dict[str, int]) -> str:
+    """"; N messages that do not decode left out (topic n, ...)", or ""."""
+    if not bad:
+        return ""
+    where = ", ".join(f"{topic} {count}" for topic, count in sorted(bad.items()))
+    return f"; {sum(bad.values())} messages that do not decode left out ({where})"
 
 
 def _recording(path: Path, messages: list[RecordedMessage], metadata: dict[str, dict[str, str]],
@@ -368,49 +398,131 @@ def _raw_channel(schema: Schema | None, channel: Channel) -> RawChannel:
 
 def read_raw(path: str | Path, topics: Iterable[str] | None = None) -> RawRecording:
     """Channels and serialized messages of a recording (only ``topics`` when given), sorted by
-    log time. A finished file whose summary passes its CRC is read through its index, every
-    chunk's CRC checked; any other file is recovered record by record (:func:`_recover`). A file
-    that is not MCAP, or holds nothing recoverable, is a :class:`RecordError`."""
+    log time. A finished file whose summary passes its CRC, and whose data section does, is
+    read through its records with every chunk's size and CRC checked ("indexed"); any other
+    file is recovered record by record (:func:`_recover`). Only a regular file is read, mapped
+    into memory rather than read into it, and no chunk decompresses beyond its declared size
+    or the reader's budget (:class:`_Budget`). A file that is not MCAP, or holds nothing
+    recoverable, is a :class:`RecordError`."""
     path = Path(path)
-    if path.is_dir():
-        raise RecordError(f"{path}: is a directory, not a recording")
-    if not path.exists():
-        raise RecordError(f"no such recording: {path}")
-    try:
-        data = path.read_bytes()  # once: every later read is bounded by what the file holds
-    except OSError as exc:
-        raise RecordError(f"{path}: cannot read: {exc.strerror}") from None
-    if not data.startswith(MAGIC):
-        raise RecordError(f"{path}: not an MCAP file (it does not start with the MCAP magic)")
-    wanted = None if topics is None else set(topics)
-    summary, why = _read_summary(data)
-    if summary is not None and not why:
-        try:
-            return _read_raw_indexed(path, data, wanted)
-        except (*_DAMAGED, MemoryError):  # (mcap sizes a chunk's buffer by its zstd header)
+    with _mapped(path) as data:
+        if data[:len(MAGIC)] != MAGIC:
+            raise RecordError(
+                f"{path}: not an MCAP file (it does not start with the MCAP magic)")
+        wanted = None if topics is None else set(topics)
+        summary, why = _read_summary(data)
+        found = _scan(data, summary, _Budget(len(data)))
+        if summary is not None and not why and not (found.corrupt or found.skipped
+                                                    or found.over_budget):
+            return _recording_of(path, data, found, wanted, complete=True, why="")
+        if summary is not None and not why:
             why = "a finished file whose index could not read every chunk"
-    return _recover(path, data, wanted, summary, why)
+        return _recording_of(path, data, found, wanted, complete=False, why=why)
 
 
-def _read_raw_indexed(path: Path, data: bytes, wanted: set[str] | None) -> RawRecording:
-    reader = make_reader(io.BytesIO(data), validate_crcs=True)
-    summary = reader.get_summary()
-    if summary is None:
-        raise McapError("no summary")
-    channels = {
-        ch.topic: _raw_channel(summary.schemas.get(ch.schema_id), ch)
-        for ch in summary.channels.values() if wanted is None or ch.topic in wanted
-    }
-    out = [
-        RawMessage(channel.topic, message.log_time, message.publish_time, message.data)
-        for _schema, channel, message in reader.iter_messages(
-            topics=None if wanted is None else sorted(wanted), log_time_order=True)
-    ]
-    metadata, notes = checked_metadata((m.name, dict(m.metadata))
-                                       for m in reader.iter_metadata())
+@contextlib.contextmanager
+def _mapped(path: Path) -> Iterator[Any]:
+    """The regular file ``path`` mapped read-only (an empty file: ``b""``)."""
+    try:
+        fd, size = open_regular(path)
+    except InputFileError as exc:
+        text = str(exc)
+        if text.endswith("no such file"):
+            raise RecordError(f"no such recording: {path}") from None
+        raise RecordError(text.replace("not a regular file", "not a recording")
+                          if "is a directory" in text else text) from None
+    try:
+        if size == 0:
+            yield b""
+            return
+        with mmap.mmap(fd, size, prot=mmap.PROT_READ) as data:
+            yield data
+    except (OSError, ValueError) as exc:
+        if isinstance(exc, RecordError):
+            raise
+        raise RecordError(f"{path}: cannot read: {exc}") from None
+    finally:
+        os.close(fd)
+
+
+#: the reader's budget: what it may decompress and hold, 16 MiB plus 32 times the file's size
+#: (this package's recordings decompress to 5-7 times their size); each record kept also
+#: counts :data:`RECORD_COST` bytes, what Python holds for it beyond its data
+BUDGET_BASE, BUDGET_RATIO, RECORD_COST = 16 << 20, 32, 256
+
+
+class _OverBudget(ValueError):
+    """A chunk that would decompress beyond the reader's budget."""
+
+
+class _Budget:
+    """What a reading may still decompress and keep [bytes] (see :data:`BUDGET_BASE`)."""
+
+    def __init__(self, file_size: int) -> None:
+        self.limit = self.left = BUDGET_BASE + BUDGET_RATIO * file_size
+
+    def take(self, size: int) -> None:
+        if size > self.left:
+            raise _OverBudget(f"{size} bytes beyond the {self.left} the reader has left of "
+                              f"its {self.limit}")
+        self.left -= size
+
+
+def _recording_of(path: Path, data: Any, found: _Scan, wanted: set[str] | None, *,
+                  complete: bool, why: str) -> RawRecording:
+    """The recording of what the scan found: "indexed" (``complete``: a finished, intact
+    file) or recovered (:func:`_recover`)."""
+    if not complete:
+        return _recover(path, data, found, wanted, why)
+    schemas, by_id = _definitions(found.chunked, None)
+    raw = [m for m in found.chunked if isinstance(m, Message)]
+    out, late = _messages(raw, by_id, wanted)
+    channels = {ch.topic: _raw_channel(schemas.get(ch.schema_id), ch)
+                for ch in by_id.values() if wanted is None or ch.topic in wanted}
+    metadata, notes = checked_metadata(found.metadata)
+    notes += [late] if late else []
     return RawRecording(path=path, channels=channels, messages=tuple(out), metadata=metadata,
                         complete=not notes, note="; ".join(["indexed", *notes]),
                         file_size=len(data), bytes_read=len(data))
+
+
+#: the latest log time a recording may give [ns]: ROS 2 times are signed 64-bit nanoseconds
+MAX_LOG_TIME_NS = (1 << 63) - 1
+
+
+def _messages(raw: list[Message], by_id: dict[int, Channel], wanted: set[str] | None
+              ) -> tuple[list[RawMessage], str]:
+    """The messages of known channels (of ``wanted`` topics) sorted by log time, and a note
+    on those left out for a log or publish time beyond :data:`MAX_LOG_TIME_NS` ("" if
+    none)."""
+    out = [RawMessage(by_id[m.channel_id].topic, m.log_time, m.publish_time, m.data)
+           for m in raw if m.channel_id in by_id
+           and (wanted is None or by_id[m.channel_id].topic in wanted)]
+    kept = [m for m in out if m.log_time_ns <= MAX_LOG_TIME_NS
+            and m.publish_time_ns <= MAX_LOG_TIME_NS]
+    kept.sort(key=lambda m: m.log_time_ns)
+    late = len(out) - len(kept)
+    return kept, (f"{late} messages with a time beyond 2^63 - 1 ns (what ROS 2 represents) "
+                  "left out" if late else "")
+
+
+def _definitions(records: list[Any], summary: _Summary | None
+                 ) -> tuple[dict[int, Schema], dict[int, Channel]]:
+    """Schemas and channels by id: the first definition of an id stands (later ones must
+    repeat it); an intact summary supplies those a lost chunk held."""
+    schemas: dict[int, Schema] = {}
+    by_id: dict[int, Channel] = {}
+    for item in records:
+        if isinstance(item, Schema):
+            schemas.setdefault(item.id, item)
+        elif isinstance(item, Channel):
+            by_id.setdefault(item.id, item)
+    if summary is not None:
+        for schema_id, schema in summary.schemas.items():
+            schemas.setdefault(schema_id, schema)
+        for channel_id, channel in summary.channels.items():
+            by_id.setdefault(channel_id, channel)
+    return schemas, by_id
 
 
 # -- the record structure --------------------------------------------------------------------
@@ -438,7 +550,7 @@ class _Framing(ValueError):
     where the next record starts is unknown."""
 
 
-def _record_at(data: bytes, pos: int, stop: int) -> tuple[int, int, int] | None:
+def _record_at(data: Any, pos: int, stop: int) -> tuple[int, int, int] | None:
     """(opcode, body start, end) of the record at ``pos`` if it lies wholly before ``stop``."""
     if pos + _PREFIX.size > stop:
         return None
@@ -447,7 +559,7 @@ def _record_at(data: bytes, pos: int, stop: int) -> tuple[int, int, int] | None:
     return (opcode, body, body + length) if length <= stop - body else None
 
 
-def _stream(data: bytes, start: int, end: int) -> ReadDataStream:
+def _stream(data: Any, start: int, end: int) -> ReadDataStream:
     return ReadDataStream(io.BytesIO(data[start:end]))
 
 
@@ -461,13 +573,19 @@ class _Summary:
     chunk_starts: tuple[int, ...]  #: offsets of the chunk records, ascending
 
 
-def _read_summary(data: bytes) -> tuple[_Summary | None, str]:
+def _crc(data: Any, start: int, end: int) -> int:
+    """CRC-32 of ``data[start:end]`` without copying it (a mapped file)."""
+    with memoryview(data) as whole, whole[start:end] as part:
+        return zlib.crc32(part)
+
+
+def _read_summary(data: Any) -> tuple[_Summary | None, str]:
     """The summary of a finished file if it passes its CRC (else None), and why the file cannot
     be read through it ("" when it can: the data section also passes its CRC, if it has one).
     Outside chunks these CRCs are the only way to detect a damaged byte, so a summary that fails
     is not used at all."""
     footer = len(data) - len(MAGIC) - _PREFIX.size - _FOOTER.size
-    if (footer < len(MAGIC) or not data.endswith(MAGIC)
+    if (footer < len(MAGIC) or data[len(data) - len(MAGIC):] != MAGIC
             or _record_at(data, footer, len(data) - len(MAGIC))
             != (Opcode.FOOTER, footer + _PREFIX.size, footer + _PREFIX.size + _FOOTER.size)):
         return None, "an unfinished file (its writer was killed)"
@@ -476,7 +594,7 @@ def _read_summary(data: bytes) -> tuple[_Summary | None, str]:
     if start == 0:
         return None, "a finished file without a summary"
     if not len(MAGIC) <= start <= footer or (
-            crc and zlib.crc32(data[start:footer + _PREFIX.size + 2 * _U64.size]) != crc):
+            crc and _crc(data, start, footer + _PREFIX.size + 2 * _U64.size) != crc):
         return damaged
     schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}
@@ -503,32 +621,41 @@ def _read_summary(data: bytes) -> tuple[_Summary | None, str]:
     if _record_at(data, data_end, start) != (Opcode.DATA_END, data_end + _PREFIX.size, start):
         return summary, "a finished file whose data section does not end where its summary says"
     (data_crc,) = _DATA_CRC.unpack_from(data, data_end + _PREFIX.size)
-    if data_crc and zlib.crc32(data[:data_end]) != data_crc:
+    if data_crc and _crc(data, 0, data_end) != data_crc:
         return summary, "a finished file whose data section fails its CRC"
     return summary, ""
 
 
-def _decompress(compression: str, data: bytes, size: int) -> bytes:
-    """A chunk's records, decompressed without trusting any size field for an allocation."""
+def _decompress(compression: str, data: bytes, size: int, budget: _Budget) -> bytes:
+    """A chunk's records, decompressed to at most its declared ``size`` (taken from the
+    ``budget`` first): a chunk that declares more than the reader has left, or whose data
+    inflates beyond what it declares, is refused before anything beyond that is allocated."""
+    budget.take(size)
     if compression == "zstd":
-        out = zstandard.ZstdDecompressor().decompressobj().decompress(data)
+        reader = zstandard.ZstdDecompressor().stream_reader(data)
+        parts, got = [], 0
+        while got <= size:
+            piece = reader.read(size + 1 - got)
+            if not piece:
+                break
+            parts.append(piece)
+            got += len(piece)
+        out = b"".join(parts)
     elif compression == "lz4":
         import lz4.frame  # (optional: only files written with lz4 need it)
 
-        declared = lz4.frame.get_frame_info(data)["content_size"]
-        if declared not in (0, size):
-            raise ValueError(f"lz4 frame of {declared} bytes in a chunk of {size}")
-        out = lz4.frame.decompress(data)
+        out = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
     elif compression == "":
         out = data
     else:
         raise McapError(f"unsupported chunk compression {compression!r}")
     if len(out) != size:
-        raise ValueError(f"chunk decompressed to {len(out)} bytes, its header says {size}")
+        raise ValueError(f"chunk decompressed to {'more than ' if len(out) > size else ''}"
+                         f"{len(out)} bytes, its header says {size}")
     return out
 
 
-def _chunk(data: bytes, body: int, end: int) -> Chunk:
+def _chunk(data: Any, body: int, end: int) -> Chunk:
     """The chunk record whose body is data[body:end], its records still compressed.
     :class:`_Framing` if its own lengths do not add up to the record's."""
     try:
@@ -545,15 +672,42 @@ def _chunk(data: bytes, body: int, end: int) -> Chunk:
                  message_end_time=stop, uncompressed_crc=crc, uncompressed_size=size)
 
 
-def _chunk_records(data: bytes, body: int, end: int) -> list[Any]:
+#: the records a chunk may hold, and how each is read from its body
+_IN_CHUNK = {
+    Opcode.SCHEMA: lambda stream, _length: Schema.read(stream),
+    Opcode.CHANNEL: lambda stream, _length: Channel.read(stream),
+    Opcode.MESSAGE: Message.read,
+}
+
+
+def _chunk_records(data: Any, body: int, end: int, budget: _Budget) -> list[Any]:
     """The schemas, channels and messages of a chunk record, after checking its framing
-    (:class:`_Framing`), its size and its CRC (a ``_DAMAGED`` error)."""
+    (:class:`_Framing`), its size and its CRC (a ``_DAMAGED`` error). Every record must fit in
+    the chunk, be one a chunk holds and be read to its end; each costs the budget
+    :data:`RECORD_COST` bytes."""
     chunk = _chunk(data, body, end)
-    records = _decompress(chunk.compression, chunk.data, chunk.uncompressed_size)
-    return breakup_chunk(replace(chunk, compression="", data=records), validate_crc=True)
+    records = _decompress(chunk.compression, chunk.data, chunk.uncompressed_size, budget)
+    if chunk.uncompressed_crc and zlib.crc32(records) != chunk.uncompressed_crc:
+        raise ValueError("chunk fails its CRC")
+    out: list[Any] = []
+    pos = 0
+    while pos < len(records):
+        record = _record_at(records, pos, len(records))
+        if record is None:
+            raise ValueError("a record runs past the end of its chunk")
+        opcode, start, pos = record
+        read = _IN_CHUNK.get(opcode)
+        if read is None:
+            raise ValueError(f"a record of opcode {opcode:#x} in a chunk")
+        stream = _stream(records, start, pos)
+        out.append(read(stream, pos - start))
+        if stream.count != pos - start:
+            raise ValueError("a record shorter than its length")
+        budget.take(RECORD_COST)
+    return out
 
 
-def _resync(data: bytes, after: int, stop: int, anchors: tuple[int, ...]) -> int:
+def _resync(data: Any, after: int, stop: int, anchors: tuple[int, ...]) -> int:
     """The first chunk record past ``after``: from an intact summary's index, else the first
     offset holding a record framed exactly as a chunk (chance can hardly do that; its CRC is
     still checked); ``stop`` if there is none."""
@@ -572,11 +726,7 @@ def _resync(data: bytes, after: int, stop: int, anchors: tuple[int, ...]) -> int
 
 
 #: readers of the records that a file written without chunks holds in its data section
-_TOP_LEVEL = {
-    Opcode.SCHEMA: lambda stream, _length: Schema.read(stream),
-    Opcode.CHANNEL: lambda stream, _length: Channel.read(stream),
-    Opcode.MESSAGE: Message.read,
-}
+_TOP_LEVEL = _IN_CHUNK
 
 
 # -- recovery --------------------------------------------------------------------------------
@@ -594,14 +744,19 @@ class _Scan:
     chunks: int = 0  #: chunk records seen, intact or not
     corrupt: int = 0  #: chunks skipped: framing, size, CRC or decompression failed
     skipped: int = 0  #: records outside chunks that did not parse
+    #: chunks skipped because they would have decompressed beyond the reader's budget
+    over_budget: int = 0
+    budget: int = 0  #: that budget [bytes]
     good: int = len(MAGIC)  #: the end of the last record read
+    summary: _Summary | None = None  #: the file's summary, if it passed its CRC
 
 
-def _scan(data: bytes, summary: _Summary | None) -> _Scan:
-    """Walk the data section by the records' length prefixes (see :func:`_recover`)."""
+def _scan(data: Any, summary: _Summary | None, budget: _Budget) -> _Scan:
+    """Walk the data section by the records' length prefixes (see :func:`_recover`); what it
+    decompresses and keeps is taken from ``budget``."""
     stop = summary.start if summary is not None else len(data)
     anchors = summary.chunk_starts if summary is not None else ()
-    found = _Scan()
+    found = _Scan(summary=summary, budget=budget.limit)
     pos = len(MAGIC)
     trusted = len(MAGIC) - 1  #: the last byte of the last chunk whose framing checked
     resumed = -1  #: where the last resync went: each goes further, so the scan ends
@@ -617,7 +772,7 @@ def _scan(data: bytes, summary: _Summary | None) -> _Scan:
                 found.good = end
                 break
             if opcode == Opcode.CHUNK:
-                found.chunked += _chunk_records(data, body, end)
+                found.chunked += _chunk_records(data, body, end, budget)
                 trusted = end - 1
             elif in_chunk:  # the index says a chunk starts here: its opcode is damaged
                 raise _Framing("not a chunk where the index has one")
@@ -626,9 +781,17 @@ def _scan(data: bytes, summary: _Summary | None) -> _Scan:
                 item = Metadata.read(stream)
                 if stream.count != end - body:  # (the map's own length is damaged)
                     raise ValueError("a metadata map shorter than its record")
+                budget.take(RECORD_COST + end - body)
                 found.metadata.append((item.name, dict(item.metadata)))
             elif opcode in _TOP_LEVEL:
+                budget.take(RECORD_COST)
                 found.loose.append(_TOP_LEVEL[opcode](_stream(data, body, end), end - body))
+        except _OverBudget:
+            found.over_budget += 1
+            if record is None:  # (cannot be: a record that does not fit takes nothing)
+                break
+            pos = record[2]
+            continue
         except _DAMAGED as exc:
             if in_chunk and not isinstance(exc, _Framing):
                 found.corrupt += 1
@@ -648,35 +811,24 @@ def _scan(data: bytes, summary: _Summary | None) -> _Scan:
     return found
 
 
-def _recover(path: Path, data: bytes, wanted: set[str] | None, summary: _Summary | None,
-             why: str) -> RawRecording:
+def _recover(path: Path, data: Any, found: _Scan, wanted: set[str] | None, why: str
+             ) -> RawRecording:
     """Every intact record of the data section of a file that cannot be read through its index:
     its writer was killed (the file ends inside a record), its summary is damaged, or a chunk is.
 
-    The scan walks the data section's records by their length prefixes. A complete chunk is kept
-    if its framing, size and CRC check, else skipped and counted. A record that does not fit (the
+    The scan (:func:`_scan`) walks the data section's records by their length prefixes. A
+    complete chunk is kept if its framing, size and CRC check, else skipped and counted; so is
+    one that would decompress beyond the reader's budget. A record that does not fit (the
     one the writer was writing when it stopped), a chunk whose lengths disagree, or a record
     outside a chunk that does not parse leave the next record's start unknown: the scan resumes
     at the next chunk (:func:`_resync`), or ends if there is none.
     An intact summary also supplies the definitions of channels whose chunk was lost; messages of
     a channel whose definition was lost all the same cannot be decoded and are counted."""
-    found = _scan(data, summary)
     records = found.chunked
     ignored = len(found.loose) if found.chunks else 0
     if not found.chunks:
         records = found.loose
-    schemas: dict[int, Schema] = {}
-    by_id: dict[int, Channel] = {}
-    for item in records:  # the first definition of an id stands (later ones must repeat it)
-        if isinstance(item, Schema):
-            schemas.setdefault(item.id, item)
-        elif isinstance(item, Channel):
-            by_id.setdefault(item.id, item)
-    if summary is not None:  # intact: it repeats the definitions a lost chunk held
-        for schema_id, schema in summary.schemas.items():
-            schemas.setdefault(schema_id, schema)
-        for channel_id, channel in summary.channels.items():
-            by_id.setdefault(channel_id, channel)
+    schemas, by_id = _definitions(records, found.summary)
     raw = [m for m in records if isinstance(m, Message)]
     decodable = [m for m in raw if m.channel_id in by_id]
     orphans = len(raw) - len(decodable)
@@ -687,13 +839,15 @@ def _recover(path: Path, data: bytes, wanted: set[str] | None, summary: _Summary
         f"; {ignored} message, schema or channel records between chunks ignored as damaged"
         if ignored else "",
         f"; {orphans} messages of channels defined in a damaged chunk dropped" if orphans else "",
+        f"; {found.over_budget} records skipped that would have decompressed or held more than "
+        f"the reader's budget of {found.budget} bytes (16 MiB + 32 x the file's size)"
+        if found.over_budget else "",
     ])
     if not decodable:
         raise RecordError(f"{path}: nothing recoverable: no complete message in its "
                           f"{len(data)} bytes{losses}")
-    out = [RawMessage(by_id[m.channel_id].topic, m.log_time, m.publish_time, m.data)
-           for m in decodable if wanted is None or by_id[m.channel_id].topic in wanted]
-    out.sort(key=lambda m: m.log_time_ns)
+    out, late = _messages(decodable, by_id, wanted)
+    losses += f"; {late}" if late else ""
     channels = {
         ch.topic: _raw_channel(schemas.get(ch.schema_id), ch)
         for ch in by_id.values() if wanted is None or ch.topic in wanted

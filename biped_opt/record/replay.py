@@ -29,7 +29,8 @@ import yaml
 from biped_opt.errors import BipedOptError
 from biped_opt.record.reader import RawRecording, read_raw
 
-__all__ = ["ReplayError", "ReplayStats", "Player", "qos_from_metadata"]
+__all__ = ["ReplayError", "ReplayStats", "Player", "qos_from_metadata", "MAX_GAP_NS",
+           "play_offsets"]
 
 
 class ReplayError(BipedOptError, ValueError):
@@ -95,6 +96,26 @@ class ReplayStats:
     max_late: float = 0.0
     skipped_types: tuple[str, ...] = ()
     interrupted: bool = False
+    #: messages that did not decode into their type, by topic (left out, not published)
+    undecodable: dict[str, int] = field(default_factory=dict)
+    #: gaps in the recorded times longer than :data:`MAX_GAP_NS`, each played as that long
+    cut_gaps: int = 0
+
+
+#: the longest pause a replay makes between two messages [ns of recorded time]: a recording
+#: whose times jump by years (a damaged or hostile file) is played, not waited out
+MAX_GAP_NS = 3_600_000_000_000
+
+
+def play_offsets(log_times: list[int]) -> list[int]:
+    """When each message plays [ns of recorded time after the first]: its log time's offset,
+    with every gap between two messages longer than :data:`MAX_GAP_NS` cut to that."""
+    out, at = [], 0
+    for k, t in enumerate(log_times):
+        if k:
+            at += min(t - log_times[k - 1], MAX_GAP_NS)
+        out.append(at)
+    return out
 
 
 class Player:
@@ -145,7 +166,8 @@ class Player:
             remaining = (target_ns - time.monotonic_ns()) * 1e-9
             if remaining <= 0.0:
                 return not self._stop.is_set()
-            if self._stop.wait(remaining):
+            # (in slices: a recording's gap may be centuries, more than a wait can take)
+            if self._stop.wait(min(remaining, 1.0)):
                 return False
 
     def run(self, on_publish: Callable[[str, int], None] | None = None) -> ReplayStats:
@@ -181,11 +203,14 @@ class Player:
             messages = [m for m in messages if m.topic in publishers]
             if not messages:
                 raise ReplayError(f"{self.recording.path.name}: no messages to replay")
-            warm: dict[str, bytes] = {}
-            for m in messages:
-                warm.setdefault(m.topic, m.data)
-            for topic, data in warm.items():  # the first decode builds Cyclone's deserializer
-                publishers[topic][1](data)
+            warm: set[str] = set()
+            for m in messages:  # the first decode builds Cyclone's deserializer
+                if m.topic not in warm:
+                    try:
+                        publishers[m.topic][1](m.data)
+                        warm.add(m.topic)
+                    except Exception:  # (counted when it is played)
+                        pass
             start = time.monotonic()
             # another Python thread (an executor in the same process) may hold the GIL for up to
             # the switch interval (5 ms by default) when a deadline comes; hand it over sooner
@@ -207,14 +232,21 @@ class Player:
 
     def _play(self, messages: list[Any], publishers: dict[str, tuple[Any, Any]],
               stats: ReplayStats, on_publish: Callable[[str, int], None] | None) -> None:
-        first = messages[0].log_time_ns
+        times = [m.log_time_ns for m in messages]
+        offsets = play_offsets(times)
+        stats.cut_gaps = sum(b - a > MAX_GAP_NS for a, b in zip(times, times[1:]))
         scale = 1.0 / self.rate
         while not self._stop.is_set():
             t0 = time.monotonic_ns()
-            for m in messages:
+            for m, offset in zip(messages, offsets):
                 pub, decode = publishers[m.topic]
-                payload = decode(m.data)  # before the deadline: decoding costs no lateness
-                target = t0 + int((m.log_time_ns - first) * scale)
+                try:
+                    payload = decode(m.data)  # before the deadline: decoding costs no lateness
+                except Exception:  # a message its writer cut or garbled: counted, not played
+                    if stats.loops == 0:
+                        stats.undecodable[m.topic] = stats.undecodable.get(m.topic, 0) + 1
+                    continue
+                target = t0 + int(offset * scale)
                 if not self._wait_until(target):
                     return
                 pub.publish(payload)

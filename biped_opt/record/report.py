@@ -40,6 +40,8 @@ Nothing is drawn here either: the figures are :mod:`biped_opt.plots`' (Figs. 2-4
 from __future__ import annotations
 
 import json
+import math
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -55,8 +57,13 @@ from biped_opt.errors import BipedOptError
 from biped_opt.paper.biped import INPUT_NAMES, ContactMode
 from biped_opt.paper.problems import OptimalControlProblem, get_problem
 from biped_opt.paper.sweeps import FixedSweep, OptimalSweep
-from biped_opt.record.reader import read_raw, recorded_system
-from biped_opt.ros.interfaces import load_interfaces
+from biped_opt.record.reader import (
+    RawRecording,
+    decode_messages,
+    read_raw,
+    recorded_system,
+    undecodable_note,
+)
 from biped_opt.systems.derive import mode_name
 
 __all__ = [
@@ -161,26 +168,33 @@ def _problem(meta: dict[str, str], maneuver: str, path: Path) -> OptimalControlP
                           f"problem of the biped: {exc}") from None
 
 
-def load_sweep(path: str | Path) -> RecordedSweep:
+#: the topics a report reads
+SWEEP_TOPICS = ("/biped/sweep", "/biped/system_info")
+
+
+def load_sweep(path: str | Path | RawRecording) -> RecordedSweep:
     """Read the SweepPoints (and the system's description) of a recording; unfinished files are
     recovered. The ``biped_opt.sweep`` record says what kind of sweep it is; without it (lost to
     damage: :func:`~biped_opt.record.reader.checked_metadata`) the SweepPoints do, and a fixed
     sweep of the biped is costed with its maneuver's default problem."""
-    raw = read_raw(path, topics=["/biped/sweep", "/biped/system_info"])
+    raw = path if isinstance(path, RawRecording) else read_raw(path, topics=SWEEP_TOPICS)
     sweep = [m for m in raw.messages if m.topic == "/biped/sweep"]
     if not sweep:
         raise ReportError(f"{raw.path}: no /biped/sweep messages ({raw.note})")
-    ts = load_interfaces().typestore
-    typename = raw.channels["/biped/sweep"].type
-    points: dict[float, Any] = {}
-    for m in sweep:
-        msg: Any = ts.deserialize_cdr(m.data, typename)
-        points[float(msg.theta0)] = msg  # a repeated angle: the later point wins
-    msgs = [points[k] for k in sorted(points)]
+    described = recorded_system(raw)
+    decoded, bad = decode_messages(raw, sweep)
+    msgs, odd = _usable_points([msg for _, msg in decoded],
+                               len(described["constraints"]) if described else 2)
+    lost = sum(bad.values()) + odd
+    note = raw.note + undecodable_note(bad) + (
+        f"; {odd} sweep points left out (a non-finite angle, a contact mode the system does "
+        "not have, or a policy unlike the other points')" if odd else "")
+    if not msgs:
+        raise ReportError(f"{raw.path}: none of its {len(sweep)} /biped/sweep messages is a "
+                          f"sweep point that can be used ({note})")
     meta = raw.metadata.get("biped_opt.sweep", {})
     maneuver = meta.get("maneuver") or msgs[0].maneuver
     pol = np.array([np.asarray(m.policy, dtype=float) for m in msgs]).reshape(len(msgs), -1)
-    described = recorded_system(raw)
     extra: dict[str, Any] = {}
     problem: OptimalControlProblem | None = None
     optimal = (meta["optimal"] == "True") if "optimal" in meta else bool(msgs[0].optimal)
@@ -222,8 +236,26 @@ def load_sweep(path: str | Path) -> RecordedSweep:
         policy={n: pol[:, k] for k, n in enumerate(names)},
         mode_sequences=tuple(tuple(int(v) for v in m.mode_sequence) for m in msgs),
         event_times=tuple(tuple(float(v) for v in m.event_times) for m in msgs),
-        metadata=dict(meta), complete=raw.complete, note=raw.note, **extra,
+        metadata=dict(meta), complete=raw.complete and not lost, note=note, **extra,
     )
+
+
+def _usable_points(msgs: list[Any], constraints: int) -> tuple[list[Any], int]:
+    """The sweep points a report can use, sorted by angle (a repeated angle: the later point
+    wins), and how many it cannot: a non-finite angle, a contact mode beyond the system's
+    ``constraints``, a policy of another length than most points'. (A file's CRCs say only that
+    it holds what its writer wrote.)"""
+    lengths = Counter(len(m.policy) for m in msgs)
+    width = lengths.most_common(1)[0][0] if lengths else 0
+    points: dict[float, Any] = {}
+    odd = 0
+    for msg in msgs:
+        if (not math.isfinite(msg.theta0) or len(msg.policy) != width
+                or any(not 0 <= int(v) < 1 << constraints for v in msg.mode_sequence)):
+            odd += 1
+            continue
+        points[float(msg.theta0)] = msg
+    return [points[k] for k in sorted(points)], odd
 
 
 # --- nonsmoothness from the recorded grid ------------------------------------------------------
@@ -311,8 +343,8 @@ def _optimal_sweep(s: RecordedSweep) -> OptimalSweep:
         nfev=np.zeros(n, dtype=np.int64), results=())
 
 
-def report(paths: Sequence[str | Path], out_dir: str | Path, *, refine: bool = False
-           ) -> Report:
+def report(paths: Sequence[str | Path | RawRecording], out_dir: str | Path, *,
+           refine: bool = False) -> Report:
     """Figures (whichever the recordings allow) and the nonsmoothness table into ``out_dir``."""
     from biped_opt.paper.figures import fixed_data, optimal_data
     from biped_opt.plots.figures import figure2, figure3, figure4

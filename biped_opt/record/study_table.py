@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from biped_opt.errors import InvalidInputError
+from biped_opt.input_files import InputFileError, read_text
 from biped_opt.studies.study import COLUMNS, Study, StudyRow, evaluate_point
 
 __all__ = ["run_study", "read_table", "StudySummary", "StudyTable", "spec_path",
@@ -190,8 +191,11 @@ def _resume(study: Study, path: Path) -> tuple[set[int], str]:
     if not spec.exists():
         raise InvalidInputError(f"--out: {path} exists and is not a study table (no {spec.name})")
     try:
-        saved = json.loads(spec.read_bytes().decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
+        saved = json.loads(read_text(spec, what="study file"))
+    except InputFileError as exc:  # (not UTF-8, a device, too large)
+        raise InvalidInputError(f"--out: {spec} is not valid JSON "
+                                f"({str(exc).split(': ', 1)[-1]})") from None
+    except (ValueError, RecursionError):  # (also an integer of more digits than Python reads)
         raise InvalidInputError(f"--out: {spec} is not valid JSON") from None
     if saved != json.loads(json.dumps(study.as_dict())):
         raise InvalidInputError(f"--out: {path} holds a different study; choose another file "

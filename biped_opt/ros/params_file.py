@@ -9,8 +9,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from biped_opt.errors import InvalidParameterError
 
 __all__ = ["load_parameters", "default_parameters_file"]
@@ -40,11 +38,13 @@ def _flatten(prefix: str, value: Any, out: dict[str, Any]) -> None:
 
 def load_parameters(path: str | Path, node_name: str) -> dict[str, Any]:
     """The parameters a file gives ``node_name`` (its own section over ``/**``)."""
+    from biped_opt.input_files import InputFileError, read_yaml
+
     path = Path(path)
     try:
-        data = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise InvalidParameterError(f"cannot read parameter file {path}: {exc}") from None
+        data = read_yaml(path, what="parameter file")
+    except InputFileError as exc:  # (one line naming the file, line and column)
+        raise InvalidParameterError(f"cannot read parameter file {exc}") from None
     if not isinstance(data, dict):
         raise InvalidParameterError(f"{path}: expected a mapping of node names")
     out: dict[str, Any] = {}

@@ -290,6 +290,19 @@ def kernel_config(options: SimulatorOptions, sample_dt: float = 0.0,
     return cfg
 
 
+def cached_size(system: str | Path) -> tuple[int, int] | None:
+    """(constraints, coordinates) of a library system or system file the index names, read
+    from the index alone (nothing derived, imported or run: a cached start stays one), else
+    None."""
+    entry = _start_entry(system)
+    try:
+        facts = json.loads(entry.read_text()) if entry is not None else None
+        return None if facts is None else (len(facts["constraints"]),
+                                           len(facts["coordinates"]))
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
 def cached_module(system: str | Path) -> ModuleType | None:
     """The compiled module of a library system or system file when the index names it (read
     without deriving anything), else None."""

@@ -250,6 +250,17 @@ class Study:
                                limits.max_num, "max_num"),
             name=_text(f"{where}: name", spec.get("name", "study"), limits))
 
+    @classmethod
+    def described_elsewhere(cls, **fields: Any) -> Study:
+        """The study of ``fields`` (:meth:`fields_from_spec`'s, the system and problem
+        resolved) that another process has built and checked: made here without describing
+        its system again. A node that must not run a system file's code (the study
+        coordinator) has its compile process build the study and keeps only its values."""
+        study = object.__new__(cls)
+        for item in dataclasses.fields(cls):
+            object.__setattr__(study, item.name, fields.get(item.name, item.default))
+        return study
+
     def __post_init__(self) -> None:
         from biped_opt.control.problems import describe
 

@@ -288,6 +288,42 @@ CASES: list[tuple[list[str], str]] = [
     (["report", "{mcap}", "--out", "{tmp}/" + "r" * 300], "characters): File name too long"),
     (["study", "{tmp}/none.yaml", "--out", "{tmp}/t.csv"], "{tmp}/none.yaml: no such study"),
     (["study", "{dir}", "--out", "{tmp}/t.csv"], "{dir}: no such study file"),
+    # -- issue 34: files and values that once ended in a traceback or exit 0 ---------------
+    (["study", "{latin}", "--out", "{tmp}/t.csv"], "{latin}: not UTF-8 text (byte 44"),
+    (["study", "{bigseed}", "--out", "{tmp}/t.csv"],
+     "{bigseed}: not valid YAML (ValueError: Exceeds the limit (4300 digits)"),
+    (["study", "/dev/zero", "--out", "{tmp}/t.csv"],
+     "/dev/zero: is a character device, not a regular file"),
+    (["launch", "--params-file", "{badyaml}"],
+     "cannot read parameter file {badyaml}: line 2, column 1: not valid YAML (expected ',' "
+     "or ']', but got '<stream end>')"),
+    (["launch", "--params-file", "{latin}"], "{latin}: not UTF-8 text"),
+    (["simulate", "--system", "rocking_bar", "--maneuver", "drop", "--s", "99"],
+     "--s: s = 99 is outside the valid range [-0.3, 0.3] of the drop maneuver of rocking_bar"),
+    (["simulate", "--system", "rocking_bar", "--maneuver", "drop", "--s", "0.1", "--param",
+      "m=-1"], "--param: rocking_bar: the parameters (m=-1) give a mass matrix that is not "
+               "positive definite"),
+    (["simulate", "--system", "rocking_bar", "--maneuver", "drop", "--s", "0.1", "--param",
+      "gamma=1.5"], "--param: rocking_bar: the parameters (gamma=1.5) give a restitution of "
+                    "1.5; it must be in [0, 1]"),
+    (["animate", "--system", "rocking_bar", "--maneuver", "drop", "--s", "-5", "-o",
+      "{tmp}/a.gif"], "--s: s = -5 is outside the valid range"),
+    (["optimise", "--system", "rocking_bar", "--problem", "drop", "--s", "2"],
+     "--s: s = 2 is outside the valid range"),
+    (["simulate", "--system", "walker99", "--maneuver", "touchdown", "--s", "0"],
+     "--system: walker99 has 99 constraints and 201 coordinates; the command line compiles "
+     "at most 6 and 16, as the nodes do"),
+    (["systems", "--check", "walker7"], "NAME: walker7 has 7 constraints and 17 coordinates"),
+    (["systems", "walker99"], "add --large to compile it anyway"),
+    (["animate", "--system", "walker99", "--maneuver", "touchdown", "-o", "{tmp}/a.gif"],
+     "--system: walker99 has 99 constraints"),
+    (["record", "--system", "walker99", "--maneuver", "touchdown", "--theta0-min", "-0.1",
+      "--theta0-max", "0.1", "--num", "3", "--out", "{tmp}/r.mcap"],
+     "--system: walker99 has 99 constraints"),
+    (["sweep", "--system", "quadruped", "--maneuver", "trot"],
+     "--system: quadruped has 4 constraints and 20 coordinates"),
+    (["info", "/dev/zero"], "/dev/zero: is a character device, not a regular file"),
+    (["report", "/dev/zero", "--out", "{tmp}/rep"], "/dev/zero: is a character device"),
 ]
 
 
@@ -302,13 +338,19 @@ def places(tmp_path_factory) -> dict[str, str]:
     (tmp / "full" / "x").write_text("x")
     (tmp / "study.yaml").write_text("system: rocking_bar\nmaneuver: drop\n"
                                     "grid: {gamma: [0.5]}\nnum: 61\n")
+    (tmp / "latin.yaml").write_bytes("system: rocking_bar\nmaneuver: drop\nname: caf\xe9\n"
+                                     "grid: {gamma: [0.5]}\n".encode("latin-1"))
+    (tmp / "bigseed.yaml").write_text("system: rocking_bar\nmaneuver: drop\ngrid: {gamma: "
+                                      f"[0.5]}}\nseed: {'9' * 5001}\n")
+    (tmp / "bad.yaml").write_text('{"a": [1, 2\n')
     with SweepWriter(tmp / "good.mcap", metadata={"maneuver": "touchdown"}) as w:
         w.write("/biped/contact_mode", {"header": {"stamp": {"sec": 0, "nanosec": 0},
                                                    "frame_id": "biped"}, "mode": 0}, 0)
     return {"tmp": str(tmp), "text": str(tmp / "notes.txt"), "empty": str(tmp / "empty.mcap"),
             "magic": str(tmp / "magic.mcap"), "dir": str(tmp / "dir"),
             "full": str(tmp / "full"), "mcap": str(tmp / "good.mcap"),
-            "study": str(tmp / "study.yaml")}
+            "study": str(tmp / "study.yaml"), "latin": str(tmp / "latin.yaml"),
+            "bigseed": str(tmp / "bigseed.yaml"), "badyaml": str(tmp / "bad.yaml")}
 
 
 def _fill(text: str, places: dict[str, str]) -> str:
@@ -321,8 +363,8 @@ def _listing(root: Path) -> set[Path]:
     return set(root.rglob("*"))
 
 
-def test_there_are_at_least_180_cases():
-    assert len(CASES) >= 180
+def test_there_are_at_least_200_cases():
+    assert len(CASES) >= 200
 
 
 @pytest.mark.parametrize(("argv", "fragment"), CASES,
@@ -417,3 +459,31 @@ def test_what_the_machine_refuses_is_one_line(error, fragment, monkeypatch, caps
     err = capsys.readouterr().err
     assert status == (130 if isinstance(error, KeyboardInterrupt) else 2)
     assert err == fragment + "\n", err
+
+
+def test_resuming_a_study_whose_saved_spec_holds_a_5001_digit_seed_is_one_line(places, capsys,
+                                                                              tmp_path):
+    """The study file beside a table is read back on resume: an integer of more digits than
+    Python converts there (a hand-edited or hostile file) is one line, not a traceback."""
+    table = tmp_path / "t.csv"
+    table.write_text("point\n")
+    (tmp_path / "t.csv.study.json").write_text('{"seed": ' + "9" * 5001 + "}")
+    status = main(["study", places["study"], "--out", str(table)])
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1 and "Traceback" not in err
+    assert "t.csv.study.json is not valid JSON" in err
+
+
+def test_the_recorder_node_refuses_parameters_it_cannot_record_even_without_autostart():
+    out = subprocess.run([sys.executable, "-m", "biped_opt.nodes.recorder", "--ros-args", "-p",
+                          "num:=0"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2
+    assert out.stderr.strip() == ("recorder: error: cannot record from the parameters: num "
+                                  "must be between 2 and 100000, got 0")
+
+
+def test_large_lifts_the_size_limit(capsys):
+    """--large compiles past the nodes' limits: the quadruped (20 coordinates) is described,
+    not refused (a listing of it builds nothing beyond its description)."""
+    assert main(["systems", "quadruped", "--large", "--json"]) == 0
+    assert '"name": "quadruped"' in capsys.readouterr().out

@@ -75,6 +75,79 @@ def test_launch_stops_cleanly_on_a_signal(sig):
     assert sum("]: ready: " in line for line in err.splitlines()) == 3, err
 
 
+def test_launch_gives_its_nodes_a_stated_time_after_a_signal():
+    """After the signal ``launch`` waits LAUNCH_STOP_S for its nodes, then ends (status 0) and
+    says so in one line, whatever a callback still does (here: no graph at all, only the
+    watchdog with a 0.2 s wait)."""
+    code = ("import threading, types, biped_opt.cli.node_cmd as n\n"
+            "n.LAUNCH_STOP_S = 0.2\nevent = threading.Event()\nevent.set()\n"
+            "n._end_after_stop(types.SimpleNamespace(event=event))\nprint('not reached')\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 0 and "not reached" not in out.stdout
+    assert out.stderr.strip() == ("biped-opt launch: stopped 0.2 s after the signal without "
+                                  "waiting for the callbacks still under way")
+
+
+@pytest.mark.alone  # (a 4 s bound on the exit)
+def test_launch_ends_within_3_s_of_a_signal_while_a_work_item_computes():
+    """A peer's study work item (64 points of optimal tables: minutes of compute) is under way
+    when SIGINT comes: launch ends within its stated 2.5 s (4 s with the process's own exit on
+    a loaded machine), status 0."""
+    import json
+    import threading
+
+    from biped_opt import ros
+
+    domain = unique_domain_id()
+    proc = subprocess.Popen([sys.executable, "-m", "biped_opt.cli.main", "launch"],
+                            env=_env(domain), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    context = ros.Context()
+    ros.init(args=[], context=context, domain_id=domain)
+    node = ros.Node("peer", context=context)
+    executor = ros.MultiThreadedExecutor(context=context)
+    executor.add_node(node)
+    threading.Thread(target=executor.spin, daemon=True).start()
+    try:
+        assert proc.stdout is not None
+        assert proc.stdout.readline().startswith("running simulator, optimiser, recorder")
+        names: list[str] = []
+        deadline = time.monotonic() + 30
+        while not names and time.monotonic() < deadline:
+            names = [n for n, kinds in node.get_service_names_and_types()
+                     if "biped_opt_interfaces/srv/StudyPoint" in kinds]
+            time.sleep(0.1)
+        client = node.create_client(ros.srvs.StudyPoint, names[0])
+        assert client.wait_for_service(timeout_sec=10)
+        spec = {"system": "biped", "problem": "touchdown", "num_optimal": 41,
+                "grid": {"k": [20.0 + i for i in range(64)]}}
+
+        def item(indices):
+            return client.call_async(ros.srvs.StudyPoint.Request(study=json.dumps(spec),
+                                                                 indices=indices))
+
+        while True:  # (the study's system is prepared in the background first: busy)
+            first = item([0])
+            assert first.wait(120)
+            if not first.result().message.startswith("busy"):
+                break
+            time.sleep(0.5)
+        running = item(list(range(1, 64)))
+        time.sleep(1.0)
+        assert not running.done()
+        start = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=HANG_S)
+        assert time.monotonic() - start < 4.0
+        assert proc.returncode == 0
+    finally:
+        proc.kill()
+        executor.shutdown()
+        node.destroy_node()
+        ros.try_shutdown(context=context)
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_record_stops_after_the_current_point_on_a_signal(sig, tmp_path):
     """A signal in the middle of a sweep: the point being recorded completes, the file is

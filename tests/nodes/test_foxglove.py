@@ -471,6 +471,9 @@ def _busy_port() -> socket.socket:
     ("topics:=[biped/state]", "foxglove: error: topics: 'biped/state' is not an absolute "
                               "topic name (/a/b)"),
     ("discovery_period:=0.0", "foxglove: error: discovery_period must be a number > 0, got 0.0"),
+    ("max_message_bytes:=100", "foxglove: error: max_message_bytes must be an integer >= 1024"),
+    ("client_queue_bytes:=2048", "foxglove: error: client_queue_bytes (2048) must hold at least "
+                                 "one message of max_message_bytes (65536)"),
     ("port:=BUSY", "foxglove: error: host, port: cannot listen on 127.0.0.1:BUSY: Failed to "
                    "bind port"),
 ])
@@ -498,11 +501,11 @@ def test_a_signal_stops_the_bridge_cleanly_while_it_queries_the_graph(domain_id,
                              "-p", "port:=0", "-p", "discovery_period:=0.01"], env=env,
                             stderr=subprocess.PIPE, text=True)
     assert proc.stderr is not None
-    lines = [proc.stderr.readline()]
-    assert "ready: serving ws://127.0.0.1:" in lines[0], lines
-    time.sleep(1.0)
-    proc.send_signal(signum)
-    try:
+    try:  # (the bridge is killed whatever fails: a leftover one would serve a later test)
+        lines = [proc.stderr.readline()]
+        assert "ready: serving ws://127.0.0.1:" in lines[0], lines
+        time.sleep(1.0)
+        proc.send_signal(signum)
         code = proc.wait(30)
     finally:
         proc.kill()
@@ -643,3 +646,39 @@ def test_kept_messages_go_out_again_at_most_once_a_replay_interval(domain_id, mo
             del bridge._bridged["/latched"]
     finally:
         ros.try_shutdown(context=ctx)
+
+
+def test_a_clients_queue_holds_at_most_its_budget_in_messages_of_the_largest_size():
+    assert foxglove_node.backlog(foxglove_node.CLIENT_QUEUE_BYTES,
+                                 foxglove_node.MAX_MESSAGE_BYTES) == 256
+    assert foxglove_node.backlog(1 << 20, 100_000) == 10
+    assert foxglove_node.backlog(1 << 40, 1024) == foxglove_node.BACKLOG  # (the SDK's most)
+
+
+def test_a_message_larger_than_the_limit_is_not_forwarded(domain_id, capfd):
+    ctx, bridge = _bridge_of(domain_id, topics=["/none"], max_message_bytes=2048)
+    try:
+        channel = _Recorded()
+        entry = foxglove_node._Bridged(ros_type="std_msgs/msg/String", channel=channel,
+                                       encode=bytes)
+        for size in (10, 2048, 2049, 100_000, 20):
+            bridge._forward(entry, b"x" * size, "/big")
+        assert [len(d) for d, _ in channel.logged] == [10, 2048, 20]
+        assert bridge.oversized == {"/big": 2}
+        assert capfd.readouterr().err.count("not forwarding messages of /big larger than "
+                                            "max_message_bytes = 2048") == 1
+    finally:
+        ros.try_shutdown(context=ctx)
+
+
+def test_clients_that_never_read_cost_the_bridge_at_most_their_budget(domain_id):
+    """Two raw WebSocket clients subscribe and never read while a peer publishes 400 messages
+    of 100 KB (bench/foxglove_backlog.py): with a budget of 1 MiB a client (10 messages of at
+    most 100,000 bytes) the bridge grows by a few MB, not by the 80 MB those messages are; the
+    clients stay connected (the SDK drops their oldest messages)."""
+    from bench.foxglove_backlog import measure
+
+    result = measure(domain_id, clients=2, messages=400, size=99_000,
+                     parameters=["max_message_bytes:=100000", "client_queue_bytes:=1048576"])
+    assert result["still_connected"] == 2
+    assert result["rss_after_mib"] - result["rss_before_mib"] < 30, result

@@ -261,6 +261,45 @@ def test_large_systems_do_not_hold_up_a_valid_request_and_sigint_stops_the_node(
                    for pid in compiling)
 
 
+def test_no_module_of_the_working_directory_runs_in_the_compile_process(tmp_path, domain_id):
+    """The node started (as ``biped-opt node optimiser``) from a folder holding a ``json.py``:
+    one ordinary request for the rocking bar starts a compile process, which must import the
+    real json (``python -m`` would put that folder first on its path)."""
+    folder = tmp_path / "downloads"
+    folder.mkdir()
+    marker = tmp_path / "planted_json_ran"
+    (folder / "json.py").write_text(f"open({str(marker)!r}, 'w').write('ran')\n")
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(
+        [str(Path(sys.executable).with_name("biped-opt")), "node", "optimiser", "--ros-args",
+         "-p", "warm_up:=false"], env=env, cwd=folder, stderr=subprocess.PIPE,
+        stdout=subprocess.DEVNULL, text=True)
+    lines: list[str] = []
+    ready = threading.Event()
+
+    def read() -> None:
+        assert proc.stderr is not None
+        for line in proc.stderr:
+            lines.append(line.rstrip())
+            if "ready:" in line:
+                ready.set()
+
+    threading.Thread(target=read, daemon=True).start()
+    peer = Host(lambda c: ros.Node("peer", context=c), domain_id)
+    try:
+        assert ready.wait(240), lines[-5:]
+        policy = peer.node.create_client(ros.srvs.OptimalPolicy, "/biped/optimal_policy")
+        assert policy.wait_for_service(timeout_sec=30)
+        reply = _when_compiled(policy, "rocking_bar")
+        assert any("queued a compile of system rocking_bar" in line for line in lines), lines
+        assert reply.success, reply.message
+        assert not marker.exists()
+    finally:
+        peer.close()
+        proc.send_signal(signal.SIGINT)
+        proc.wait(30)
+
+
 def _goal(node, study: dict | str, out: str):
     action = ros.ActionClient(node, ros.actions.Study, "/biped/study",
                               callback_group=ros.ReentrantCallbackGroup())
@@ -404,8 +443,13 @@ def test_a_bad_parameter_ends_the_node_with_status_2_and_one_line(domain_id, nod
 
 
 def test_a_goal_whose_system_file_exits_or_recurses_is_aborted_with_the_reason(tmp_path):
-    """The coordinator describes a goal's system itself (to count and check the study): a
-    system file of its system_paths that exits or recurses ends that goal, not the node."""
+    """The coordinator has a goal's system described in a compile process (to count and check
+    the study): a system file of its system_paths that exits or recurses ends that goal, not
+    the node, and its code never runs in the coordinator's process."""
+    marker = tmp_path / "pids"
+    (tmp_path / "records_pid.py").write_text(
+        f"import os\nopen({str(marker)!r}, 'a').write(f'{{os.getpid()}}\\n')\n"
+        "from biped_opt.systems.library import rocking_bar\nSYSTEM = rocking_bar()\n")
     (tmp_path / "exits.py").write_text("import sys\nsys.exit(3)\n")
     (tmp_path / "interrupts.py").write_text("raise KeyboardInterrupt\n")
     (tmp_path / "recurses.py").write_text("def f():\n    return f()\nf()\n")
@@ -420,6 +464,90 @@ def test_a_goal_whose_system_file_exits_or_recurses_is_aborted_with_the_reason(t
             spec = {"system": system, "maneuver": "drop", "grid": {"gamma": [0.5]}}
             result = _goal(peer.node, spec, "t.csv")
             assert not result.success and reason in result.message, result.message
+            assert str(tmp_path) not in result.message
+        spec = {"system": "records_pid", "maneuver": "drop", "grid": {"gamma": [0.5]},
+                "num": 5}
+        result = _goal(peer.node, {**spec, "grid": {"no_such": [0.5]}}, "t.csv")
+        assert not result.success and "cannot vary 'no_such'" in result.message
+        pids = marker.read_text().split()
+        assert pids and str(os.getpid()) not in pids  # described, but not here
     finally:
         peer.close()
         host.close()
+
+
+@pytest.fixture()
+def outside(tmp_path):
+    """A directory of system_paths holding links to files outside it (whose code writes a
+    marker), and a file that fails with its path in the message."""
+    folder, away = tmp_path / "systems", tmp_path / "elsewhere"
+    folder.mkdir()
+    away.mkdir()
+    marker = tmp_path / "outside_ran"
+    (away / "evil.py").write_text(
+        f"open({str(marker)!r}, 'w').write('ran')\n"
+        "from biped_opt.systems.library import rocking_bar\nSYSTEM = rocking_bar()\n")
+    (away / "prob.yaml").write_text("system: rocking_bar\nmaneuver: drop\n"
+                                    "decisions: {u_th: [-0.5, 0.5]}\n")
+    (folder / "linked.py").symlink_to(away / "evil.py")
+    (folder / "linked_problem.yaml").symlink_to(away / "prob.yaml")
+    (folder / "beside.yaml").write_text("system: ../elsewhere/evil.py\nmaneuver: drop\n")
+    (folder / "fails.py").write_text(f"raise ValueError('cannot read {folder}/data.csv')\n")
+    (folder / "inner.py").write_text(
+        "from biped_opt.systems.library import rocking_bar\nSYSTEM = rocking_bar()\n")
+    (folder / "inner_link.py").symlink_to(folder / "inner.py")  # (stays inside: served)
+    return folder, marker
+
+
+def test_links_out_of_system_paths_are_refused_and_no_reply_names_a_path(outside):
+    """A file of system_paths that resolves outside its directory is refused in a request, a
+    work item and a goal, and never runs (before: followed, its code ran 9 times in the
+    compile process and twice in the coordinator's); a link inside the directory is served.
+    No reply to the peer shows where the node's directories are."""
+    folder, marker = outside
+    domain = unique_domain_id()
+    optimiser = Host(lambda c: OptimiserNode(context=c, parameter_overrides=[
+        ros.Parameter("warm_up", value=False),
+        ros.Parameter("system_paths", value=[str(folder)])]), domain, threads=4)
+    coordinator = Host(lambda c: StudyCoordinator(context=c, parameter_overrides=[
+        ros.Parameter("output_dir", value=str(folder.parent / "tables")),
+        ros.Parameter("system_paths", value=[str(folder)])]), domain, threads=4)
+    peer = Host(lambda c: ros.Node("peer", context=c), domain)
+    try:
+        policy = peer.node.create_client(ros.srvs.OptimalPolicy, "/biped/optimal_policy")
+        assert policy.wait_for_service(timeout_sec=30)
+        messages = []
+        for system, problem in (("linked", ""), ("rocking_bar", "linked_problem")):
+            reply = _when_compiled(policy, system) if not problem else _reply(
+                policy.call_async(ros.srvs.OptimalPolicy.Request(
+                    maneuver="drop", theta0=0.1, system=system, problem=problem)))
+            assert not reply.success and "outside its directory" in reply.message, \
+                reply.message
+            messages.append(reply.message)
+        reply = _when_compiled(policy, "fails")
+        assert not reply.success and "cannot read data.csv" in reply.message, reply.message
+        messages.append(reply.message)
+        reply = _reply(policy.call_async(ros.srvs.OptimalPolicy.Request(
+            maneuver="drop", theta0=0.1, system="no_such")))
+        assert "nor no_such.py in the node's system_paths" in reply.message
+        messages.append(reply.message)
+        spec = {"system": "linked", "maneuver": "drop", "grid": {"gamma": [0.5]}, "num": 5}
+        result = _goal(peer.node, spec, "t.csv")
+        assert not result.success and "outside its directory" in result.message
+        messages.append(result.message)
+        result = _goal(peer.node, {**spec, "system": "rocking_bar", "problem": "beside"},
+                       "t.csv")
+        assert not result.success, result.message
+        messages.append(result.message)
+        result = _goal(peer.node, {**spec, "system": "rocking_bar"}, "../t.csv")
+        assert not result.success and result.message.startswith("out: "), result.message
+        messages.append(result.message)
+        reply = _when_compiled(policy, "inner_link")
+        assert reply.success, reply.message
+        assert not marker.exists()
+        for message in messages:
+            assert str(folder) not in message and str(folder.parent) not in message, message
+    finally:
+        peer.close()
+        coordinator.close()
+        optimiser.close()

@@ -181,15 +181,16 @@ def test_no_request_can_take_a_node_down(graph, probe, capfd, service, srv):
     assert "Traceback" not in err and "x" * 100 not in err
 
 
-@pytest.mark.alone  # (see the docstring)
 def test_eight_concurrent_clients_get_their_own_replies(graph, probe):
     """8 clients x 100 calls in flight together: every call is answered, once, with the answer
     to its own request. No request is ever sent twice: a reply not there within 30 s is lost.
 
-    Run alone: twice in clean-clone runs of the whole suite on two workers, and once in a
-    loaded local run, one client's first call went unanswered, with no reply dropped by the
-    service's wait for its reader (no warning logged); alone it has not failed. The cause is
-    not found; a failure now reports what the client still waits for."""
+    One client's first call once went unanswered now and then (in loaded runs): the service's
+    reply step listed its writer's matched readers through cyclonedds' binding, which raises
+    IndexError when a reader matches between its two calls (here: another client being
+    created), and the pool thread's exception went unseen. Fixed in
+    ``biped_opt.ros.dds.entities.matched_handles`` (tests/ros/test_robustness.py); the test
+    runs beside the others again."""
     angles = np.linspace(-0.2, 0.2, 9)
     expected = {}
     for th in angles:  # fill the cache, and know each angle's answer
@@ -347,3 +348,26 @@ def test_the_simulated_clock_runs_on_across_runs(graph, probe):
             assert start - ends[-1] <= 1
         ends.append(start + round(reply.t_final * NS))
     assert ends[0] < ends[1] < ends[2]
+
+
+def test_an_answer_asked_before_is_the_quick_reply(graph, probe):
+    """The optimiser gives its service the answers it has by the request's own fields: the
+    service sends them as requests arrive, never behind computations (tests/ros/
+    test_fairness.py). The quick reply is the computed one field for field; a request not
+    asked before, or asked with -0.0 for 0.0, has none."""
+    first = call(probe, ros.srvs.OptimalPolicy, "/biped/optimal_policy", maneuver="touchdown",
+                 theta0=0.0)
+    assert first.success
+    request = ros.srvs.OptimalPolicy.Request(maneuver="touchdown", theta0=0.0)
+    quick = graph.optimiser._quick_reply(request)
+    assert quick is not None
+    for field in ("success", "message", "value", "outcome", "t_final"):
+        assert getattr(quick, field) == getattr(first, field)
+    for field in ("policy", "mode_sequence", "event_times", "value_derivative", "inputs"):
+        np.testing.assert_array_equal(np.asarray(getattr(quick, field)),
+                                      np.asarray(getattr(first, field)))
+    assert graph.optimiser._quick_reply(
+        ros.srvs.OptimalPolicy.Request(maneuver="touchdown", theta0=-0.0)) is None
+    assert graph.optimiser._quick_reply(
+        ros.srvs.OptimalPolicy.Request(maneuver="touchdown", theta0=0.01)) is None
+    assert graph.optimiser._service.quick_reply == graph.optimiser._quick_reply

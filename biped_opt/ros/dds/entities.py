@@ -11,6 +11,7 @@ raised out of the executor (:mod:`.wire`).
 
 from __future__ import annotations
 
+import ctypes
 import itertools
 import threading
 import time
@@ -25,6 +26,7 @@ from cyclonedds.core import (
     SampleState,
     ViewState,
 )
+from cyclonedds.internal import dds_c_t
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 
@@ -40,8 +42,8 @@ if TYPE_CHECKING:
     from .context import Context
 
 __all__ = ["Entity", "Owner", "Publisher", "Subscription", "Timer", "endpoint_id",
-           "ignore_deleted", "type_hash_user_data", "user_data_id", "NOT_READ",
-           "LOG_THROTTLE_S"]
+           "ignore_deleted", "matched_handles", "type_hash_user_data", "user_data_id",
+           "NOT_READ", "LOG_THROTTLE_S"]
 
 #: read-condition mask of every reader: samples not yet taken, in any view or instance state
 NOT_READ = SampleState.NotRead | ViewState.Any | InstanceState.Any
@@ -62,6 +64,34 @@ def endpoint_id(participant: Any) -> str:
     data = participant.get_guid().bytes[:12] + next(_ID_COUNTER).to_bytes(4, "big")
     data += bytes(size - len(data))
     return f"{data[0]:02x}" + "".join(f".{b:x}" for b in data[1:])
+
+
+def matched_handles(endpoint: DataReader | DataWriter) -> list[int]:
+    """The instance handles of the endpoints matched with ``endpoint``: a writer's readers, a
+    reader's writers.
+
+    cyclonedds' own ``get_matched_subscriptions`` and ``get_matched_publications`` ask the C
+    library for the count, allocate that many handles and ask again; the second call returns
+    the count *now*, and when an endpoint matched in between (a client created while a service
+    looks) the binding indexes past its buffer and raises IndexError. That is what lost the
+    first reply of one of eight concurrent clients: the service's reply step raised on a pool
+    thread and nothing answered. The C call fills at most the buffer it is given and returns
+    the full count, so here it is repeated with a buffer of that count until the list fits.
+    """
+    if isinstance(endpoint, DataWriter):
+        call, what = endpoint._get_matched_subscriptions, "subscriptions"
+    else:
+        call, what = endpoint._get_matched_publications, "publications"
+    size = 8
+    while True:
+        handles = (dds_c_t.instance_handle * size)()
+        count = call(endpoint._ref, ctypes.cast(handles, ctypes.POINTER(dds_c_t.instance_handle)),
+                     size)
+        if count < 0:
+            raise DDSException(count, f"Occurred when getting the matched {what} of {endpoint!r}")
+        if count <= size:
+            return [int(h) for h in handles[:count]]
+        size = count + 8  # (more matched meanwhile: room for a few more)
 
 
 def type_hash_user_data(ros_type: str) -> bytes:
@@ -189,7 +219,7 @@ class Publisher(Entity):
 
     def get_subscription_count(self) -> int:
         writer = self._writer
-        return len(writer.get_matched_subscriptions()) if writer else 0
+        return len(matched_handles(writer)) if writer else 0
 
     def _guids(self) -> tuple[list[bytes], list[bytes]]:
         return [], ([self._writer.get_guid().bytes] if self._writer else [])

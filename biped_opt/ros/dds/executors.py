@@ -17,6 +17,7 @@ import contextlib
 import os
 import threading
 import time
+import traceback
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
@@ -26,6 +27,7 @@ from cyclonedds.core import DDSException, WaitSet
 from . import context as _ctx
 from .futures import Future
 from .lifetime import delete_dds
+from .log import Logger
 
 __all__ = ["Executor", "SingleThreadedExecutor", "MultiThreadedExecutor",
            "spin", "spin_once", "spin_until_future_complete"]
@@ -221,8 +223,23 @@ class SingleThreadedExecutor(Executor):
     """Runs every callback in the spinning thread."""
 
 
+#: logs what a callback on a pool thread raised (else the pool's future would keep it unseen)
+_LOG = Logger("executor")
+
+
+def _report(exc: BaseException) -> None:
+    """One line (at most one a second) for an exception that left a callback on a pool thread:
+    its type, message and where it was raised."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    where = f" at {frames[-1].filename}:{frames[-1].lineno}" if frames else ""
+    _LOG.error(f"a callback raised {type(exc).__name__}: {str(exc)[:200]}{where}",
+               throttle_duration_sec=1.0)
+
+
 class MultiThreadedExecutor(Executor):
-    """Runs callbacks on a thread pool; a MutuallyExclusiveCallbackGroup serialises its own."""
+    """Runs callbacks on a thread pool; a MutuallyExclusiveCallbackGroup serialises its own.
+    An exception that leaves a callback is logged (:func:`_report`) and the pool serves on:
+    rclpy re-raises it from ``spin``, which would end every other callback's service with it."""
 
     def __init__(self, num_threads: int | None = None, *, context: Any = None) -> None:
         super().__init__(context=context)
@@ -241,6 +258,8 @@ class MultiThreadedExecutor(Executor):
                 else:
                     with lock:
                         task()
+            except Exception as exc:  # (the pool's future would keep it where nobody looks)
+                _report(exc)
             finally:
                 self._wake()  # let the spinning thread see completed futures at once
         self._pool.submit(call)

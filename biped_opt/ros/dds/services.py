@@ -32,6 +32,18 @@ Where this backend does better than rmw_cyclonedds, without changing what peers 
   type has ``bool success`` and ``string message`` (as this package's services and
   ``std_srvs`` do), the server replies ``success = false`` with the reason instead of leaving the
   client waiting; either way it logs one line (rate-limited) and keeps serving.
+- **Clients are served in turn.** A service queues requests per client (a DDS participant: one
+  process, however many clients it creates) and serves the clients in turn, at most
+  :data:`MAX_QUEUED_PER_CLIENT` waiting per client (more are answered :data:`TOO_MANY`): one
+  client's flood delays another's request by at most one request of each client ahead of it,
+  not by the whole flood. A node may give a service a ``quick_reply`` (its cache) that answers
+  as requests are taken, before any queue.
+- **No reply waits on a serving thread.** rmw_cyclonedds waits (100 ms) for a new client's
+  reply reader to match before it answers, on the thread that serves. Here a reply to a client
+  whose reader has not matched yet is held by a thread of the service's own, sent when the
+  reader appears, dropped after ``reply_wait_s`` (one warning a second at most) and the client
+  remembered: its later replies get one look, so a client that never reads costs the service
+  nothing.
 - **A second server is reported.** A client that gets two replies to one request logs once that
   more than one server answers the service and counts them in ``duplicate_replies``.
 """
@@ -40,11 +52,12 @@ from __future__ import annotations
 
 import collections
 import itertools
+import os
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import replace
-from typing import Any
+from typing import Any, NamedTuple
 
 from cyclonedds.core import ReadCondition
 from cyclonedds.pub import DataWriter
@@ -61,13 +74,14 @@ from .entities import (
     Owner,
     endpoint_id,
     ignore_deleted,
+    matched_handles,
     type_hash_user_data,
     user_data_id,
 )
 from .futures import Future
 from .qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, to_dds_qos
 
-__all__ = ["Service", "Client", "MalformedMessageError"]
+__all__ = ["Service", "Client", "MalformedMessageError", "MAX_QUEUED_PER_CLIENT", "TOO_MANY"]
 
 _MASK64 = (1 << 64) - 1
 #: replies a service's writer keeps for retransmission, if not yet acknowledged (module doc)
@@ -145,8 +159,103 @@ class _RequestReply(Entity):
         return self.srv_name
 
 
+#: most requests of one client waiting in one service's queue; more are answered
+#: :data:`TOO_MANY` at once. A client is a DDS participant (one process, however many clients
+#: it creates), so a peer cannot buy more turns by making more clients.
+MAX_QUEUED_PER_CLIENT = 32
+#: the refusal of a request beyond :data:`MAX_QUEUED_PER_CLIENT`
+TOO_MANY = "busy: too many requests from this client"
+#: replies a service holds for clients whose reply reader has not appeared yet; beyond this the
+#: oldest is dropped
+MAX_HELD_REPLIES = 1024
+#: request writers (and matched reply readers) a service remembers
+_REMEMBERED = 4096
+
+
+def _matched_data(lookup: Callable[[int], Any], handle: int) -> Any:
+    """What DDS knows of a matched endpoint, or None: gone meanwhile, or the binding's
+    conversion of its QoS failed ("Callfunc cqos errored", seen now and then while endpoints
+    are created and deleted around it; the caller looks again later)."""
+    try:
+        return lookup(handle)
+    except Exception:
+        return None
+
+
+class _FairQueue:
+    """Requests waiting to be served, one queue per client, taken in turn: the client served
+    goes to the back of the line, so a client that sends many waits behind every other once
+    per request, and one that sends a few is never behind more than one request of each."""
+
+    def __init__(self, cap: int) -> None:
+        self.cap = cap
+        self._lock = threading.Lock()
+        self._queues: collections.OrderedDict[Any, collections.deque[Any]] = \
+            collections.OrderedDict()
+        self._size = 0
+
+    def __len__(self) -> int:
+        return self._size
+
+    def put(self, client: Any, item: Any) -> bool:
+        """Queue ``item`` of ``client``; False (nothing queued) when it has ``cap`` waiting."""
+        with self._lock:
+            queue = self._queues.get(client)
+            if queue is None:
+                queue = self._queues[client] = collections.deque()
+            elif len(queue) >= self.cap:
+                return False
+            queue.append(item)
+            self._size += 1
+            return True
+
+    def pop(self) -> Any:
+        """The next request in turn, or None."""
+        with self._lock:
+            if not self._queues:
+                return None
+            client, queue = next(iter(self._queues.items()))
+            item = queue.popleft()
+            self._size -= 1
+            if queue:
+                self._queues.move_to_end(client)
+            else:
+                del self._queues[client]
+            return item
+
+    def clear(self) -> None:
+        with self._lock:
+            self._queues.clear()
+            self._size = 0
+
+
+class _Requester(NamedTuple):
+    """What a service knows of the writer of a request: its client's ``clientid`` (None: a
+    writer without one, a plain DDS peer) and the participant it belongs to (the fair queue's
+    key)."""
+
+    client_id: str | None
+    participant: Any
+
+
+class _Held(NamedTuple):
+    deadline: float
+    publication: int
+    header: Any
+    response: Any
+
+
 class Service(_RequestReply):
-    """``rclpy.service.Service``: ``callback(request, response) -> response``."""
+    """``rclpy.service.Service``: ``callback(request, response) -> response``.
+
+    Requests are queued per client and served in turn (:class:`_FairQueue`), at most
+    :attr:`concurrency` at once, a client's requests beyond :data:`MAX_QUEUED_PER_CLIENT`
+    refused ``busy``. :attr:`quick_reply` (None, or ``f(request) -> response or None``) runs as
+    each request is taken, on the executor's own thread: what it answers (a cached answer)
+    never waits behind the computations in the queue. A reply to a client whose reply reader
+    the service has not matched yet waits in a thread of the service's own (:meth:`_reply`),
+    never on the thread that serves.
+    """
 
     # rmw_cyclonedds waits 100 ms for a new client's reply reader before answering and drops the
     # reply after that; on a loaded machine discovery can take longer, and a dropped reply leaves
@@ -160,15 +269,45 @@ class Service(_RequestReply):
         self.callback, self.callback_group, self.qos_profile = callback, group, qos
         self._endpoints(node, qos, "serviceid")
         self.service_id = self.endpoint_id
-        self._client_ids: dict[int, str | None] = {}
-        self._ready_clients: set[str] = set()
         fields = getattr(srv_type.Response, "__annotations__", {})
         self._can_refuse = "success" in fields and "message" in fields
         self.malformed_requests = 0
+        #: requests answered busy because their client had too many waiting
+        self.refused_busy = 0
+        #: replies dropped because the client's reply reader never appeared
+        self.dropped_replies = 0
+        self.quick_reply: Callable[[Any], Any] | None = None
+        #: requests served at once: one in a mutually exclusive group, else one per core
+        self.concurrency = 1 if getattr(group, "lock", None) is not None else \
+            max(1, os.cpu_count() or 1)
+        self._queue = _FairQueue(MAX_QUEUED_PER_CLIENT)
+        self._in_flight = 0
+        self._slots = threading.Lock()
+        self._requesters: collections.OrderedDict[int, _Requester] = collections.OrderedDict()
+        self._known_readers: dict[int, str | None] = {}  # reply reader handle -> clientid
+        self._matched_ids: frozenset[str] = frozenset()
+        self._absent: collections.OrderedDict[str, None] = collections.OrderedDict()
+        self._held: collections.deque[_Held] = collections.deque()
+        self._held_lock = threading.Condition(threading.Lock())
+        self._waiter: threading.Thread | None = None
+
+    # -- taking and queueing (the executor's thread) -----------------------------------------
+    def _triggered(self) -> bool:
+        return super()._triggered() or (len(self._queue) > 0
+                                        and self._in_flight < self.concurrency)
 
     def _take(self) -> list[Callable[[], None]]:
         requests, malformed = self._take_from()
-        tasks: list[Callable[[], None]] = [lambda r=r: self._handle(r) for r in requests]
+        for request in requests:
+            publication = request.sample_info.publication_handle
+            response = self._quick(request.body)
+            if response is not None:
+                self._reply(request.header, response, publication)
+                continue
+            requester = self._requester(publication)
+            client = requester.participant if requester is not None else publication
+            if not self._queue.put(client, request):
+                self._too_many(request, publication)
         for sample in malformed:
             self.malformed_requests += 1
             refuse = sample.header is not None and self._can_refuse
@@ -177,8 +316,34 @@ class Service(_RequestReply):
                 f"({sample.reason}); " + ("answered success=false" if refuse else "dropped"),
                 throttle_duration_sec=LOG_THROTTLE_S)
             if refuse:
-                tasks.append(lambda s=sample: self._refuse(s))
-        return tasks
+                self._refuse(sample)
+        with self._slots:
+            count = max(0, min(len(self._queue), self.concurrency - self._in_flight))
+            self._in_flight += count
+        return [self._serve_next] * count
+
+    def _quick(self, body: Any) -> Any:
+        """:attr:`quick_reply`'s answer to ``body``, or None (also when it fails: the request
+        then takes the queue, where a failure is answered)."""
+        quick = self.quick_reply
+        if quick is None:
+            return None
+        try:
+            response = quick(body)
+        except Exception:  # (the request goes the long way and fails there, answered)
+            return None
+        return response if isinstance(response, self.srv_type.Response) else None
+
+    def _too_many(self, request: Any, publication: int) -> None:
+        self.refused_busy += 1
+        self.node.get_logger().warning(
+            f"service {self.srv_name}: a client has {MAX_QUEUED_PER_CLIENT} requests waiting; "
+            + ("answered busy" if self._can_refuse else "request dropped"),
+            throttle_duration_sec=LOG_THROTTLE_S)
+        if self._can_refuse:
+            response = self.srv_type.Response(
+                success=False, message=f"{TOO_MANY} ({MAX_QUEUED_PER_CLIENT} waiting); retry")
+            self._reply(request.header, response, publication)
 
     def _refuse(self, sample: wire.Malformed) -> None:
         """Answer a request that did not decode: ``success = false`` and the reason."""
@@ -188,6 +353,20 @@ class Service(_RequestReply):
         header = RequestHeader(guid=sample.header[0], seq=sample.header[1])
         self._reply(header, response, sample.publication_handle)
 
+    # -- serving (a pool thread) -------------------------------------------------------------
+    def _serve_next(self) -> None:
+        try:
+            request = self._queue.pop()
+            if request is not None:
+                try:
+                    self._handle(request)
+                except Exception as exc:  # a bug in the callback: one failed request
+                    self._failed(request, exc)
+        finally:
+            with self._slots:
+                self._in_flight -= 1
+            self.node.context.wake()  # (the executor takes the next one in turn)
+
     def _handle(self, request: Any) -> None:
         response = self.callback(request.body, self.srv_type.Response())
         if not isinstance(response, self.srv_type.Response):
@@ -196,52 +375,137 @@ class Service(_RequestReply):
                             f"{self.srv_type.Response.__name__}")
         self._reply(request.header, response, request.sample_info.publication_handle)
 
+    def _failed(self, request: Any, exc: Exception) -> None:
+        self.node.get_logger().error(
+            f"service {self.srv_name}: the callback raised {type(exc).__name__}: "
+            f"{str(exc)[:200]}", throttle_duration_sec=LOG_THROTTLE_S)
+        if self._can_refuse:
+            response = self.srv_type.Response(
+                success=False, message=f"internal error: {type(exc).__name__}")
+            self._reply(request.header, response, request.sample_info.publication_handle)
+
+    # -- replying ----------------------------------------------------------------------------
+    def _requester(self, publication: int) -> _Requester | None:
+        """Who wrote requests from ``publication`` (remembered); None when the request reader
+        cannot tell now (the writer is gone, or the binding failed to convert its data)."""
+        known = self._requesters.get(publication)
+        if known is not None:
+            return known
+        with self._lock:
+            reader = self._reader
+            data = (_matched_data(reader.get_matched_publication_data, publication)
+                    if reader else None)
+        if data is None:
+            return None
+        found = _Requester(user_data_id(data.qos, "clientid"),
+                           getattr(data, "participant_key", None) or publication)
+        self._requesters[publication] = found
+        while len(self._requesters) > _REMEMBERED:
+            self._requesters.popitem(last=False)
+        return found
+
     def _reply(self, header: Any, response: Any, publication: int) -> None:
-        status = self._client_present(publication)
-        if status == "gone":
-            return  # the client disappeared (or this service was destroyed): nobody to answer
-        if status == "maybe":
-            self.node.get_logger().warning(
-                f"service {self.srv_name}: the client's reply reader did not appear "
-                f"within {self.reply_wait_s * 1e3:.0f} ms; reply dropped")
+        """Send ``response`` now if the client's reply reader is matched (or the client has no
+        ``clientid``: a plain DDS peer, as rmw assumes), else hold it for the reply waiter: up
+        to ``reply_wait_s`` for a new client, one look for a client whose reader never appeared
+        before. Never waits on the calling thread."""
+        requester = self._requester(publication)
+        if requester is not None and (requester.client_id is None
+                                      or requester.client_id in self._matched_ids):
+            self._write(header, response)
             return
+        absent = requester is not None and requester.client_id in self._absent
+        held = _Held(time.monotonic() + (0.0 if absent else self.reply_wait_s), publication,
+                     header, response)
+        with self._held_lock:
+            if self._destroyed:
+                return
+            if len(self._held) >= MAX_HELD_REPLIES:
+                self._held.popleft()
+                self._drop("more replies waiting for their clients than the service holds")
+            self._held.append(held)
+            if self._waiter is None:
+                self._waiter = threading.Thread(target=self._wait_for_readers, daemon=True,
+                                                name=f"replies {self.srv_name}")
+                self._waiter.start()
+            self._held_lock.notify()
+
+    def _write(self, header: Any, response: Any) -> None:
         writer = self._writer
         if writer is not None:  # a service destroyed meanwhile answers nobody
             ignore_deleted(
                 lambda: writer.write(self.srv_type.ResponseWire(header=header, body=response)),
                 self)
 
-    def _client_present(self, publication: int) -> str:
-        """``yes``/``gone``/``maybe`` (timed out) for the client that wrote a request.
+    def _drop(self, why: str) -> None:
+        self.dropped_replies += 1
+        self.node.get_logger().warning(f"service {self.srv_name}: reply dropped: {why}",
+                                       throttle_duration_sec=LOG_THROTTLE_S)
 
-        As rmw_cyclonedds: a request writer without ``clientid`` is assumed fine; otherwise
-        wait up to ``reply_wait_s`` until the reply writer has matched the reader with that id.
-        """
-        deadline = time.monotonic() + self.reply_wait_s
-        if publication not in self._client_ids:
-            with self._lock:
-                reader = self._reader
-                data = reader.get_matched_publication_data(publication) if reader else None
-            if data is None:
-                return "gone"
-            self._client_ids[publication] = user_data_id(data.qos, "clientid")
-        client_id = self._client_ids[publication]
-        if client_id is None or client_id in self._ready_clients:
-            return "yes"
+    def _refresh_matched(self) -> None:
+        """The clientids of the reply readers the writer has matched now."""
+        with self._lock:
+            writer = self._writer
+            if writer is None:
+                return
+            try:
+                handles = matched_handles(writer)
+            except Exception:  # (destroyed meanwhile)
+                return
+            for handle in handles:
+                if handle not in self._known_readers:
+                    data = _matched_data(writer.get_matched_subscription_data, handle)
+                    if data is not None:  # (else: look again at the next refresh)
+                        self._known_readers[handle] = user_data_id(data.qos, "clientid")
+        current = set(handles)
+        for handle in [h for h in self._known_readers if h not in current]:
+            del self._known_readers[handle]
+        self._matched_ids = frozenset(i for i in self._known_readers.values() if i is not None)
+
+    def _wait_for_readers(self) -> None:
+        """The reply waiter: every few milliseconds while replies are held, send those whose
+        reader has appeared and drop those past their deadline (the client remembered, so that
+        its next replies cost one look)."""
         while True:
-            with self._lock:
-                writer = self._writer
-                if writer is None:
-                    return "gone"
-                matched = [writer.get_matched_subscription_data(h)
-                           for h in writer.get_matched_subscriptions()]
-            if any(d is not None and user_data_id(d.qos, "clientid") == client_id
-                   for d in matched):
-                self._ready_clients.add(client_id)
-                return "yes"
-            if time.monotonic() >= deadline:
-                return "maybe"
-            time.sleep(0.002)
+            with self._held_lock:
+                while not self._held and not self._destroyed:
+                    self._held_lock.wait()
+                if self._destroyed:
+                    self._held.clear()
+                    self._waiter = None
+                    return
+                held, self._held = self._held, collections.deque()
+            self._refresh_matched()
+            now, keep = time.monotonic(), []
+            for item in held:
+                requester = self._requester(item.publication)
+                if requester is not None and (requester.client_id is None
+                                              or requester.client_id in self._matched_ids):
+                    self._write(item.header, item.response)
+                    if requester.client_id is not None:
+                        self._absent.pop(requester.client_id, None)
+                elif now >= item.deadline:
+                    if requester is None:
+                        continue  # the client is gone: nobody to answer
+                    if requester.client_id is not None:
+                        self._absent[requester.client_id] = None
+                        while len(self._absent) > _REMEMBERED:
+                            self._absent.popitem(last=False)
+                    self._drop(f"the client's reply reader did not appear within "
+                               f"{self.reply_wait_s * 1e3:.0f} ms")
+                else:
+                    keep.append(item)
+            if keep:
+                with self._held_lock:
+                    self._held.extendleft(reversed(keep))
+                time.sleep(0.002)
+
+    def destroy(self) -> None:
+        super().destroy()
+        self._queue.clear()
+        with self._held_lock:
+            self._held.clear()
+            self._held_lock.notify_all()
 
 
 class Client(_RequestReply):
@@ -269,10 +533,10 @@ class Client(_RequestReply):
         with self._lock:
             if self._writer is None or self._reader is None:
                 return False
-            readers = [self._writer.get_matched_subscription_data(h)
-                       for h in self._writer.get_matched_subscriptions()]
-            writers = [self._reader.get_matched_publication_data(h)
-                       for h in self._reader.get_matched_publications()]
+            readers = [_matched_data(self._writer.get_matched_subscription_data, h)
+                       for h in matched_handles(self._writer)]
+            writers = [_matched_data(self._reader.get_matched_publication_data, h)
+                       for h in matched_handles(self._reader)]
         needles = {user_data_id(d.qos, "serviceid") for d in readers if d is not None} - {None}
         if not needles:
             # Servers without ids (older rmw, plain DDS): matched endpoints are enough.
