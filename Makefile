@@ -6,7 +6,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint typecheck bench venv clean clean-cache lock foxglove-client
+.PHONY: demo test lint typecheck bench venv clean clean-cache lock foxglove-client docs
 
 venv: $(STAMP)
 
@@ -25,8 +25,16 @@ demo: $(STAMP)
 # alone runs while no other does, and tests sharing a module's fixture go to one worker.
 TEST_WORKERS ?= 2
 
-test: $(STAMP) lint typecheck foxglove-client
+test: $(STAMP) lint typecheck foxglove-client docs
 	$(PY) -m pytest -n $(TEST_WORKERS) --dist loadgroup
+
+# The manual (docs/, Sphinx with MyST): tutorials, how-to guides, the specifications and the API
+# reference from the docstrings, to docs/_build/html; a warning is an error. Its code examples
+# run in the test suite (tests/test_docs_examples.py).
+docs: $(STAMP)
+	rm -rf docs/reference/generated
+	$(PY) -m sphinx -W --keep-going -q -b html docs docs/_build/html
+	@echo "the manual: docs/_build/html/index.html"
 
 # The live view's test client (tests/nodes/test_foxglove.py): Foxglove's own WebSocket protocol
 # client and ROS 2 decoders under Node.js, at the versions package-lock.json pins. Without npm
@@ -66,4 +74,4 @@ lock: $(STAMP)
 		> constraints.txt.new && mv constraints.txt.new constraints.txt
 
 clean: clean-cache
-	rm -rf $(VENV) build *.egg-info .mypy_cache
+	rm -rf $(VENV) build *.egg-info .mypy_cache docs/_build docs/reference/generated

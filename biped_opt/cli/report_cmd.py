@@ -1,4 +1,5 @@
-"""``biped-opt report FILE... --out DIR``: figures and nonsmoothness table from recordings."""
+"""``biped-opt report FILE... --out DIR``: figures, a nonsmoothness table and one HTML page of
+them from recordings."""
 
 from __future__ import annotations
 
@@ -17,7 +18,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "fixed-input sweeps, Fig. 4 from optimal sweeps, and a table of nonsmooth "
                     "points estimated at the recording's grid resolution (one-sided limits and "
                     "slopes extrapolated from the recorded angles on each side). --refine also "
-                    "locates every point to 1e-10 with the core and prints both.")
+                    "locates every point to 1e-10 with the core and prints both. All of it "
+                    "also goes into one self-contained page, DIR/report.html.")
     p.add_argument("files", nargs="+", metavar="FILE", help=".mcap recordings")
     p.add_argument("--out", type=path_arg(output_directory, "--out", create=False),
                    required=True, help="output directory (made once the recordings are read)")
@@ -41,5 +43,5 @@ def func(args: argparse.Namespace) -> int:
         print(f"{s.path}: {s.kind} {s.label} sweep, {s.theta0.size} points, {state}")
     print()
     print(result.table)
-    emit_paths((*result.figures, result.table_path))
+    emit_paths((*result.figures, result.table_path, *([result.page] if result.page else [])))
     return 0

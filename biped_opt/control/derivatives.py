@@ -132,7 +132,7 @@ def saltation_matrix(
 @dataclass(frozen=True, eq=False, kw_only=True)
 class OutcomeGradient:
     """First-order sensitivities of one maneuver on one branch, with respect to the parameters
-    ``names`` = (s, *inputs) of the system.
+    ``names`` = ``(s, *inputs)`` of the system.
 
     ``gradient`` = d outcome / dp, ``state_gradient`` = d y_final / dp (2d rows), and
     ``time_gradient`` = d t_final / dp. Away from simultaneous events these are the derivatives
@@ -542,12 +542,12 @@ def outcome_gradient(
     options: SimulatorOptions = DEFAULT_OPTIONS,
     variational: VariationalOptions = DEFAULT_VARIATIONAL,
 ) -> OutcomeGradient:
-    """Gradient of ``maneuver``'s outcome, final state and final time w.r.t. (s, *inputs).
+    """Gradient of ``maneuver``'s outcome, final state and final time w.r.t. ``(s, *inputs)``.
 
     ``inputs`` as for :meth:`CompiledSystem.simulate`. Without ``direction`` no two guards may
     reach zero together (else SimulationError says so; events a little apart are fine, each
     in its order); with it (a vector over
-    (s, *inputs)) the result is the gradient of the branch the direction selects, which at a
+    ``(s, *inputs)``) the result is the gradient of the branch the direction selects, which at a
     simultaneous event is the linear piece of the Bouligand derivative for that direction.
     Raises SimulationError when the maneuver does not reach its terminal event.
     """
@@ -626,7 +626,7 @@ def directional_derivative(
     *, options: SimulatorOptions = DEFAULT_OPTIONS,
     variational: VariationalOptions = DEFAULT_VARIATIONAL,
 ) -> float:
-    """Bouligand derivative of the outcome at (s, inputs) in the direction v over (s, *inputs):
+    """Bouligand derivative of the outcome at (s, inputs) in the direction v over ``(s, *inputs)``:
     lim_{eps -> 0+} (o(p + eps v) - o_branch(p)) / eps, where o_branch(p) is the limit along v
     (it differs from o(p) where the outcome jumps)."""
     g = outcome_gradient(compiled, maneuver, s, inputs, direction=v, options=options,

@@ -104,7 +104,7 @@ class Derivatives:
 
 
 def cost_gradient(problem: Problem, g: OutcomeGradient, inputs: Array) -> Array:
-    """D c over (s, *inputs) from the branch's outcome and final-state gradients."""
+    """D c over ``(s, *inputs)`` from the branch's outcome and final-state gradients."""
     out = 2.0 * problem.outcome_weight * (g.outcome - problem.target) * g.gradient
     for col, w, r in problem.final_state_columns:
         out = out + 2.0 * w * (g.y_final[col] - r) * g.state_gradient[col]

@@ -69,10 +69,10 @@ def prepare(job: dict[str, Any]) -> Any:
     from biped_opt.analysis.nonsmooth import find_nonsmooth
     from biped_opt.control.solve import compiled_for, optimal_policy
     from biped_opt.control.theorem1 import value_slopes
-    from biped_opt.simulation.compiled import shared
+    from biped_opt.simulation.compiled import compiled_with
 
     if job["kind"] == "study":
-        compiled = shared(source)
+        compiled = compiled_with(source)
         for maneuver in compiled.maneuvers:
             compiled.simulate(maneuver, 0.0)
         if compiled.maneuvers:

@@ -1,4 +1,4 @@
-"""The paper's biped in its own words (MODEL.md Secs. 2-4), over the library's ``biped``.
+"""The paper's biped [1]_ in its own words (MODEL.md Secs. 2-4), over the library's ``biped``.
 
 The biped is a system of the library like any other (``systems/library/biped.py``: the walker
 with two legs ``left`` and ``right`` and inputs u1, u2, u12), simulated by the one compiled

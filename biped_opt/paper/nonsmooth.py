@@ -1,6 +1,10 @@
 """The biped's nonsmooth tables (MODEL.md Sec. 6) on the engine of
-:mod:`biped_opt.analysis.switches`: the paper's problems and fixed inputs, branches in its mode
-names (``AIR->LEFT->GROUND``)."""
+:mod:`biped_opt.analysis.switches`: the paper's [1]_ problems and fixed inputs, branches in its
+mode names (``AIR->LEFT->GROUND``).
+
+.. [1] B. Banjanin and S. A. Burden, "Nonsmooth optimal value and policy functions in mechanical
+   systems subject to unilateral constraints", IEEE Control Systems Letters 4(2), 2020.
+"""
 
 from __future__ import annotations
 

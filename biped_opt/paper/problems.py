@@ -3,13 +3,13 @@
 The paper ([1]_ Eqs. (14), (15); MODEL.md Secs. 5, 6) names three problems of its biped, which
 the library's ``biped`` declares like any system's (:func:`biped_opt.systems.library.walker`):
 
-==================  ===================  ==========================================
-paper               library biped        decisions, fixed inputs, target, weights
-==================  ===================  ==========================================
-``touchdown``       ``touchdown``        u1, u2 in [-0.5, 1.5]; th* = -0.1; alpha = (3e-4, 3e-3)
-``liftoff``         ``liftoff``          u12 in [-0.5, 0.5], u1 = 1.5, u2 = 3; th* = 0.01; 0.01
-``liftoff-variant`` ``liftoff_variant``  u1, u2 in [0, 3], u12 = 0; th* = -0.02; (1e-5, 2e-5)
-==================  ===================  ==========================================
+===================  ===================  ========================================================
+paper                library biped        decisions, fixed inputs, target, weights
+===================  ===================  ========================================================
+``touchdown``        ``touchdown``        u1, u2 in [-0.5, 1.5]; th* = -0.1; alpha = (3e-4, 3e-3)
+``liftoff``          ``liftoff``          u12 in [-0.5, 0.5], u1 = 1.5, u2 = 3; th* = 0.01; 0.01
+``liftoff-variant``  ``liftoff_variant``  u1, u2 in [0, 3], u12 = 0; th* = -0.02; (1e-5, 2e-5)
+===================  ===================  ========================================================
 
 An :class:`OptimalControlProblem` is one of them in the paper's words, as the command line and
 the nodes accept overrides of it: the target pitch th* (``theta_star``), the weights alpha

@@ -29,7 +29,9 @@ as its grid: the bracket width (the recorded spacing) bounds the location error,
 says so. ``refine=True`` re-locates every point to 1e-10 with the core's engine
 (:mod:`biped_opt.paper.nonsmooth`, which simulates and optimises again) and prints both.
 
-Nothing is drawn here either: the figures are :mod:`biped_opt.plots`' (Figs. 2-4 from
+Everything also goes into one self-contained HTML page, ``report.html``
+(:mod:`biped_opt.record.html_page`). Nothing is drawn here either: the figures are
+:mod:`biped_opt.plots`' (Figs. 2-4 from
 :mod:`biped_opt.paper.figures`' data, another system's sweep by
 :func:`biped_opt.plots.recorded.sweep_figure`).
 
@@ -39,6 +41,7 @@ Nothing is drawn here either: the figures are :mod:`biped_opt.plots`' (Figs. 2-4
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from collections import Counter
@@ -57,6 +60,7 @@ from biped_opt.errors import BipedOptError
 from biped_opt.paper.biped import INPUT_NAMES, ContactMode
 from biped_opt.paper.problems import OptimalControlProblem, get_problem
 from biped_opt.paper.sweeps import FixedSweep, OptimalSweep
+from biped_opt.record.html_page import write_page
 from biped_opt.record.reader import (
     RawRecording,
     decode_messages,
@@ -319,6 +323,8 @@ class Report:
     sweeps: tuple[RecordedSweep, ...]
     grid_points: dict[str, tuple[GridPoint, ...]]
     refined: tuple[NonsmoothReport, ...] = ()
+    #: the whole report as one self-contained HTML page (biped_opt.record.html_page)
+    page: Path | None = None
 
 
 def _fixed_sweep(s: RecordedSweep) -> FixedSweep:
@@ -404,8 +410,9 @@ def report(paths: Sequence[str | Path | RawRecording], out_dir: str | Path, *,
     table = "\n\n".join(blocks) + "\n"
     table_path = out / "nonsmooth_recorded.txt"
     table_path.write_text(table)
-    return Report(figures=tuple(figures), table_path=table_path, table=table,
-                  sweeps=tuple(by_key.values()), grid_points=grid, refined=tuple(refined))
+    result = Report(figures=tuple(figures), table_path=table_path, table=table,
+                    sweeps=tuple(by_key.values()), grid_points=grid, refined=tuple(refined))
+    return dataclasses.replace(result, page=write_page(result, out))
 
 
 def _system_figure(s: RecordedSweep, points: Sequence[GridPoint], path: Path) -> Path:

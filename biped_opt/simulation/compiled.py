@@ -56,7 +56,7 @@ if TYPE_CHECKING:  # (imported where needed: SymPy and the generator are the slo
 
 __all__ = ["BatchResult", "CompiledSystem", "SystemTrajectory", "Trajectory", "available_cores",
            "batch_thread_limit", "batch_threads", "cache_dir", "compile_system", "compiled_with",
-           "kernels_cached", "run_batch", "shared", "simulate", "simulate_batch", "warm_up"]
+           "kernels_cached", "run_batch", "simulate", "simulate_batch", "warm_up"]
 
 Array = npt.NDArray[np.float64]
 
@@ -730,7 +730,6 @@ def compile_system(system: System | str, **parameters: float) -> CompiledSystem:
     return CompiledSystem(system, **parameters)
 
 
-_COMPILED: dict[tuple[int, str], CompiledSystem] = {}
 #: compiled_with's systems, by system and full parameter values (oldest first)
 _WITH: dict[tuple[Any, tuple[tuple[str, float], ...]], CompiledSystem] = {}
 #: how many parameter sets compiled_with keeps (each costs a parameter vector, not a compile)
@@ -769,28 +768,13 @@ def compiled_with(system: System | str, parameters: Mapping[str, float] | None =
     return found
 
 
-def shared(system: System | str) -> CompiledSystem:
-    """One CompiledSystem per System object or name/path in this process; callers set its
-    parameters before each use (and serialise uses that may run in parallel threads)."""
-    named = isinstance(system, (str, Path))
-    key = (0, str(system)) if named else (id(system), "")
-    with _LOCK:
-        found = _COMPILED.get(key)
-    if found is None or (not named and found.system is not system):
-        found = CompiledSystem(system)
-        with _LOCK:
-            _COMPILED[key] = found
-    return found
-
-
 def simulate(system: System | str, maneuver: str, s: float, inputs: Any = None, *,
              parameters: dict[str, float] | None = None,
              options: SimulatorOptions = DEFAULT_OPTIONS,
              sample_dt: float | None = None) -> Trajectory:
-    """``maneuver`` of ``system`` (a System, a library name or a system file) at s: the
-    compiled system is made once per process and its parameters set for this call."""
-    compiled = shared(system)
-    compiled.set_parameters(**(parameters or {}))
+    """``maneuver`` of ``system`` (a System, a library name or a system file) at s, with
+    ``parameters`` (defaults for the rest): the compiled system of :func:`compiled_with`."""
+    compiled = compiled_with(system, parameters)
     return compiled.simulate(maneuver, s, inputs, options=options, sample_dt=sample_dt)
 
 
@@ -799,8 +783,7 @@ def simulate_batch(system: System | str, maneuver: str, s: npt.ArrayLike,
                    parameters: dict[str, float] | None = None,
                    options: SimulatorOptions = DEFAULT_OPTIONS) -> BatchResult:
     """:meth:`CompiledSystem.simulate_batch` of ``system`` (see :func:`simulate`)."""
-    compiled = shared(system)
-    compiled.set_parameters(**(parameters or {}))
+    compiled = compiled_with(system, parameters)
     return compiled.simulate_batch(maneuver, s, inputs, options=options)
 
 

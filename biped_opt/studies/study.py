@@ -22,7 +22,6 @@ import dataclasses
 import itertools
 import math
 import reprlib
-import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -344,24 +343,20 @@ def _size(kind: str, left: float, right: float) -> float:
     return right - left if kind != "none" else 0.0
 
 
-_LOCK = threading.Lock()
-
 
 def evaluate_point(study: Study, index: int, values: Mapping[str, float]) -> list[StudyRow]:
     """The rows of parameter point ``index`` (``values`` from :meth:`Study.points`)."""
     from biped_opt.analysis.nonsmooth import find_nonsmooth, find_nonsmooth_optimal
     from biped_opt.control.problems import describe
-    from biped_opt.simulation.compiled import shared
+    from biped_opt.simulation.compiled import compiled_with
 
     system = describe(study.system)
     model = {k: v for k, v in values.items() if k in system.defaults}
     found: list[tuple[str, Any]] = []
     if study.maneuver is not None:
-        with _LOCK:  # the process's compiled system, its parameters set per point
-            compiled = shared(study.system)
-            compiled.set_parameters(**model)
-            grid = _grid(compiled, study.maneuver, study.num, study.s_range)
-            report = find_nonsmooth(compiled, study.maneuver, dict(study.inputs), s=grid)
+        compiled = compiled_with(study.system, model)  # (one object per parameter set)
+        grid = _grid(compiled, study.maneuver, study.num, study.s_range)
+        report = find_nonsmooth(compiled, study.maneuver, dict(study.inputs), s=grid)
         found += [("fixed", p) for p in report.points] or [("fixed", None)]
     if study.problem is not None:
         from biped_opt.control.solve import compiled_for

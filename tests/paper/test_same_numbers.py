@@ -29,7 +29,7 @@ from biped_opt.control.derivatives import outcome_gradient
 from biped_opt.control.problems import Problem, get_problem
 from biped_opt.control.solve import compiled_for, optimal_policy
 from biped_opt.control.theorem1 import optimal_derivatives_with_errors
-from biped_opt.simulation.compiled import shared, simulate
+from biped_opt.simulation.compiled import compiled_with, simulate
 from tests.extrapolated import SAFETY
 
 RECORD = json.loads(Path(__file__).with_name("biped_lane.json").read_text())
@@ -111,7 +111,7 @@ def test_outcome_branch_gradients(rec: dict[str, Any]) -> None:
     (hand-written physics with differenced Jacobians against generated code), so 1e-9 (measured
     5e-12); the branch limits come from the same simulation, or the same continuation, to
     1e-10."""
-    compiled = shared("biped")
+    compiled = compiled_with("biped")
     for side, key in ((-1.0, "left"), (1.0, "right")):
         g = outcome_gradient(compiled, rec["maneuver"], rec["theta0"], tuple(rec["inputs"]),
                              direction=(side, 0.0, 0.0, 0.0))
