@@ -3,6 +3,7 @@ API reference from the package's docstrings, warnings as errors (the Makefile pa
 
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
 
@@ -37,14 +38,32 @@ html_theme = "alabaster"
 html_title = f"biped_opt {version}"
 
 
-def _plain_bars(app, what, name, obj, options, lines):  # noqa: ARG001 (Sphinx's signature)
-    """The docstrings write norms and absolute values as |x| (plain text, as read in the
-    source); reStructuredText would take |x| for a substitution. Bars are escaped, but on the
-    rows of a grid table."""
+_CITATION = re.compile(r"^(?P<indent>\s*)\.\. \[(?P<n>\d+)\] (?P<rest>.*)$")
+
+
+def _plain_text(app, what, name, obj, options, lines):  # noqa: ARG001 (Sphinx's signature)
+    """The docstrings are read as plain text in the source, and rendered as such:
+
+    - norms and absolute values are written |x|, which reStructuredText would take for a
+      substitution: the bars are escaped, but on the rows of a grid table;
+    - the paper is cited as [1]_ with its reference below, ``.. [1] ...``: kept as the plain
+      "[1]" and a paragraph, since a module's first sentence (citing the paper more than once)
+      is also shown in the API's summary tables, where no footnote [1] is defined."""
+    follows = False
     for k, line in enumerate(lines):
         if "|" in line and not line.lstrip().startswith(("|", "+")):
-            lines[k] = line.replace("|", "\\|")
+            line = line.replace("|", "\\|")
+        line = re.sub(r"\[(\d+)\]_", r"[\1]", line)
+        cited = _CITATION.match(line)
+        if cited:
+            line = f"{cited['indent']}[{cited['n']}] {cited['rest']}"
+            follows = True
+        elif follows and line.startswith("   "):
+            line = line[3:]
+        else:
+            follows = False
+        lines[k] = line
 
 
 def setup(app):
-    app.connect("autodoc-process-docstring", _plain_bars)
+    app.connect("autodoc-process-docstring", _plain_text)
