@@ -25,13 +25,15 @@ import math
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Any
 
 from biped_opt.version import __version__
 
-if TYPE_CHECKING:
-    from biped_opt.analysis.sampled import GridPoint
-    from biped_opt.record.report import RecordedSweep, Report
+#: (the report's types, biped_opt.record.report.Report and RecordedSweep, and
+#: biped_opt.analysis.sampled.GridPoint: that module imports this one, so they are not named)
+Report = Any
+RecordedSweep = Any
+GridPoint = Any
 
 __all__ = ["PAGE_NAME", "page", "write_page"]
 
