@@ -345,7 +345,7 @@ class SystemFigures:
 
 #: how the nonsmooth points are drawn, for the captions
 MARKS_CAPTION = ("Circles: one-sided limits of a jump; diamonds: kinks; squares: second-"
-                 "derivative jumps; the cause of each is written along its line.")
+                 "derivative jumps; the cause of each is written under the axes.")
 
 
 def _caption(file: str | None, text: str) -> str:
