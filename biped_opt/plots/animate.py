@@ -21,14 +21,14 @@ Sec. 6), drawn with matplotlib instead of a ROS tool, so an animation and a live
 
 Frames are taken every ``speed / fps`` of simulated time (``speed`` simulated time units per
 second of animation, ``fps`` frames per second), except around contact events
-(:func:`frame_clock`): a mode between two events that would get fewer than ``min_frames``
-frames (the biped's single stance near th0 = 0 lasts 10 ms) is slowed down until it gets
-them, and every event is held for ``hold`` frames at its instant, with a ring round each
-contact point it touches (red: an impact, grey: a liftoff). An impact that separates at once
-(the rocking bar's, restitution 0.5) leaves no mode behind: its held frames, with the point
-red and ringed, are where it shows. The title says when time runs slowed (``t = 1.0006
-(x0.022)``: 0.022 time units per second of animation) or is held (``held at right↓
-(impact)``). The configuration is interpolated between samples (it is continuous across
+(:func:`frame_clock`): a mode between two events lasting less than ``min_frames + 1`` frame
+steps (the biped's single stance near th0 = 0 lasts 10 ms) is slowed down until ``min_frames``
+frames fall inside it, and every event is held for ``hold`` frames at its instant, with a ring
+round each contact point it touches (red: an impact, grey: a liftoff). An impact that
+separates at once (the rocking bar's, restitution 0.5) leaves no mode behind: its held frames,
+with the point red and ringed, are where it shows. The title says when time runs slowed
+(``t = 1.0006 (x0.022)``: 0.022 time units per second of animation) or is held (``held at
+right↓ (impact)``). The configuration is interpolated between samples (it is continuous across
 impacts, only velocities jump), the mode and the forces are the ones holding at the frame's
 time (just after the event at a held frame). :func:`side_by_side` puts the same maneuver at
 s0 - delta and s0 + delta into two panels of one animation on one clock: on either side of a
@@ -306,10 +306,10 @@ def frame_clock(events: Sequence[Sequence[float]], ends: Sequence[float], fps: i
     ``ends[p]``: every ``speed / fps`` of simulated time (:func:`frame_times` up to the latest
     end), except that
 
-    - each mode between two contact events of a panel that would get fewer than
-      ``min_frames`` frames is slowed down so that at least ``min_frames`` frames fall
-      strictly inside it (a single stance of 10 ms, or the 5 ms between two impacts of the
-      rocking bar, which the nominal rate shows in one frame or none);
+    - each mode between two contact events of a panel that lasts less than ``min_frames +
+      1`` frame steps is slowed down so that at least ``min_frames`` frames fall strictly
+      inside it (a single stance of 10 ms, or the 5 ms between two impacts of the rocking
+      bar, which the nominal rate shows in one frame or none);
     - each event is held for ``hold`` frames at its instant, showing the state just after it.
       Events of different panels less than a thousandth of a frame apart (the two mirrored runs
       of a side-by-side pair) are held together, at the later of their times.
@@ -565,12 +565,12 @@ class Animation:
         ax.set_ylabel("z", fontsize=FONT - 1, labelpad=1, rotation=0)
         ax.axhspan(z0, 0.0, color=GROUND_COLOR[:3], zorder=0)
         ax.axhline(0.0, color="0.35", linewidth=1.0, zorder=1)
-        ax.text(x0 + 0.01 * (x1 - x0), 0.0, "ground, z = 0", fontsize=FONT - 1, color="0.3",
-                va="top", ha="left", zorder=1)
-        if d.contacts.shape[1]:
-            ax.text(x0 + 0.01 * (x1 - x0), z0 + 0.01 * (z1 - z0),
-                    f"arrows: contact force, {FORCE_SCALE:g} {p.units.length} per unit",
-                    fontsize=FONT - 1, color="0.3", va="bottom", ha="left", zorder=1)
+        # (at the foot of the ground, where nothing is drawn but force arrows' tails)
+        forces = bool(np.any(d.arrows[:, :, 0] != d.arrows[:, :, 1]))
+        ax.text(x0 + 0.01 * (x1 - x0), z0 + 0.01 * (z1 - z0), "ground, z = 0"
+                + (f"; arrows: contact force, {FORCE_SCALE:g} {p.units.length} per unit"
+                   if forces else ""), fontsize=FONT - 1, color="0.3", va="bottom",
+                ha="left", zorder=1)
         # points per unit of length, for line widths and marker sizes given in lengths
         _left, _bottom, w, _h = self._box
         per_m = self.size[0] / len(self.panels) * w / (x1 - x0) * 72 / self.dpi
