@@ -5,20 +5,35 @@ Sec. 6), drawn with matplotlib instead of a ROS tool, so an animation and a live
 
 - boxes as rectangles posed by their frame (a planar system's frames turn about y only, so the
   rectangle is the box's x-z face; a rotation out of the plane would show that face's
-  projection), spheres as circles, lines as polylines, the ground as the line z = 0;
+  projection), spheres as circles, lines as polylines, the ground as the line z = 0 (labelled);
 - the contact points, red while their constraint is active and grey while it is free, and each
-  contact force lambda_j as an arrow from its point along the constraint's normal,
-  :data:`~biped_opt.record.scene.FORCE_SCALE` m per unit of force (none while free);
+  contact force lambda_j as an arrow along the constraint's normal,
+  :data:`~biped_opt.record.scene.FORCE_SCALE` length units per unit of force (none while
+  free). The markers draw it from the contact point outwards, through the body; here it
+  pushes on the body from the ground's side and ends where it meets the shapes drawn around
+  the contact point (:data:`ARROW_GAP` short of them), so it never crosses the body;
+- axes with a scale in the system's units (:mod:`biped_opt.plots.units`: gravity units for
+  the biped, "model units" for a system that states none);
 - each panel's title: its s, the order of its contact events (``right↓ left↓``: touchdowns,
-  ``↑``: liftoffs), its outcome, and at every frame the time t and the contact mode.
+  ``↑``: liftoffs), its outcome as the maneuver declares it with its value and unit
+  (``th(t_f) = +0.0143 rad``), and at every frame the time t, how fast it runs, and the
+  contact mode.
 
-Frames are taken at a fixed rate in simulated time (``speed`` simulated seconds per second of
-animation, ``fps`` frames per second): the configuration is interpolated between samples (it
-is continuous across impacts, only velocities jump), the mode and the forces are the ones
-holding at the frame's time. :func:`side_by_side` puts the same maneuver at s0 - delta and
-s0 + delta into two panels of one animation: on either side of a simultaneous event (s0 = 0:
-the biped's touchdown and liftoff, the rocking bar's drop) the order of the contacts flips,
-and with it the outcome (SYSTEMS.md Sec. 2 and [1]_).
+Frames are taken every ``speed / fps`` of simulated time (``speed`` simulated time units per
+second of animation, ``fps`` frames per second), except around contact events
+(:func:`frame_clock`): a mode between two events lasting less than ``min_frames + 1`` frame
+steps (the biped's single stance near th0 = 0 lasts 10 ms) is slowed down until ``min_frames``
+frames fall inside it, and every event is held for ``hold`` frames at its instant, with a ring
+round each contact point it touches (red: an impact, grey: a liftoff). An impact that
+separates at once (the rocking bar's, restitution 0.5) leaves no mode behind: its held frames,
+with the point red and ringed, are where it shows. The title says when time runs slowed
+(``t = 1.0006 (x0.022)``: 0.022 time units per second of animation) or is held (``held at
+right↓ (impact)``). The configuration is interpolated between samples (it is continuous across
+impacts, only velocities jump), the mode and the forces are the ones holding at the frame's
+time (just after the event at a held frame). :func:`side_by_side` puts the same maneuver at
+s0 - delta and s0 + delta into two panels of one animation on one clock: on either side of a
+simultaneous event (s0 = 0: the biped's touchdown and liftoff, the rocking bar's drop) the
+order of the contacts flips, and with it the outcome (SYSTEMS.md Sec. 2 and [1]_).
 
 GIFs are written with matplotlib's Pillow writer, MP4 with its FFmpeg writer where ffmpeg is
 installed; the suffix chooses. The file appears complete or not at all (written under a
@@ -45,8 +60,10 @@ import numpy as np  # noqa: E402
 import numpy.typing as npt  # noqa: E402
 from matplotlib import animation  # noqa: E402
 from matplotlib.patches import Circle, FancyArrowPatch, Polygon  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from biped_opt.errors import InvalidInputError  # noqa: E402
+from biped_opt.plots.units import MODEL, Units, units_of  # noqa: E402
 from biped_opt.record.scene import (  # noqa: E402
     ACTIVE_COLOR,
     ARROW_COLOR,
@@ -59,21 +76,49 @@ from biped_opt.simulation.compiled import CompiledSystem  # noqa: E402
 from biped_opt.simulation.scene import Scene, SceneState  # noqa: E402
 from biped_opt.simulation.trajectory import Trajectory, constraint_names  # noqa: E402
 
-__all__ = ["Animation", "Drawn", "Panel", "animate", "check_output", "default_inputs",
-           "drawn", "frame_times", "panel", "rotation_matrices", "side_by_side",
-           "SUFFIXES", "contact_order"]
+__all__ = ["Animation", "Clock", "Drawn", "Panel", "animate", "check_output", "default_inputs",
+           "drawn", "frame_clock", "frame_times", "panel", "rotation_matrices", "side_by_side",
+           "SUFFIXES", "contact_order", "HOLD_FRAMES", "MIN_MODE_FRAMES"]
 
 Array = npt.NDArray[np.float64]
 
 #: output suffix -> matplotlib writer
 SUFFIXES = {".gif": "pillow", ".mp4": "ffmpeg"}
-#: a panel's size in pixels (width, height) unless given, and the resolution it is drawn at
+#: a panel's size in pixels (width, height) unless given, and the resolution it is drawn at;
+#: a larger panel is the same picture enlarged (its resolution grows with its smaller ratio
+#: to PANEL_SIZE), so its type is as legible
 PANEL_SIZE = (320, 240)
 DPI = 80
 #: the finest sampling of a run, in simulated seconds (frames are interpolated between samples)
 MAX_SAMPLE_DT = 0.005
 #: contact events named in a title before the rest is cut to "..."
 SHOWN_EVENTS = 4
+#: what a force arrow leaves free between its head and the body it pushes on
+ARROW_GAP = 0.01
+#: frames each contact event is held for, and the fewest frames a mode between two events
+#: is shown in (slowed down where the nominal rate gives it fewer), unless given
+HOLD_FRAMES = 8
+MIN_MODE_FRAMES = 8
+#: the titles' font size [pt]; a held impact's ring, in areas of a contact point's marker
+FONT = 7
+FLASH_SIZE = 6.0
+#: the ring round a contact point at a held liftoff
+LIFTOFF_COLOR = (0.25, 0.25, 0.25, 1.0)
+#: the axes' margins in a panel, in pixels: left (ticks and "z"), right, bottom (ticks and
+#: the units), top (the three lines of the title)
+MARGINS = (30, 6, 26, 40)
+
+
+def _zoom(width: int, height: int) -> float:
+    """How much larger than :data:`PANEL_SIZE` a panel of this size draws (type, lines)."""
+    return min(width / PANEL_SIZE[0], height / PANEL_SIZE[1])
+
+
+def _axes_box(width: int, height: int) -> tuple[float, float, float, float]:
+    """A panel's axes (left, bottom, width, height) as fractions of the panel."""
+    left, right, bottom, top = (m * _zoom(width, height) for m in MARGINS)
+    return (left / width, bottom / height, 1 - (left + right) / width,
+            1 - (bottom + top) / height)
 
 
 def check_output(path: Path) -> str:
@@ -180,8 +225,50 @@ def drawn(scene: Scene, state: SceneState, mode: npt.ArrayLike, lam: npt.ArrayLi
     for i, j in enumerate(scene.contacts):
         active[:, i] = (mode >> j) & 1 == 1
         force = np.where(active[:, i], lam[:, j] if j < lam.shape[1] else 0.0, 0.0)
-        arrows[:, i, 1, :] += FORCE_SCALE * force[:, None] * state.normals[:, i][:, [0, 2]]
+        normal = state.normals[:, i][:, [0, 2]]
+        unit = normal / np.maximum(np.hypot(normal[:, 0], normal[:, 1]), 1e-300)[:, None]
+        # the force pushes on the body from the ground's side: the arrow ends where it leaves
+        # the shapes around the contact point, seen from below, so it never crosses the body
+        gap = _clearance(contacts[:, i], -unit, boxes, circles, lines) + ARROW_GAP
+        end = contacts[:, i] - gap[:, None] * unit
+        arrows[:, i, 1, :] = np.where(active[:, i, None], end, contacts[:, i])
+        arrows[:, i, 0, :] = arrows[:, i, 1, :] - FORCE_SCALE * force[:, None] * normal
     return Drawn(boxes, circles, lines, contacts, active, arrows)
+
+
+def _clearance(point: Array, direction: Array, boxes: dict[str, Array],
+               circles: dict[str, tuple[Array, Array]],
+               lines: dict[str, tuple[Array, Array]]) -> Array:
+    """How far (n,) the rays from ``point`` (n, 2) along the unit ``direction`` (n, 2) run
+    inside the drawn shapes that hold their start: circles, boxes (convex: the rectangle
+    of each), and the round ends of lines; 0 where no shape holds the point."""
+    out = np.zeros(point.shape[0])
+    discs = [(c, r) for c, r in circles.values()]
+    for pts, width in lines.values():
+        discs += [(pts[:, k], width / 2) for k in range(pts.shape[1])]
+    for centre, radius in discs:
+        rel = point - centre
+        b = np.einsum("ij,ij->i", rel, direction)
+        c = np.einsum("ij,ij->i", rel, rel) - radius ** 2
+        inside = c < 0
+        exit_ = -b + np.sqrt(np.maximum(b * b - c, 0.0))
+        out = np.where(inside, np.maximum(out, exit_), out)
+    for corners in boxes.values():
+        # the corners run counter-clockwise or clockwise: take the edges' outward normals
+        # from the sign of the polygon's area
+        edge = np.roll(corners, -1, axis=1) - corners  # (n, 4, 2)
+        area = np.sum(corners[:, :, 0] * np.roll(corners, -1, axis=1)[:, :, 1]
+                      - np.roll(corners, -1, axis=1)[:, :, 0] * corners[:, :, 1], axis=1)
+        sign = np.where(area >= 0, 1.0, -1.0)[:, None]
+        outward = np.stack([edge[:, :, 1], -edge[:, :, 0]], axis=-1) * sign[..., None]
+        depth = np.einsum("ikj,ikj->ik", outward, point[:, None, :] - corners)  # <= 0 inside
+        inside = np.all(depth < 0, axis=1)
+        rate = np.einsum("ikj,ij->ik", outward, direction)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(rate > 0, -depth / rate, np.inf)
+        exit_ = np.min(t, axis=1)
+        out = np.where(inside & np.isfinite(exit_), np.maximum(out, exit_), out)
+    return out
 
 
 # -- runs and their frames ------------------------------------------------------------------
@@ -193,6 +280,94 @@ def frame_times(duration: float, fps: int, speed: float) -> Array:
     step = speed / fps
     count = int(math.ceil(duration / step * (1 - 1e-12))) + 1
     return np.arange(count, dtype=np.float64) * float(step)
+
+
+@dataclass(frozen=True)
+class Clock:
+    """The frames of an animation in simulated time: frame k shows ``times[k]``; ``pace[k]``
+    is the simulated time it stands for over the nominal ``speed / fps`` (1: the nominal rate,
+    below 1: slowed, 0: held); ``held[k]`` is the index into ``holds`` of the events it holds
+    (-1: none). ``holds[c]`` is (t, ((panel, event index), ...)): the contact events of the
+    panels held together at time t, each panel's event of that instant."""
+
+    times: Array
+    pace: Array
+    held: npt.NDArray[np.int64]
+    holds: tuple[tuple[float, tuple[tuple[int, int], ...]], ...]
+
+    @property
+    def frames(self) -> int:
+        return int(self.times.size)
+
+
+def frame_clock(events: Sequence[Sequence[float]], ends: Sequence[float], fps: int,
+                speed: float, *, hold: int = 0, min_frames: int = 0) -> Clock:
+    """The frames of panels whose contact events are at ``events[p]`` and which end at
+    ``ends[p]``: every ``speed / fps`` of simulated time (:func:`frame_times` up to the latest
+    end), except that
+
+    - each mode between two contact events of a panel that lasts less than ``min_frames +
+      1`` frame steps is slowed down so that at least ``min_frames`` frames fall strictly
+      inside it (a single stance of 10 ms, or the 5 ms between two impacts of the rocking
+      bar, which the nominal rate shows in one frame or none);
+    - each event is held for ``hold`` frames at its instant, showing the state just after it.
+      Events of different panels less than a thousandth of a frame apart (the two mirrored runs
+      of a side-by-side pair) are held together, at the later of their times.
+    """
+    step = speed / fps
+    t_end = max(ends)
+    regular = frame_times(t_end, fps, speed)
+    # the slowed stretches: (start, end, the longest step that puts min_frames inside)
+    slowed: list[tuple[float, float, float]] = []
+    if min_frames > 0:
+        for ts in events:
+            for a, b in zip(ts, ts[1:]):
+                if 0 < b - a < (min_frames + 1) * step:
+                    slowed.append((a, b, (b - a) / (min_frames + 1)))
+    times: list[float] = []
+    pace: list[float] = []
+    cuts = sorted({v for a, b, _ in slowed for v in (a, b)})
+    for a, b in zip(cuts, cuts[1:]):
+        cover = [h for lo, hi, h in slowed if lo <= a and b <= hi]
+        if not cover:
+            continue
+        n = max(1, math.ceil((b - a) / min(cover) * (1 - 1e-12)))
+        times += [a + k * (b - a) / n for k in range(n)]
+        pace += [(b - a) / n / step] * n
+    inside = np.zeros(regular.size, dtype=bool)
+    for lo, hi, _ in slowed:
+        inside |= (regular >= lo) & (regular < hi)
+    times += regular[~inside].tolist()
+    pace += [1.0] * int(np.sum(~inside))
+    held = [-1] * len(times)
+    holds: list[tuple[float, tuple[tuple[int, int], ...]]] = []
+    if hold > 0:
+        tol = 1e-3 * step
+        order = sorted((t, p, k) for p, ts in enumerate(events) for k, t in enumerate(ts))
+        groups: list[list[tuple[float, int, int]]] = []
+        for item in order:
+            group = groups[-1] if groups else None
+            if group and item[0] - group[0][0] <= tol and item[1] not in {g[1] for g in group}:
+                group.append(item)
+            else:
+                groups.append([item])
+        for c, group in enumerate(groups):
+            first, at = group[0][0], group[-1][0]
+            holds.append((at, tuple((p, k) for _t, p, k in group)))
+            # (a frame between the grouped events, or on them, would show one panel's event
+            # before the other's: the hold shows both)
+            keep = [i for i, t in enumerate(times) if held[i] >= 0 or not first <= t <= at]
+            times, pace, held = ([times[i] for i in keep], [pace[i] for i in keep],
+                                 [held[i] for i in keep])
+            times += [at] * hold
+            pace += [0.0] * hold
+            held += [c] * hold
+    # in time order; at one instant the held frames first (they show the event itself)
+    order_ = sorted(range(len(times)), key=lambda i: (times[i], held[i] < 0))
+    return Clock(times=np.array([times[i] for i in order_], dtype=np.float64),
+                 pace=np.array([pace[i] for i in order_], dtype=np.float64),
+                 held=np.array([held[i] for i in order_], dtype=np.int64),
+                 holds=tuple(holds))
 
 
 def contact_order(trajectory: Trajectory) -> str:
@@ -213,20 +388,41 @@ def contact_order(trajectory: Trajectory) -> str:
 @dataclass(frozen=True)
 class Panel:
     """One run to draw: its label, its sampled trajectory, the system's scene and parameter
-    values; :meth:`at` gives what is drawn at any times, :attr:`title` the fixed part of the
-    panel's title."""
+    values, the maneuver's outcome expression and the system's units; :meth:`at` gives what
+    is drawn at any times, :attr:`title` the fixed part of the panel's title."""
 
     label: str
     trajectory: Trajectory
     scene: Scene
     parameters: tuple[float, ...]
+    outcome: str = "outcome"
+    units: Units = MODEL
+
+    @property
+    def outcome_text(self) -> str:
+        """The outcome as the maneuver declares it, its value and unit: ``th(t_f) = +0.0143
+        rad`` (the unit where :class:`~biped_opt.plots.units.Units` knows it)."""
+        tr = self.trajectory
+        if not tr.success:
+            return f"{tr.status.name.lower()} (no outcome)"
+        unit = self.units.outcome(self.outcome)
+        return f"{self.outcome}(t_f) = {tr.outcome:+.4f}" + (f" {unit}" if unit else "")
 
     @property
     def title(self) -> str:
         tr = self.trajectory
-        end = (f"outcome {tr.outcome:+.4f}" if tr.success
-               else f"{tr.status.name.lower()} (no outcome)")
-        return f"{self.label}  s = {tr.s:+.4g}\ncontacts: {contact_order(tr)}, {end}"
+        return f"{self.label}  s = {tr.s:+.4g}\ncontacts: {contact_order(tr)}, " \
+            f"{self.outcome_text}"
+
+    def event_words(self, k: int) -> str:
+        """Contact event k of the run as a title says it: ``right↓ (impact)``,
+        ``left↑ (liftoff)``, ``left↓ right↓ (impact)`` for a simultaneous one."""
+        row = self.trajectory.event_rows[k]
+        names = self.trajectory.constraints
+        entered = constraint_names(int(row[2]), names)
+        left = constraint_names(int(row[3]), names)
+        what = " + ".join(w for w, c in (("impact", entered), ("liftoff", left)) if c)
+        return " ".join([f"{c}↓" for c in entered] + [f"{c}↑" for c in left]) + f" ({what})"
 
     def at(self, times: Array) -> tuple[Drawn, npt.NDArray[np.int64]]:
         """What is drawn at ``times`` (past the run's end: its last state) and the mode."""
@@ -267,53 +463,87 @@ def panel(compiled: CompiledSystem, maneuver: str, s: float,
     given = {**default_inputs(compiled, maneuver), **dict(inputs or {})}
     dt = min(MAX_SAMPLE_DT, speed / fps / 2)
     tr = compiled.simulate(maneuver, s, given, sample_dt=dt)
+    outcome = str(compiled.system.maneuvers[maneuver].outcome)
     return Panel(label or f"{compiled.name} {maneuver}", tr, scene,
-                 tuple(compiled.parameters.values()))
+                 tuple(compiled.parameters.values()), outcome,
+                 units_of(compiled.name, compiled.system.source))
 
 
 # -- the figure -------------------------------------------------------------------------------
 
 class Animation:
-    """Panels drawn side by side, one frame per :func:`frame_times` of the longest run (a
-    shorter run holds its last state). :meth:`draw` poses frame k, :meth:`save` writes all."""
+    """Panels drawn side by side on one :func:`frame_clock` (a shorter run holds its last
+    state): every ``speed / fps`` of simulated time, slowed where a mode lasts fewer than
+    ``min_frames`` frames, each contact event held for ``hold`` frames. :meth:`draw` poses
+    frame k, :meth:`save` writes all."""
 
     def __init__(self, panels: Sequence[Panel], *, fps: int = 30, speed: float = 1.0,
-                 size: tuple[int, int] = PANEL_SIZE) -> None:
+                 size: tuple[int, int] = PANEL_SIZE, hold: int = HOLD_FRAMES,
+                 min_frames: int = MIN_MODE_FRAMES) -> None:
         if not panels:
             raise InvalidInputError("an animation needs at least one run")
         _check_rate(fps, speed)
+        _check_frames(hold, min_frames)
         width, height = (int(v) for v in size)
         if width < 32 or height < 32 or width % 2 or height % 2:
             raise InvalidInputError(f"a panel's size must be even and at least 32 x 32 pixels, "
                                     f"got {width} x {height}")
         self.panels = tuple(panels)
         self.fps, self.speed = int(fps), float(speed)
-        self.times = frame_times(max(p.trajectory.t_final for p in panels), fps, speed)
+        self.clock = frame_clock([p.trajectory.event_times for p in self.panels],
+                                 [p.trajectory.t_final for p in self.panels], fps, speed,
+                                 hold=hold, min_frames=min_frames)
+        self.times = self.clock.times
         self._drawn = [p.at(self.times) for p in self.panels]
-        self.figure = plt.figure(figsize=(width * len(panels) / DPI, height / DPI), dpi=DPI)
+        self._flashes = [self._flash(i) for i in range(len(self.panels))]
+        self.dpi = DPI * _zoom(width, height)
+        self.figure = plt.figure(figsize=(width * len(panels) / self.dpi, height / self.dpi),
+                                 dpi=self.dpi)
         self.size = (width * len(panels), height)
-        self.axes = [self.figure.add_subplot(1, len(panels), k + 1) for k in range(len(panels))]
-        digits = max(2, int(math.ceil(-math.log10(self.speed / self.fps))) + 1)
+        self._box = _axes_box(width, height)
+        self.axes = []
+        for k in range(len(panels)):
+            left, bottom, w, h = self._box
+            self.axes.append(self.figure.add_axes(((k + left) / len(panels), bottom,
+                                                   w / len(panels), h)))
+        shortest = float(np.min(self.clock.pace[self.clock.pace > 0], initial=1.0))
+        digits = max(2, int(math.ceil(-math.log10(shortest * self.speed / self.fps))) + 1)
         self._t_format = f"t = {{:.{digits}f}}"
         limits = self._limits()
         self._artists = [self._setup(ax, p, d, limits)
                          for ax, p, (d, _m) in zip(self.axes, self.panels, self._drawn)]
-        self.figure.subplots_adjust(left=0.02, right=0.98, bottom=0.02, top=0.80,
-                                    wspace=0.06)
 
     @property
     def frames(self) -> int:
-        return int(self.times.size)
+        return self.clock.frames
+
+    def _flash(self, i: int) -> dict[int, tuple[list[int], list[int], str]]:
+        """Panel i's held events by hold: the contact points (indices into the scene's
+        contacts) that an impact entered and those a liftoff left, and the caption's words."""
+        p = self.panels[i]
+        rows = p.trajectory.event_rows
+        out = {}
+        for c, (_t, members) in enumerate(self.clock.holds):
+            mine = [k for panel_, k in members if panel_ == i]
+            if not mine:
+                continue
+            entered = [pos for k in mine for pos, j in enumerate(p.scene.contacts)
+                       if int(rows[k, 2]) >> j & 1]
+            left = [pos for k in mine for pos, j in enumerate(p.scene.contacts)
+                    if int(rows[k, 3]) >> j & 1]
+            out[c] = (entered, left, ", ".join(p.event_words(k) for k in mine))
+        return out
 
     def _limits(self) -> tuple[float, float, float, float]:
         """One view for every panel (so they compare): all that is drawn, padded, with the
-        panel's aspect ratio at one metre per metre in x and z."""
+        axes' aspect ratio at one unit of length per unit in x and z."""
         bounds = np.array([d.bounds() for d, _m in self._drawn])
         x0, x1 = bounds[:, 0].min(), bounds[:, 1].max()
         z0, z1 = bounds[:, 2].min(), bounds[:, 3].max()
         pad = 0.08 * max(x1 - x0, z1 - z0, 1e-3)
         x0, x1, z0, z1 = x0 - pad, x1 + pad, z0 - pad, z1 + pad
-        aspect = (self.size[1] * 0.78) / (self.size[0] / len(self.panels) * 0.96)
+        _left, _bottom, w, h = self._box
+        aspect = (h * self.size[1]) / (w * self.size[0] / len(self.panels))
         if (z1 - z0) < aspect * (x1 - x0):
             grow = aspect * (x1 - x0) - (z1 - z0)
             z0, z1 = z0 - grow / 2, z1 + grow / 2
@@ -328,12 +558,22 @@ class Animation:
         ax.set_xlim(x0, x1)
         ax.set_ylim(z0, z1)
         ax.set_aspect("equal", adjustable="box")
-        ax.set_xticks([])
-        ax.set_yticks([])
+        for axis in (ax.xaxis, ax.yaxis):
+            axis.set_major_locator(MaxNLocator(5))
+        ax.tick_params(labelsize=FONT - 1, length=2, pad=1)
+        ax.set_xlabel(p.units.axes_note, fontsize=FONT - 1, labelpad=1)
+        ax.set_ylabel("z", fontsize=FONT - 1, labelpad=1, rotation=0)
         ax.axhspan(z0, 0.0, color=GROUND_COLOR[:3], zorder=0)
         ax.axhline(0.0, color="0.35", linewidth=1.0, zorder=1)
-        # points per metre, for line widths and marker sizes given in metres
-        per_m = self.size[0] / len(self.panels) * 0.96 / (x1 - x0) * 72 / DPI
+        # (at the foot of the ground, where nothing is drawn but force arrows' tails)
+        forces = bool(np.any(d.arrows[:, :, 0] != d.arrows[:, :, 1]))
+        ax.text(x0 + 0.01 * (x1 - x0), z0 + 0.01 * (z1 - z0), "ground, z = 0"
+                + (f"; arrows: contact force, {FORCE_SCALE:g} {p.units.length} per unit"
+                   if forces else ""), fontsize=FONT - 1, color="0.3", va="bottom",
+                ha="left", zorder=1)
+        # points per unit of length, for line widths and marker sizes given in lengths
+        _left, _bottom, w, _h = self._box
+        per_m = self.size[0] / len(self.panels) * w / (x1 - x0) * 72 / self.dpi
         shapes = {s.name: s for s in p.scene.shapes}
         artists: dict[str, Any] = {"boxes": {}, "circles": {}, "lines": {}, "arrows": []}
         for name, corners in d.boxes.items():
@@ -348,19 +588,43 @@ class Animation:
                               solid_capstyle="round")
             artists["lines"][name] = line
         if d.contacts.shape[1]:
+            size = max(4.0, (CONTACT_DIAMETER * per_m) ** 2)
             artists["contacts"] = ax.scatter(d.contacts[0, :, 0], d.contacts[0, :, 1],
-                                             s=max(4.0, (CONTACT_DIAMETER * per_m) ** 2),
-                                             zorder=5, edgecolors="none")
+                                             s=size, zorder=5, edgecolors="none")
+            # the held frames' rings: red round an impact's point, grey round a liftoff's
+            artists["flash"] = ax.scatter(np.zeros(0), np.zeros(0), s=FLASH_SIZE * size,
+                                          facecolors="none", linewidths=1.6, zorder=7)
             for _ in range(d.contacts.shape[1]):
                 arrow = FancyArrowPatch((0, 0), (0, 0), arrowstyle="-|>", mutation_scale=8,
                                         color=ARROW_COLOR[:3], linewidth=1.5, zorder=6)
                 artists["arrows"].append(ax.add_patch(arrow))
         return artists
 
+    def caption(self, k: int, i: int) -> str:
+        """The last line of panel i's title at frame k: the time, how fast it runs (or that
+        it is held, and at which event), the contact mode."""
+        p = self.panels[i]
+        tr = p.trajectory
+        _d, mode = self._drawn[i]
+        t = float(self.times[k])
+        names = ", ".join(constraint_names(int(mode[k]), tr.constraints)) or "air"
+        clock = self._t_format.format(min(t, tr.t_final))
+        held = int(self.clock.held[k])
+        if t >= tr.t_final and held < 0:
+            pace = " (end)"
+        elif held >= 0:
+            flash = self._flashes[i].get(held)
+            pace = f" held at {flash[2]}" if flash else " (held)"
+        else:
+            rate = float(self.clock.pace[k]) * self.speed
+            pace = f" (x{rate:.2g})" if abs(rate - 1) > 1e-9 else ""
+        return f"{clock}{pace}  mode {{{names}}}"
+
     def draw(self, k: int) -> None:
         """Pose every artist at frame ``k`` and write the titles."""
-        t = float(self.times[k])
-        for ax, p, (d, mode), art in zip(self.axes, self.panels, self._drawn, self._artists):
+        held = int(self.clock.held[k])
+        for i, (ax, p, (d, _mode), art) in enumerate(zip(self.axes, self.panels, self._drawn,
+                                                          self._artists)):
             for name, patch in art["boxes"].items():
                 patch.set_xy(d.boxes[name][k])
             for name, patch in art["circles"].items():
@@ -371,21 +635,22 @@ class Animation:
                 points = d.lines[name][0][k]
                 line.set_data(points[:, 0], points[:, 1])
             if "contacts" in art:
+                entered, left, _words = self._flashes[i].get(held, ([], [], ""))
                 art["contacts"].set_offsets(d.contacts[k])
-                art["contacts"].set_facecolor([ACTIVE_COLOR if on else FREE_COLOR
-                                               for on in d.active[k]])
-                for i, arrow in enumerate(art["arrows"]):
-                    start, end = d.arrows[k, i]
-                    shown = bool(d.active[k, i]) and float(np.hypot(*(end - start))) > 1e-9
+                art["contacts"].set_facecolor([ACTIVE_COLOR if on or c in entered
+                                               else FREE_COLOR
+                                               for c, on in enumerate(d.active[k])])
+                rings = entered + left
+                art["flash"].set_offsets(d.contacts[k][rings] if rings else np.zeros((0, 2)))
+                art["flash"].set_edgecolor([ACTIVE_COLOR] * len(entered)
+                                           + [LIFTOFF_COLOR] * len(left))
+                for c, arrow in enumerate(art["arrows"]):
+                    start, end = d.arrows[k, c]
+                    shown = bool(d.active[k, c]) and float(np.hypot(*(end - start))) > 1e-9
                     arrow.set_visible(shown)
                     if shown:
                         arrow.set_positions(tuple(start), tuple(end))
-            tr = p.trajectory
-            names = ", ".join(constraint_names(int(mode[k]), tr.constraints)) or "air"
-            clock = self._t_format.format(min(t, tr.t_final))
-            ended = "  (end)" if t >= tr.t_final else ""
-            ax.set_title(f"{p.title}\n{clock}  mode {{{names}}}{ended}", fontsize=7,
-                         loc="left")
+            ax.set_title(f"{p.title}\n{self.caption(k, i)}", fontsize=FONT, loc="left")
 
     def save(self, path: Path) -> Path:
         """Write every frame to ``path`` (.gif or .mp4, see :func:`check_output`)."""
@@ -395,7 +660,7 @@ class Animation:
                        else animation.FFMpegWriter(fps=self.fps))
         partial = path.with_name(f".{path.stem}.partial{path.suffix}")
         try:
-            with writer.saving(self.figure, str(partial), DPI):
+            with writer.saving(self.figure, str(partial), self.dpi):
                 for k in range(self.frames):
                     self.draw(k)
                     writer.grab_frame()
@@ -415,9 +680,17 @@ def _check_rate(fps: int, speed: float) -> None:
         raise InvalidInputError(f"speed must be a number in (0, 100], got {speed!r}")
 
 
+def _check_frames(hold: int, min_frames: int) -> None:
+    for name, value in (("hold", hold), ("min_frames", min_frames)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
+                or not 0 <= value <= 100:
+            raise InvalidInputError(f"{name} must be an integer from 0 to 100, got {value!r}")
+
+
 def _write(panels: Sequence[Panel], out: Path, fps: int, speed: float,
-           size: tuple[int, int]) -> Animation:
-    movie = Animation(panels, fps=fps, speed=speed, size=size)
+           size: tuple[int, int], hold: int, min_frames: int) -> Animation:
+    movie = Animation(panels, fps=fps, speed=speed, size=size, hold=hold,
+                      min_frames=min_frames)
     try:
         movie.save(out)
     finally:
@@ -427,29 +700,33 @@ def _write(panels: Sequence[Panel], out: Path, fps: int, speed: float,
 
 def animate(system: CompiledSystem | str, maneuver: str, s: float, out: Path, *,
             inputs: Mapping[str, float] | None = None, fps: int = 30, speed: float = 1.0,
-            size: tuple[int, int] = PANEL_SIZE) -> Animation:
+            size: tuple[int, int] = PANEL_SIZE, hold: int = HOLD_FRAMES,
+            min_frames: int = MIN_MODE_FRAMES) -> Animation:
     """Write ``maneuver`` of ``system`` (compiled, a library name or a system file) at s to
     ``out`` (.gif, or .mp4 with ffmpeg); returns the (closed) animation: its frames, times
     and panels. Every argument is checked before anything is simulated or written."""
     out = Path(out)
     check_output(out)
     _check_rate(fps, speed)
+    _check_frames(hold, min_frames)
     _check_s("s", s)
     compiled = system if isinstance(system, CompiledSystem) else CompiledSystem(system)
     compiled.code(maneuver)
     return _write([panel(compiled, maneuver, s, inputs, fps=fps, speed=speed)], out, fps,
-                  speed, size)
+                  speed, size, hold, min_frames)
 
 
 def side_by_side(system: CompiledSystem | str, maneuver: str, out: Path, *, s0: float = 0.0,
                  delta: float = 0.02, inputs: Mapping[str, float] | None = None, fps: int = 30,
-                 speed: float = 1.0, size: tuple[int, int] = PANEL_SIZE) -> Animation:
+                 speed: float = 1.0, size: tuple[int, int] = PANEL_SIZE,
+                 hold: int = HOLD_FRAMES, min_frames: int = MIN_MODE_FRAMES) -> Animation:
     """Write ``maneuver`` at s0 - delta (left panel) and s0 + delta (right panel) into one
     animation (see the module docstring; s0 = 0 is the simultaneous event of the biped's
     touchdown and liftoff and of the rocking bar's drop)."""
     out = Path(out)
     check_output(out)
     _check_rate(fps, speed)
+    _check_frames(hold, min_frames)
     _check_s("s0", s0)
     if not (isinstance(delta, (int, float)) and math.isfinite(delta) and 0 < delta <= 1):
         raise InvalidInputError(f"delta must be a number in (0, 1], got {delta!r}")
@@ -457,7 +734,7 @@ def side_by_side(system: CompiledSystem | str, maneuver: str, out: Path, *, s0: 
     compiled.code(maneuver)
     panels = [panel(compiled, maneuver, s0 + sign * delta, inputs, fps=fps, speed=speed)
               for sign in (-1, 1)]
-    return _write(panels, out, fps, speed, size)
+    return _write(panels, out, fps, speed, size, hold, min_frames)
 
 
 def _check_s(name: str, value: float) -> None:

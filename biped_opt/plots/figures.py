@@ -29,6 +29,7 @@ from biped_opt.paper.figures import (  # noqa: E402
     NonsmoothMark,
     OptimalSweepData,
 )
+from biped_opt.plots.placement import NOTE, place_notes  # noqa: E402
 
 __all__ = [
     "FixedSweepData",
@@ -53,22 +54,24 @@ MANEUVER_TITLES = {"touchdown": "touchdown", "liftoff": "liftoff"}
 
 
 def _annotate(ax, marks: Sequence[NonsmoothMark], fmt: str = "{:+.4g}") -> None:
-    """Marker at each nonsmooth point, with its one-sided numbers in a small box."""
-    for i, m in enumerate(marks):
+    """Marker at each nonsmooth point, with its one-sided numbers in a small box that
+    :func:`~biped_opt.plots.placement.place_notes` puts where the data leaves room."""
+    for m in marks:
         ax.axvline(m.theta0, color="0.6", lw=0.6, ls=":", zorder=0)
         ax.plot([m.theta0], [m.value], "o", ms=6, mfc="none", mec="crimson", mew=1.4, zorder=5)
         what = f" {m.label}" if m.label else ""
         text = (f"{m.kind} at $\\theta_0$={m.theta0:.3g}\nleft{what} {fmt.format(m.left)}\n"
                 f"right{what} {fmt.format(m.right)}")
         ax.annotate(
-            text, xy=(m.theta0, m.value), xytext=(0.03, 0.97 - 0.3 * i),
-            textcoords="axes fraction", va="top", ha="left", fontsize=7,
+            text, xy=(m.theta0, m.value), xytext=(0.03, 0.97), textcoords="axes fraction",
+            va="top", ha="left", fontsize=7, gid=NOTE, zorder=6,
             bbox={"boxstyle": "round", "fc": "white", "ec": "crimson", "alpha": 0.9},
             arrowprops={"arrowstyle": "-", "color": "crimson", "lw": 0.6},
         )
 
 
 def _finish(fig, path: Path) -> Path:
+    place_notes(fig)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=150)
     plt.close(fig)

@@ -18,6 +18,10 @@ of its panels, in the mosaic's proportions, from a recording read with
   the same bands over the window the synced plots follow (``followingViewWidth``), since a
   sweep's hundreds of changes are only seen zoomed in.
 
+Lengths and times are labelled in the recorded system's units (:mod:`biped_opt.plots.units`):
+the biped's are gravity units (g = 1), so a length is in length units, not metres, and the log
+time, simulated time, counts the model's time units (one per second of Foxglove's clock).
+
 Message paths are Foxglove's ``/topic.field[index].field``. A topic the recording lacks leaves its
 panel with a note. ``python -m biped_opt.plots.layout_preview RECORDING OUT.png --layout
 config/foxglove_layout.json`` draws one.
@@ -40,7 +44,8 @@ from matplotlib.patches import Circle, FancyArrowPatch, Patch, Polygon
 
 from biped_opt.errors import BipedOptError
 from biped_opt.plots.figures import plt  # (its import selects the file backend)
-from biped_opt.record.reader import RawRecording, read_raw
+from biped_opt.plots.units import units_of
+from biped_opt.record.reader import RawRecording, read_raw, recorded_system
 from biped_opt.ros.interfaces import load_interfaces
 
 __all__ = ["LayoutError", "draw_layout", "message_path", "mosaic", "FIGSIZE", "DPI"]
@@ -105,12 +110,16 @@ def mosaic(node: Any, rect: Rect = (0.0, 0.0, 1.0, 1.0)) -> dict[str, Rect]:
 
 @dataclass
 class _Data:
-    """A recording's messages by topic, decoded on first use."""
+    """A recording's messages by topic, decoded on first use, and the recorded system's units
+    (a recording of the biped names no system: the biped's)."""
 
     raw: RawRecording
     typestore: Any
 
     def __post_init__(self) -> None:
+        system = recorded_system(self.raw)
+        self.units = units_of("biped") if system is None else \
+            units_of(system.get("system"), system.get("source"))
         self._by_topic: dict[str, list[Any]] = {}
         self._decoded: dict[str, list[tuple[int, Any]]] = {}
         for m in self.raw.messages:
@@ -281,10 +290,10 @@ def _draw_scene(ax: Any, data: _Data, cfg: dict[str, Any], log_time_ns: int,
     for layer in cfg.get("layers", {}).values():
         if layer.get("layerId") == "foxglove.Grid" and layer.get("visible", True):
             _draw_grid(ax, layer)
-    ax.set_xlabel("x [m] (world)")
-    ax.set_ylabel("z [m]")
-    ax.set_title(f"{ax.get_title()}\n{what} (at {(log_time_ns - data.start_ns) / NS:.3f} s)",
-                 fontsize=9)
+    ax.set_xlabel(f"x [{data.units.length}] (world; {data.units.name})")
+    ax.set_ylabel(f"z [{data.units.length}]")
+    ax.set_title(f"{ax.get_title()}\n{what} (at {(log_time_ns - data.start_ns) / NS:.3f} "
+                 f"{data.units.time} of the recording)", fontsize=9)
 
 
 def _draw_markers(ax: Any, array: Any, frames: dict[str, _Pose]) -> list[Array]:
@@ -391,7 +400,7 @@ def _draw_plot(ax: Any, data: _Data, cfg: dict[str, Any], cursor_s: float) -> No
         ax.set_xlabel(cfg["xAxisPath"]["value"])
     else:
         ax.axvline(cursor_s, color="0.3", lw=0.8, ls=":")
-        ax.set_xlabel("time since the recording's start [s]")
+        ax.set_xlabel(f"time since the recording's start [{data.units.time}]")
     width = cfg.get("followingViewWidth")
     window = (cursor_s - float(width), cursor_s) if width and not custom else None
     shown: list[Array] = []
@@ -458,10 +467,10 @@ def _draw_transitions(axes: Sequence[Any], data: _Data, cfg: dict[str, Any], cur
         a.tick_params(labelsize=7)
     if len(axes) > 1 and width:
         axes[1].set_xlim(cursor_s - width, cursor_s)
-        axes[1].set_xlabel(f"the last {width:g} s, as the synced plots show them (zoomed in)",
-                           fontsize=7)
+        axes[1].set_xlabel(f"the last {width:g} {data.units.time}, as the synced plots show "
+                           "them (zoomed in)", fontsize=7)
     else:
-        ax.set_xlabel("time since the recording's start [s]")
+        ax.set_xlabel(f"time since the recording's start [{data.units.time}]")
 
 
 # -- the picture -----------------------------------------------------------------------------------

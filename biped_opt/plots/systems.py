@@ -178,8 +178,9 @@ def _draw_curve(ax, s: Array, y: Array, breaks: Sequence[float], **style: Any) -
 def _draw_points(ax, s: Array, curves: Mapping[str, Array], points: Sequence[Any],
                  causes: bool = True) -> None:
     """A vertical line per point (style by kind), markers at the one-sided limits of a jump and
-    at the value of a kink, the cause written along the line."""
+    at the value of a kink; the causes in a note under the axes (:func:`_cause_note`)."""
     seen: set[str] = set()
+    why: list[tuple[float, str, str]] = []
     for p in points:
         x, kind = _point(p)
         base = _base_kind(kind)
@@ -201,13 +202,25 @@ def _draw_points(ax, s: Array, curves: Mapping[str, Array], points: Sequence[Any
             seen.add(base)
         cause = _get(p, "cause", default="")
         if cause and causes:
-            # a long cause (several mode sequences) is cut at the axes' edge and takes no room
-            # in the layout; the captions and tables hold it whole
-            note = ax.annotate(f"{kind}: {cause}", xy=(x, 1.0),
-                               xycoords=("data", "axes fraction"), xytext=(2, -4),
-                               textcoords="offset points", rotation=90, va="top", ha="left",
-                               fontsize=6, color="0.4", annotation_clip=False, clip_on=True)
-            note.set_in_layout(False)
+            why.append((x, kind, str(cause)))
+    if why:
+        _cause_note(ax, why)
+
+
+#: the longest line of a cause note, in characters (the captions and tables hold it whole)
+CAUSE_CHARS = 110
+
+
+def _cause_note(ax, why: Sequence[tuple[float, str, str]]) -> None:
+    """Each point's cause, one line each ("kink at 0: mode order changes: ..."), in small grey
+    type under the axes' x label: off the plotting area, so it never crosses a curve (written
+    along the point's line, as it once was, it crossed every curve there)."""
+    lines = []
+    for x, kind, cause in why:
+        line = f"{kind} at {x:.7g}: {cause}"
+        lines.append(line if len(line) <= CAUSE_CHARS else line[:CAUSE_CHARS - 3] + "...")
+    ax.annotate("\n".join(lines), xy=(0.5, 0.0), xycoords=ax.xaxis.label, xytext=(0, -3),
+                textcoords="offset points", ha="center", va="top", fontsize=7, color="0.35")
 
 
 def _panel(ax, s: Array, curves: Mapping[str, Array], points: Sequence[Any],
@@ -332,7 +345,7 @@ class SystemFigures:
 
 #: how the nonsmooth points are drawn, for the captions
 MARKS_CAPTION = ("Circles: one-sided limits of a jump; diamonds: kinks; squares: second-"
-                 "derivative jumps; the cause of each is written along its line.")
+                 "derivative jumps; the cause of each is written under the axes.")
 
 
 def _caption(file: str | None, text: str) -> str:

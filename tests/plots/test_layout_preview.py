@@ -74,6 +74,32 @@ def test_the_instant_shown_is_the_one_asked_for(recording, tmp_path):
     assert 1.5 < _red_pixels(both) / _red_pixels(one) < 2.5
 
 
+def test_axes_are_labelled_in_the_models_units(recording, tmp_path, monkeypatch):
+    """The biped is in gravity units (MODEL.md Sec. 2): the robot's axes say length units,
+    the time axes time units; no axis says metres or seconds."""
+    from matplotlib.figure import Figure
+
+    saved = []
+    savefig = Figure.savefig
+
+    def keep(fig, *args, **kwargs):
+        saved.append(fig)
+        return savefig(fig, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", keep)
+    path, _trs = recording
+    draw_layout(path, tmp_path / "preview.png", layout=LAYOUT)
+    (fig,) = saved
+    labels = [label for ax in fig.axes for label in (ax.get_xlabel(), ax.get_ylabel())]
+    assert "x [length units] (world; gravity units, g = 1)" in labels
+    assert "z [length units]" in labels
+    assert "time since the recording's start [time units]" in labels
+    assert not [label for label in labels if "[m]" in label or "[s]" in label
+                or label.endswith(" s") or " s," in label]
+    titles = [ax.get_title() for ax in fig.axes]
+    assert any("time units of the recording)" in t for t in titles)
+
+
 def test_a_recording_without_the_scene_still_draws(tmp_path):
     """A recording of states only (older files): the panels whose topics it lacks say so, the
     state plots are drawn, no red contact point."""

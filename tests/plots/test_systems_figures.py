@@ -80,6 +80,47 @@ def test_control_experiment_figure_writes_png_of_its_size(tmp_path, experiment):
     check_png(control_experiment_figure(tmp_path / "ce.png", experiment), (15.0, 5.0))
 
 
+def test_control_experiment_labels_cross_no_curve(tmp_path, experiment, monkeypatch):
+    """Every text of every panel (the causes of the points, the jump list of (c)) as drawn:
+    its box, measured with the renderer, meets no curve's path (each segment sampled at one
+    pixel) and no marker. Written along the point's line, the causes crossed the curves."""
+    import biped_opt.plots.systems as systems
+
+    kept = []
+    finish = systems._finish
+
+    def keep(fig, path):
+        kept.append(fig)
+        return finish(fig, path)
+
+    monkeypatch.setattr(systems, "_finish", keep)
+    control_experiment_figure(tmp_path / "ce.png", experiment)
+    (fig,) = kept
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    texts = 0
+    for ax in fig.axes[:3]:
+        points = []
+        for line in ax.lines:
+            if line.get_transform() != ax.transData:  # (the faint lines at the points' s)
+                continue
+            xy = ax.transData.transform(np.asarray(line.get_xydata(), dtype=float))
+            points.append(xy)
+            for a, b in zip(xy[:-1], xy[1:]):
+                n = int(np.ceil(np.hypot(*(b - a)))) + 1
+                points.append(a + np.linspace(0, 1, n)[:, None] * (b - a))
+        pts = np.vstack(points)
+        for text in ax.texts:
+            patch = text.get_bbox_patch()
+            box = (patch if patch is not None else text).get_window_extent(renderer)
+            hit = ((pts[:, 0] >= box.x0) & (pts[:, 0] <= box.x1)
+                   & (pts[:, 1] >= box.y0) & (pts[:, 1] <= box.y1))
+            assert not hit.any(), (ax.get_title(), text.get_text())
+            texts += 1
+    assert texts == 3  # (the causes of (a) and (b), the jumps of (c))
+    plt.close(fig)
+
+
 def test_bad_data_is_one_clear_error(tmp_path):
     s = np.linspace(0.0, 1.0, 5)
     with pytest.raises(InvalidInputError, match=r"series 'y' has shape \(4,\), s has \(5,\)"):
