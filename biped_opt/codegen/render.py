@@ -60,7 +60,7 @@ from biped_opt.systems.description import System, SystemDescriptionError
 
 __all__ = ["render", "source_key", "UnsupportedExpressionError"]
 #: bump when the generated code's form changes (the cache key includes it)
-FORMAT = 10
+FORMAT = 11
 
 
 class UnsupportedExpressionError(SystemDescriptionError):
@@ -101,6 +101,12 @@ class _Printer(PythonCodePrinter):
         raise UnsupportedExpressionError(
             f"{type(expr).__name__} ({expr}) has no compiled form: write the system with "
             "elementary functions (sin, exp, log, sqrt, Abs, Piecewise, ...)")
+
+    def _print_Float(self, expr: sp.Float) -> str:
+        # every digit of the double (SymPy prints 15, which need not read back as the same
+        # number: a URDF's inertia or a rotation's entries would move by ~1e-16)
+        value = float(expr)
+        return repr(value) if math.isfinite(value) else super()._print_Float(expr)
 
     def _print_Integer(self, expr: sp.Integer) -> str:
         return f"{float(expr)!r}"
@@ -419,14 +425,17 @@ class _Tree:
     velocity products and weights (Featherstone's CRBA and RNEA, in world axes about one
     point P, the root's origin, so that sums over a subtree need no transforms).
 
-    A coordinate q_k moves one body b (its owner) relative to its parent; its unit motion is
-    the twist S_k = (s_k, u_k): the angular velocity and the velocity of the point of b at P.
-    A body's spatial inertia about P is (m, h = m d, J = I_c + m (|d|^2 1 - d d^T)), d from P
-    to its centre, I_c its inertia in world axes; the momentum of twist (w, u) is
-    (J w + h x u, m u + w x h). Then M_kl = S_k . (inertia of the subtree of l's owner) S_l
-    where k's owner is l's or an ancestor of it (0 otherwise), and the bodies' generalised
-    force is -S_k . (the wrench about P of m (a_c - g) and I_c alpha + w x I_c w, summed over
-    the subtree of k's owner) with the accelerations at q'' = 0."""
+    A coordinate q_k moves the bodies b whose pose relative to their parent depends on it (its
+    owners: one for a plain joint, more for a mimic joint, whose followers turn with it); its
+    unit motion of b is the twist S_kb = (s_kb, u_kb): the angular velocity and the velocity of
+    the point of b at P that q_k' = 1 gives b relative to its parent. A body's spatial inertia
+    about P is (m, h = m d, J = I_c + m (|d|^2 1 - d d^T)), d from P to its centre, I_c its
+    inertia in world axes; the momentum of twist (w, u) is (J w + h x u, m u + w x h). Then
+    M_kl = sum over the owners a of k and b of l on one line of the tree of
+    S_ka . (inertia of the subtree of the deeper of a, b) S_lb (0 for owners on different
+    branches), and the bodies' generalised force is -sum over the owners b of k of
+    S_kb . (the wrench about P of m (a_c - g) and I_c alpha + w x I_c w, summed over the
+    subtree of b) with the accelerations at q'' = 0."""
 
     def __init__(self, derived: DerivedSystem, em: _Emitter, *, motion: bool,
                  hoist: _Hoisted | None = None) -> None:
@@ -447,9 +456,10 @@ class _Tree:
                 varying += [*b.rel_aw, *b.rel_ap]
         values = iter(em.exprs(varying, "j"))
         consts = iter(names)
-        self.owner = [-1] * d
-        self.s: dict[int, Vec] = {}
-        self.u: dict[int, Vec] = {}
+        #: the bodies each coordinate moves (in the order of the bodies), and its twists
+        self.owners: list[list[int]] = [[] for _ in range(d)]
+        self.s: dict[tuple[int, int], Vec] = {}
+        self.u: dict[tuple[int, int], Vec] = {}
         self.parent = [b.parent for b in bodies]
         inertia_of: list[tuple[str, Vec, list[Vec]]] = []  # (m, h, J) about P, per body
         wrench_of: list[tuple[Vec, Vec]] = []
@@ -486,10 +496,10 @@ class _Tree:
                 self.P = o
             to_p = zero if i == 0 else self.sub(self.P, o)
             for k in ks:
-                self.owner[k] = i
-                self.s[k] = self.matvec(axes[up], jw[k]) if up >= 0 else jw[k]
+                self.owners[k].append(i)
+                s = self.s[k, i] = self.matvec(axes[up], jw[k]) if up >= 0 else jw[k]
                 t = self.matvec(axes[up], jp[k]) if up >= 0 else jp[k]
-                self.u[k] = self.add(t, self.cross(self.s[k], to_p))
+                self.u[k, i] = self.add(t, self.cross(s, to_p))
             # the centre, and the body's inertia in world axes and about P
             arm = self.matvec(R, centre)
             lever = self.sub(self.add(o, arm), self.P)
@@ -588,38 +598,48 @@ class _Tree:
         return out
 
     def mass_matrix(self) -> list[str]:
+        """M by composite rigid bodies: for each coordinate col and each body b it moves, the
+        momentum of its twist under the subtree of b, projected on the twists of the
+        coordinates that move b or an ancestor of b (a pair moving one body once: the
+        upper triangle, mirrored; a coordinate that moves two bodies on one line meets
+        itself twice on the diagonal, as (a, b) and (b, a))."""
         d, em = self.d, self.em
-        m = [["0.0"] * d for _ in range(d)]
+        terms: dict[tuple[int, int], list[str]] = {}
         for col in range(d):
-            b = self.owner[col]
-            if b < 0:
-                continue
-            mass, h, J = self.inertia[b]
-            s, u = self.s[col], self.u[col]
-            spin = [em.assign("t", _sum([_mul(J[j][t], s[t]) for t in range(3)]))
-                    for j in range(3)]
-            L = self.add(spin, self.cross(h, u))
-            p = self.add(self.scale(mass, u), self.cross(s, h))
-            line = set(self._ancestors(b))
-            for k in range(d):
-                if self.owner[k] in line and (self.owner[k] != b or k <= col):
-                    m[k][col] = m[col][k] = em.assign("m", _sum(
-                        [*(_mul(self.s[k][j], L[j]) for j in range(3)),
-                         *(_mul(self.u[k][j], p[j]) for j in range(3))]))
+            for b in self.owners[col]:
+                mass, h, J = self.inertia[b]
+                s, u = self.s[col, b], self.u[col, b]
+                spin = [em.assign("t", _sum([_mul(J[j][t], s[t]) for t in range(3)]))
+                        for j in range(3)]
+                L = self.add(spin, self.cross(h, u))
+                p = self.add(self.scale(mass, u), self.cross(s, h))
+                line = self._ancestors(b)
+                for k in range(d):
+                    for a in self.owners[k]:
+                        if a not in line or (a == b and k > col):
+                            continue
+                        term = em.assign("m", _sum(
+                            [*(_mul(self.s[k, a][j], L[j]) for j in range(3)),
+                             *(_mul(self.u[k, a][j], p[j]) for j in range(3))]))
+                        key = (min(k, col), max(k, col))
+                        terms.setdefault(key, []).append(term)
+                        if k == col and a != b:
+                            terms[key].append(term)
+        m = [["0.0"] * d for _ in range(d)]
+        for (k, col), parts in terms.items():
+            m[k][col] = m[col][k] = parts[0] if len(parts) == 1 else em.assign("m", _sum(parts))
         return [m[i][j] for i in range(d) for j in range(d)]
 
     def forces(self) -> list[str]:
         """The bodies' generalised forces (weights and velocity products)."""
         out = []
         for k in range(self.d):
-            b = self.owner[k]
-            if b < 0:
-                out.append("0.0")
-                continue
-            n, f = self.wrench[b]
-            out.append(self.em.assign("g", _neg(_sum(
-                [*(_mul(self.s[k][j], n[j]) for j in range(3)),
-                 *(_mul(self.u[k][j], f[j]) for j in range(3))]))))
+            parts = []
+            for b in self.owners[k]:
+                n, f = self.wrench[b]
+                parts += [*(_mul(self.s[k, b][j], n[j]) for j in range(3)),
+                          *(_mul(self.u[k, b][j], f[j]) for j in range(3))]
+            out.append(self.em.assign("g", _neg(_sum(parts))) if parts else "0.0")
         return out
 
 
