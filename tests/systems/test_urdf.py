@@ -338,3 +338,15 @@ def test_the_hopper_by_hand_and_from_its_urdf_agree():
         want = by_hand.constraint_jacobian_rate(q, dq)
         np.testing.assert_allclose(imported.constraint_jacobian_rate(q, dq), want, rtol=0,
                                    atol=1e-13 * np.abs(want).max())
+
+
+def test_a_continuous_joint_is_a_revolute_one_without_limits():
+    """The hopper's hips as continuous joints: the same coordinates and dynamics, the limits
+    dropped (the efforts' bounds stay)."""
+    text = HOPPER.read_text().replace('type="revolute"', 'type="continuous"')
+    continuous = system_from_urdf(text)
+    assert continuous.robot.robot.joint("left_hip").limit.lower is None
+    assert continuous.problems["drop"]["decisions"]["left_hip_effort"] == (-4.0, 4.0)
+    a, b = derive(continuous).numeric(), derive(system_from_urdf(HOPPER)).numeric()
+    q = np.random.default_rng(4).uniform(-1, 1, 8)
+    assert np.array_equal(a.mass_matrix(q), b.mass_matrix(q))
