@@ -369,13 +369,12 @@ def _link(e: ET.Element, source: str) -> Link:
         if min(np.linalg.eigvalsh(inertial.tensor())) < -1e-12 * max(1.0, max(
                 abs(v) for v in values)):
             raise UrdfError(f"{source}: {what}: inertia is not positive semidefinite")
-    shapes = {kind: tuple(_shape(s, source, f"{what} {kind}", k)
-                          for k, s in enumerate(e.findall(kind)))
+    shapes = {kind: tuple(_shape(s, source, f"{what} {kind}") for s in e.findall(kind))
               for kind in ("visual", "collision")}
     return Link(name, inertial, shapes["visual"], shapes["collision"])
 
 
-def _shape(e: ET.Element, source: str, what: str, index: int) -> Shape:
+def _shape(e: ET.Element, source: str, what: str) -> Shape:
     geometry = e.find("geometry")
     if geometry is None or len(geometry) != 1:
         raise UrdfError(f"{source}: {what}: needs one <geometry> with one shape")
@@ -666,7 +665,8 @@ class _Importer:
                                 "joint from 'world', the floating base)")
         return locked
 
-    def _subtree_mass(self, link: str, locked: Mapping[str, float]) -> tuple[float, list[str]]:
+    def _subtree_mass(self, link: str) -> tuple[float, list[str]]:
+        """The mass of ``link`` and every link below it, and their names."""
         total, names, stack = 0.0, [], [link]
         while stack:
             current = stack.pop()
@@ -680,7 +680,7 @@ class _Importer:
         for joint in self.robot.joints:
             if joint.kind not in MOVING or joint.name in locked:
                 continue
-            mass, names = self._subtree_mass(joint.child, locked)
+            mass, names = self._subtree_mass(joint.child)
             if mass > 0:
                 continue
             if self.massless == "lock":
@@ -998,9 +998,11 @@ class _Importer:
                                "ground, the base rolled by s and pitched by s / 2, to the "
                                "base's lowest point after the first touchdown; outcome: the "
                                "roll rate there")
-        efforts = {inp: (-j.limit.effort, j.limit.effort) for jn, inp in
-                   self._inputs(coordinates).items() for j in (self.joints[jn],)
-                   if j.limit.effort}
+        efforts: dict[str, tuple[float, float]] = {}
+        for jn, c in coordinates.items():
+            effort = self.joints[jn].limit.effort
+            if effort:
+                efforts[f"{c}_effort"] = (-effort, effort)
         if efforts:
             s.problem("drop", maneuver="drop", decisions=efforts,
                       weights={k: 1e-6 for k in efforts}, target=0.0)
@@ -1038,9 +1040,6 @@ class _Importer:
         if efforts:
             s.problem("stand", maneuver="stand", decisions=efforts,
                       weights={k: 1e-6 for k in efforts}, target=float(depth))
-
-    def _inputs(self, coordinates: Mapping[str, str]) -> dict[str, str]:
-        return {j: f"{c}_effort" for j, c in coordinates.items()}
 
     # -- looks -----------------------------------------------------------------------------
     def _looks(self, s: System, world: Any, order: list[str], nodes: Mapping[str, _Node],
