@@ -49,3 +49,24 @@ def test_drops_are_the_reference_s(compiled, reference, s):
     else:
         assert len(events) >= 2 and all(len(entered) == 1 for entered, _l, _a in events)
     assert times < checks.DROP_TOL and states < checks.DROP_TOL, (times, states)
+
+
+def test_the_readme_example_runs_and_is_the_library_s_solo12(compiled, tmp_path, capsys):
+    """README "Your robot from URDF": its ten lines, as written there, build the library's
+    solo12 (the same generated module, loaded from this module's compile) and print the drop's
+    status, outcome and landings."""
+    import re
+    import runpy
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    (block,) = [b for b in re.findall(r"```python\n(.*?)```", text, re.S)
+                if b.startswith("# solo.py")]
+    assert len(block.strip().splitlines()) <= 12  # (ten lines of code and two comments)
+    path = tmp_path / "solo.py"
+    path.write_text(block)
+    runpy.run_path(str(path), run_name="__main__")
+    out = capsys.readouterr().out
+    run = compiled.simulate("drop", 0.05)
+    assert out.strip() == f"OK {run.outcome} {[(e.t, e.mask_after) for e in run.contact_events]}"
+    assert run.contact_events[0].mask_entered == 0b0010  # (FR_FOOT)
