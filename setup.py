@@ -19,7 +19,8 @@ setup(
     name=package_name,
     version="0.1.0",
     packages=find_packages(include=[package_name, f"{package_name}.*"]),
-    package_data={package_name: ["py.typed"]},
+    # (the library's robots: their URDFs, licences and sources, SYSTEMS.md Sec. 3c)
+    package_data={package_name: ["py.typed", "systems/library/robots/*/*"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{package_name}"]),
         (f"share/{package_name}", ["package.xml"]),

@@ -1,9 +1,12 @@
-"""A system file named with its arguments: ``chain.py:links=5,feet=true`` (SYSTEMS.md Sec. 4).
+"""A system file named with its arguments: ``chain.py:links=5,feet=true`` (SYSTEMS.md Sec. 4),
+or a robot's URDF with the importer's options: ``solo.urdf:contacts=FL_FOOT+FR_FOOT`` (Sec. 4a).
 
-The text after the last ``.py:`` is a comma-separated list of ``name=value``; a value is read as
-an integer, else a finite number, else ``true``/``false``, else a word (letters, digits, ``_``,
-``-``, ``.``). The file's factory ``make_system(**arguments)`` builds the system. Parsing needs
-neither SymPy nor the file, so the start index can key a cached start on it.
+The text after the last ``.py:`` (or ``.urdf:``) is a comma-separated list of ``name=value``; a
+value is read as an integer, else a finite number, else ``true``/``false``, else a word
+(letters, digits, ``_``, ``-``, ``.``, and ``+`` and ``*`` for a URDF's lists of links and
+patterns of joints). A ``.py`` file's factory ``make_system(**arguments)`` builds the system,
+a ``.urdf`` file's options go to :func:`biped_opt.systems.urdf.system_from_urdf`. Parsing
+needs neither SymPy nor the file, so the start index can key a cached start on it.
 """
 
 from __future__ import annotations
@@ -15,12 +18,12 @@ from pathlib import Path
 
 from biped_opt.errors import InvalidInputError, quoted
 
-__all__ = ["FileSpec", "parse_file_spec", "FACTORY"]
+__all__ = ["FileSpec", "parse_file_spec", "FACTORY", "SUFFIXES"]
 
 #: the function a system file defines to take arguments
 FACTORY = "make_system"
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
-_WORD = re.compile(r"^[A-Za-z0-9_.\-]+$")
+_WORD = re.compile(r"^[A-Za-z0-9_.\-+*]+$")
 _INT = re.compile(r"^[+-]?[0-9]+$")
 #: at most this many arguments, each value at most this long (a spec is typed, not generated)
 MAX_ARGUMENTS, MAX_VALUE = 32, 64
@@ -71,16 +74,21 @@ def _value(name: str, text: str, spec: str) -> Value:
     return text
 
 
+#: the files a system may come from: a Python system file, a robot's URDF
+SUFFIXES = (".py", ".urdf")
+
+
 def parse_file_spec(spec: str | Path) -> FileSpec | None:
-    """The file and arguments of ``spec`` (``x.py`` or ``x.py:a=1,b=2``), or None when it names
-    no ``.py`` file (a library system). A malformed argument list is an InvalidInputError."""
+    """The file and arguments of ``spec`` (``x.py``, ``x.py:a=1,b=2``, ``x.urdf:base=fixed``),
+    or None when it names no ``.py`` or ``.urdf`` file (a library system). A malformed argument
+    list is an InvalidInputError."""
     text = str(spec)
-    if text.endswith(".py"):
+    if text.endswith(SUFFIXES):
         return FileSpec(Path(text))
-    at = text.rfind(".py:")
+    at, suffix = max((text.rfind(f"{s}:"), s) for s in SUFFIXES)
     if at < 0:
         return None
-    path, rest = text[: at + 3], text[at + 4:]
+    path, rest = text[: at + len(suffix)], text[at + len(suffix) + 1:]
     items = rest.split(",") if rest else []
     if len(items) > MAX_ARGUMENTS:
         raise InvalidInputError(f"{quoted(text)}: more than {MAX_ARGUMENTS} arguments")

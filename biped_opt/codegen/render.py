@@ -60,7 +60,7 @@ from biped_opt.systems.description import System, SystemDescriptionError
 
 __all__ = ["render", "source_key", "UnsupportedExpressionError"]
 #: bump when the generated code's form changes (the cache key includes it)
-FORMAT = 10
+FORMAT = 11
 
 
 class UnsupportedExpressionError(SystemDescriptionError):
@@ -101,6 +101,12 @@ class _Printer(PythonCodePrinter):
         raise UnsupportedExpressionError(
             f"{type(expr).__name__} ({expr}) has no compiled form: write the system with "
             "elementary functions (sin, exp, log, sqrt, Abs, Piecewise, ...)")
+
+    def _print_Float(self, expr: sp.Float) -> str:
+        # every digit of the double (SymPy prints 15, which need not read back as the same
+        # number: a URDF's inertia or a rotation's entries would move by ~1e-16)
+        value = float(expr)
+        return repr(value) if math.isfinite(value) else super()._print_Float(expr)
 
     def _print_Integer(self, expr: sp.Integer) -> str:
         return f"{float(expr)!r}"
@@ -419,14 +425,17 @@ class _Tree:
     velocity products and weights (Featherstone's CRBA and RNEA, in world axes about one
     point P, the root's origin, so that sums over a subtree need no transforms).
 
-    A coordinate q_k moves one body b (its owner) relative to its parent; its unit motion is
-    the twist S_k = (s_k, u_k): the angular velocity and the velocity of the point of b at P.
-    A body's spatial inertia about P is (m, h = m d, J = I_c + m (|d|^2 1 - d d^T)), d from P
-    to its centre, I_c its inertia in world axes; the momentum of twist (w, u) is
-    (J w + h x u, m u + w x h). Then M_kl = S_k . (inertia of the subtree of l's owner) S_l
-    where k's owner is l's or an ancestor of it (0 otherwise), and the bodies' generalised
-    force is -S_k . (the wrench about P of m (a_c - g) and I_c alpha + w x I_c w, summed over
-    the subtree of k's owner) with the accelerations at q'' = 0."""
+    A coordinate q_k moves the bodies b whose pose relative to their parent depends on it (its
+    owners: one for a plain joint, more for a mimic joint, whose followers turn with it); its
+    unit motion of b is the twist S_kb = (s_kb, u_kb): the angular velocity and the velocity of
+    the point of b at P that q_k' = 1 gives b relative to its parent. A body's spatial inertia
+    about P is (m, h = m d, J = I_c + m (|d|^2 1 - d d^T)), d from P to its centre, I_c its
+    inertia in world axes; the momentum of twist (w, u) is (J w + h x u, m u + w x h). Then
+    M_kl = sum over the owners a of k and b of l on one line of the tree of
+    S_ka . (inertia of the subtree of the deeper of a, b) S_lb (0 for owners on different
+    branches), and the bodies' generalised force is -sum over the owners b of k of
+    S_kb . (the wrench about P of m (a_c - g) and I_c alpha + w x I_c w, summed over the
+    subtree of b) with the accelerations at q'' = 0."""
 
     def __init__(self, derived: DerivedSystem, em: _Emitter, *, motion: bool,
                  hoist: _Hoisted | None = None) -> None:
@@ -447,9 +456,10 @@ class _Tree:
                 varying += [*b.rel_aw, *b.rel_ap]
         values = iter(em.exprs(varying, "j"))
         consts = iter(names)
-        self.owner = [-1] * d
-        self.s: dict[int, Vec] = {}
-        self.u: dict[int, Vec] = {}
+        #: the bodies each coordinate moves (in the order of the bodies), and its twists
+        self.owners: list[list[int]] = [[] for _ in range(d)]
+        self.s: dict[tuple[int, int], Vec] = {}
+        self.u: dict[tuple[int, int], Vec] = {}
         self.parent = [b.parent for b in bodies]
         inertia_of: list[tuple[str, Vec, list[Vec]]] = []  # (m, h, J) about P, per body
         wrench_of: list[tuple[Vec, Vec]] = []
@@ -486,10 +496,10 @@ class _Tree:
                 self.P = o
             to_p = zero if i == 0 else self.sub(self.P, o)
             for k in ks:
-                self.owner[k] = i
-                self.s[k] = self.matvec(axes[up], jw[k]) if up >= 0 else jw[k]
+                self.owners[k].append(i)
+                s = self.s[k, i] = self.matvec(axes[up], jw[k]) if up >= 0 else jw[k]
                 t = self.matvec(axes[up], jp[k]) if up >= 0 else jp[k]
-                self.u[k] = self.add(t, self.cross(self.s[k], to_p))
+                self.u[k, i] = self.add(t, self.cross(s, to_p))
             # the centre, and the body's inertia in world axes and about P
             arm = self.matvec(R, centre)
             lever = self.sub(self.add(o, arm), self.P)
@@ -588,38 +598,48 @@ class _Tree:
         return out
 
     def mass_matrix(self) -> list[str]:
+        """M by composite rigid bodies: for each coordinate col and each body b it moves, the
+        momentum of its twist under the subtree of b, projected on the twists of the
+        coordinates that move b or an ancestor of b (a pair moving one body once: the
+        upper triangle, mirrored; a coordinate that moves two bodies on one line meets
+        itself twice on the diagonal, as (a, b) and (b, a))."""
         d, em = self.d, self.em
-        m = [["0.0"] * d for _ in range(d)]
+        terms: dict[tuple[int, int], list[str]] = {}
         for col in range(d):
-            b = self.owner[col]
-            if b < 0:
-                continue
-            mass, h, J = self.inertia[b]
-            s, u = self.s[col], self.u[col]
-            spin = [em.assign("t", _sum([_mul(J[j][t], s[t]) for t in range(3)]))
-                    for j in range(3)]
-            L = self.add(spin, self.cross(h, u))
-            p = self.add(self.scale(mass, u), self.cross(s, h))
-            line = set(self._ancestors(b))
-            for k in range(d):
-                if self.owner[k] in line and (self.owner[k] != b or k <= col):
-                    m[k][col] = m[col][k] = em.assign("m", _sum(
-                        [*(_mul(self.s[k][j], L[j]) for j in range(3)),
-                         *(_mul(self.u[k][j], p[j]) for j in range(3))]))
+            for b in self.owners[col]:
+                mass, h, J = self.inertia[b]
+                s, u = self.s[col, b], self.u[col, b]
+                spin = [em.assign("t", _sum([_mul(J[j][t], s[t]) for t in range(3)]))
+                        for j in range(3)]
+                L = self.add(spin, self.cross(h, u))
+                p = self.add(self.scale(mass, u), self.cross(s, h))
+                line = self._ancestors(b)
+                for k in range(d):
+                    for a in self.owners[k]:
+                        if a not in line or (a == b and k > col):
+                            continue
+                        term = em.assign("m", _sum(
+                            [*(_mul(self.s[k, a][j], L[j]) for j in range(3)),
+                             *(_mul(self.u[k, a][j], p[j]) for j in range(3))]))
+                        key = (min(k, col), max(k, col))
+                        terms.setdefault(key, []).append(term)
+                        if k == col and a != b:
+                            terms[key].append(term)
+        m = [["0.0"] * d for _ in range(d)]
+        for (k, col), parts in terms.items():
+            m[k][col] = m[col][k] = parts[0] if len(parts) == 1 else em.assign("m", _sum(parts))
         return [m[i][j] for i in range(d) for j in range(d)]
 
     def forces(self) -> list[str]:
         """The bodies' generalised forces (weights and velocity products)."""
         out = []
         for k in range(self.d):
-            b = self.owner[k]
-            if b < 0:
-                out.append("0.0")
-                continue
-            n, f = self.wrench[b]
-            out.append(self.em.assign("g", _neg(_sum(
-                [*(_mul(self.s[k][j], n[j]) for j in range(3)),
-                 *(_mul(self.u[k][j], f[j]) for j in range(3))]))))
+            parts = []
+            for b in self.owners[k]:
+                n, f = self.wrench[b]
+                parts += [*(_mul(self.s[k, b][j], n[j]) for j in range(3)),
+                          *(_mul(self.u[k, b][j], f[j]) for j in range(3))]
+            out.append(self.em.assign("g", _neg(_sum(parts))) if parts else "0.0")
         return out
 
 
@@ -770,6 +790,9 @@ class _Hoisted:
         self.offset = len(derived.system.p)
         self.slots: dict[str, int] = {}
         self.params = {derived.system.p[name] for name in derived.system.p.names()}
+        #: contiguous blocks after the slots (apply_impact's constant entries), each a list
+        #: of names or literals; reserved once the vector field has taken its slots
+        self.blocks: list[list[str]] = []
 
     def constant(self, matrix: sp.Matrix) -> bool:
         return matrix.free_symbols <= self.params
@@ -778,12 +801,20 @@ class _Hoisted:
         """``name`` (computed in ``pre``) made available to the vector field."""
         if _is_zero(name) or _LITERAL.fullmatch(name) or name in self.slots:
             return name
+        assert not self.blocks, "a slot after a block would move the block"
         self.slots[name] = len(self.slots)
         self.em.line(f"{name} = p[{self.offset + self.slots[name]}]")
         return name
 
     def load_all(self, names: list[Any]) -> list[Any]:  # nested lists of names
         return [self.load_all(v) if isinstance(v, list) else self.load(v) for v in names]
+
+    def block(self, values: list[str]) -> int:
+        """Where ``values`` (names computed in ``pre``, or literals) start in the prepared
+        parameter vector, one after another."""
+        start = self.offset + len(self.slots) + sum(len(b) for b in self.blocks)
+        self.blocks.append(list(values))
+        return start
 
     def function(self, derived: DerivedSystem) -> list[str]:
         out = ["def prepare_parameters(p):",
@@ -793,7 +824,8 @@ class _Hoisted:
         system = derived.system
         out += [f"    {self.pre.names[sym]} = p[{k}]" for k, sym in enumerate(system.p)]
         return out + self.pre.lines + ["    return np.array([", "        *p,"] + [
-            f"        {v}," for v in self.slots] + ["    ], dtype=np.float64)"]
+            f"        {v}," for v in self.slots] + [
+            f"        {v}," for b in self.blocks for v in b] + ["    ], dtype=np.float64)"]
 
 
 #: the vector field computes sine and cosine by inlined polynomials (runtime.sincos) for at most
@@ -815,12 +847,13 @@ def _angles(derived: DerivedSystem) -> set[sp.Expr]:
     return {f.args[0] for f in _atoms([sp.sympify(v) for v in values], (sp.sin, sp.cos))}
 
 
-def _vector_field(derived: DerivedSystem) -> tuple[list[str], list[str]]:
+def _vector_field(derived: DerivedSystem) -> tuple[list[str], _Hoisted]:
     """Eq. (1a) for the current mode, branch-free: the forces mixed by 0/1 mode factors, and
     the reactions from the Schur complement of *all* constraints with the inactive ones' rows
     and columns replaced by the identity (their reactions come out 0). Without branches Numba
     can drop the reference counting around an inlined call (tests/codegen/test_dop853.py checks
-    that none is left). Also returns ``prepare_parameters`` (see :class:`_Hoisted`)."""
+    that none is left). Also returns what it hoisted (:class:`_Hoisted`), whose
+    ``prepare_parameters`` is written once the impact map has added its blocks."""
     d, n = derived.ndof, derived.nconstraints
     out = ["@nb.njit(**HOT_PATH, inline=\"always\")",
            "def vector_field(p, mode, y, yo, u, out, off, lam, lo):",
@@ -898,7 +931,7 @@ def _vector_field(derived: DerivedSystem) -> tuple[list[str], list[str]]:
             em.line(f"lam[lo + {j}] = {lam[j]} + 0.0")
     for i in range(d):
         em.line(f"out[off + {d + i}] = {acc[i]}")
-    return out + _schedule(em.lines), hoist.function(derived)
+    return out + _schedule(em.lines), hoist
 
 
 _DEFINITION = re.compile(r"    (\w+(?:, \w+)*) = (.*)")
@@ -1005,7 +1038,7 @@ def _columns(em: _Emitter, L: list[list[str]], Da: list[list[str]], active: list
 IMPACT_LOOP_CONSTRAINTS = 4
 
 
-def _impact(derived: DerivedSystem) -> list[str]:
+def _impact(derived: DerivedSystem, hoist: _Hoisted) -> list[str]:
     d, n = derived.ndof, derived.nconstraints
     out = ["@nb.njit(**HOT_PATH)",
            "def apply_impact(p, mode, y):",
@@ -1014,6 +1047,9 @@ def _impact(derived: DerivedSystem) -> list[str]:
     em = _Emitter(_symbol_names(derived.system))
     _bindings(derived, em, velocities=True, inputs=False)
     gamma = em.assign("g", em.expr(derived.restitution)) if derived.restitution != 0 else "0.0"
+    if derived.bodies:
+        _impact_tree(derived, em, gamma, hoist)
+        return out + em.lines
     L, Da = _factors(derived, em)
     v = [em.names[c] for c in derived.system.dq]
     if n >= IMPACT_LOOP_CONSTRAINTS:
@@ -1033,6 +1069,188 @@ def _impact(derived: DerivedSystem) -> list[str]:
                 br.line(f"y[{d + i}] = {v[i]} - (1.0 + {gamma}) * ({delta})")
         out += br.lines
     return out
+
+
+#: apply_impact of a system of bodies after its joints' expressions: the tree's M by composite
+#: rigid bodies (the sums of render's _Tree, as loops over the vectors filled before: ``rel``
+#: each body's frame in its parent's (12 per body), ``body`` its mass, inertia and centre (13),
+#: ``twist`` the relative angular and origin velocity per rate of each (coordinate, body)
+#: entry (6), ``da`` Da row by row), its
+#: Cholesky factor, the columns M^-1 Da_j^T, and Eq. (1b) for the active constraints
+_IMPACT_TREE = """\
+R = np.empty((NB, 3, 3))
+o = np.empty((NB, 3))
+for i in range(NB):
+    up = parent[i]
+    for a in range(3):
+        for c in range(3):
+            if up < 0:
+                R[i, a, c] = rel[12 * i + 3 * a + c]
+            else:
+                R[i, a, c] = (R[up, a, 0] * rel[12 * i + c] + R[up, a, 1] * rel[12 * i + 3 + c]
+                              + R[up, a, 2] * rel[12 * i + 6 + c])
+        if up < 0:
+            o[i, a] = rel[12 * i + 9 + a]
+        else:
+            o[i, a] = (o[up, a] + R[up, a, 0] * rel[12 * i + 9] + R[up, a, 1] * rel[12 * i + 10]
+                       + R[up, a, 2] * rel[12 * i + 11])
+comp = np.zeros((NB, 13))
+lever = np.empty(3)
+for i in range(NB):
+    m = body[13 * i + 0]
+    for a in range(3):
+        lever[a] = (o[i, a] + R[i, a, 0] * body[13 * i + 10] + R[i, a, 1] * body[13 * i + 11]
+                    + R[i, a, 2] * body[13 * i + 12] - o[0, a])
+    sq = lever[0] * lever[0] + lever[1] * lever[1] + lever[2] * lever[2]
+    comp[i, 0] = m
+    for a in range(3):
+        comp[i, 1 + a] = m * lever[a]
+        for c in range(3):
+            ic = 0.0
+            for s in range(3):
+                for t in range(3):
+                    ic += R[i, a, s] * body[13 * i + 1 + 3 * s + t] * R[i, c, t]
+            comp[i, 4 + 3 * a + c] = ic + m * ((sq if a == c else 0.0) - lever[a] * lever[c])
+for i in range(NB - 1, 0, -1):
+    if parent[i] >= 0:
+        for c in range(13):
+            comp[parent[i], c] += comp[i, c]
+S = np.empty((NE, 6))
+for e in range(NE):
+    i = ebody[e]
+    up = parent[i]
+    for a in range(3):
+        if up < 0:
+            S[e, a] = twist[6 * e + a]
+            S[e, 3 + a] = twist[6 * e + 3 + a]
+        else:
+            S[e, a] = (R[up, a, 0] * twist[6 * e + 0] + R[up, a, 1] * twist[6 * e + 1]
+                       + R[up, a, 2] * twist[6 * e + 2])
+            S[e, 3 + a] = (R[up, a, 0] * twist[6 * e + 3] + R[up, a, 1] * twist[6 * e + 4]
+                           + R[up, a, 2] * twist[6 * e + 5])
+    for a in range(3):
+        lever[a] = o[0, a] - o[i, a]
+    for a in range(3):
+        S[e, 3 + a] += (S[e, (a + 1) % 3] * lever[(a + 2) % 3]
+                        - S[e, (a + 2) % 3] * lever[(a + 1) % 3])
+M = np.zeros((ND, ND))
+mom = np.empty(6)
+for e in range(NE):
+    col = ecoord[e]
+    b = ebody[e]
+    for a in range(3):
+        mom[a] = (comp[b, 4 + 3 * a] * S[e, 0] + comp[b, 5 + 3 * a] * S[e, 1]
+                  + comp[b, 6 + 3 * a] * S[e, 2]
+                  + comp[b, 1 + (a + 1) % 3] * S[e, 3 + (a + 2) % 3]
+                  - comp[b, 1 + (a + 2) % 3] * S[e, 3 + (a + 1) % 3])
+        mom[3 + a] = (comp[b, 0] * S[e, 3 + a] + S[e, (a + 1) % 3] * comp[b, 1 + (a + 2) % 3]
+                      - S[e, (a + 2) % 3] * comp[b, 1 + (a + 1) % 3])
+    for f in range(NE):
+        k = ecoord[f]
+        a = ebody[f]
+        x = b
+        while x >= 0 and x != a:
+            x = parent[x]
+        if x != a or (a == b and k > col):
+            continue
+        term = 0.0
+        for c in range(6):
+            term += S[f, c] * mom[c]
+        lo = min(k, col)
+        hi = max(k, col)
+        M[lo, hi] += term
+        if k == col and a != b:
+            M[lo, hi] += term
+for r in range(ND):
+    for c in range(r):
+        M[r, c] = M[c, r]
+for c in range(ND):
+    acc = M[c, c]
+    for r in range(c):
+        acc = acc - M[c, r] * M[c, r]
+    M[c, c] = math.sqrt(acc)
+    inv = 1.0 / M[c, c]
+    for i in range(c + 1, ND):
+        acc = M[i, c]
+        for r in range(c):
+            acc = acc - M[i, r] * M[c, r]
+        M[i, c] = acc * inv
+cols = np.empty((NC, ND))
+for j in range(NC):
+    for i in range(ND):
+        acc = da[ND * j + i]
+        for r in range(i):
+            acc = acc - M[i, r] * cols[j, r]
+        cols[j, i] = acc / M[i, i]
+    for i in range(ND - 1, -1, -1):
+        acc = cols[j, i]
+        for r in range(i + 1, ND):
+            acc = acc - M[r, i] * cols[j, r]
+        cols[j, i] = acc / M[i, i]
+schur = np.empty((NC, NC))
+rates = np.empty(NC)
+for j in range(NC):
+    rates[j] = 0.0
+    for i in range(ND):
+        rates[j] += da[ND * j + i] * vel[i]
+    for k in range(NC):
+        acc = 0.0
+        for i in range(ND):
+            acc += da[ND * j + i] * cols[k, i]
+        schur[j, k] = acc
+link = np.ones((NC, NC), np.bool_)
+"""
+
+
+def _impact_tree(derived: DerivedSystem, em: _Emitter, gamma: str, hoist: _Hoisted) -> None:
+    """apply_impact of a system of bodies (Eq. (1b)): the joints' expressions, the bodies'
+    constants and Da unrolled (common subexpressions shared), then M by composite rigid
+    bodies, its factor and the impact as loops (:data:`_IMPACT_TREE`, then the active set's
+    Schur complement as :func:`_impact_loop` solves it). The unrolled sums of the vector field
+    (render's _Tree) would be compiled again here for an event that happens a few times per
+    trajectory: the loops compile in a fraction of the time (the same sums in another order,
+    equal to rounding)."""
+    d, n = derived.ndof, derived.nconstraints
+    bodies = derived.bodies
+    own = [[k for k in range(d) if any(b.rel_jw[r, k] != 0 or b.rel_jp[r, k] != 0
+                                       for r in range(3))] for b in bodies]
+    entries = [(k, i) for i, ks in enumerate(own) for k in ks]
+    rel: list[sp.Expr] = []
+    for b in bodies:
+        rel += [*b.rel_rotation, *b.rel_position]
+    twist: list[sp.Expr] = []
+    for k, i in entries:
+        twist += [bodies[i].rel_jw[r, k] for r in range(3)]
+        twist += [bodies[i].rel_jp[r, k] for r in range(3)]
+    body = [sp.sympify(e) for b in bodies for e in (b.mass, *b.inertia, *b.centre)]
+    arrays = {"rel": rel, "body": body, "twist": twist, "da": list(derived.jacobian)}
+    # entries of the parameters alone come from prepare_parameters, one block per array
+    # copied in at once; those of q are computed here (common subexpressions shared) and
+    # stored one by one: a store costs Numba compile time, and most entries are constants
+    # (fixed offsets, a hinge's axis, the masses and inertias)
+    varying: list[tuple[str, int, sp.Expr]] = []
+    nb, ne = len(bodies), len(entries)
+    em.line(f"NB, NE, ND, NC = {nb}, {ne}, {d}, {n}")
+    em.line(f"parent = np.array({[b.parent for b in bodies]}, dtype=np.int64)")
+    em.line(f"ebody = np.array({[i for _k, i in entries]}, dtype=np.int64)")
+    em.line(f"ecoord = np.array({[k for k, _i in entries]}, dtype=np.int64)")
+    for name, values in arrays.items():
+        fixed = [k for k, e in enumerate(values) if hoist.constant(sp.Matrix([e]))]
+        names = hoist.pre.exprs([values[k] for k in fixed], "ib") if fixed else []
+        block = ["0.0"] * len(values)
+        for k, value in zip(fixed, names):
+            block[k] = value
+        start = hoist.block(block)
+        em.line(f"{name} = p[{start}:{start + len(values)}].copy()")
+        varying += [(name, k, e) for k, e in enumerate(values) if k not in set(fixed)]
+    computed = em.exprs([e for _n, _k, e in varying], "j") if varying else []
+    for (name, k, _e), value in zip(varying, computed):
+        if not _is_zero(value):
+            em.line(f"{name}[{k}] = {value}")
+    em.line("vel = y[ND:2 * ND].copy()")
+    for text in _IMPACT_TREE.splitlines():
+        em.line(text)
+    _impact_active(em, d, n, gamma)
 
 
 def _impact_loop(em: _Emitter, L: list[list[str]] | _Inverse, Da: list[list[str]],
@@ -1067,6 +1285,13 @@ def _impact_loop(em: _Emitter, L: list[list[str]] | _Inverse, Da: list[list[str]
         em.line(f"rates[{j}] = {rates[j]}")
     for i in range(d):
         em.line(f"vel[{i}] = {v[i]}")
+    _impact_active(em, d, n, gamma)
+
+
+def _impact_active(em: _Emitter, d: int, n: int, gamma: str) -> None:
+    """Eq. (1b) for the active constraints of ``mode`` from the arrays ``cols`` (M^-1 Da_j^T),
+    ``schur`` (Da M^-1 Da^T), ``link`` (its structurally nonzero entries off the diagonal),
+    ``rates`` (Da q'-) and ``vel`` (q'-) of the function body."""
     for text in (
         f"act = np.empty({n}, np.int64)",
         "na = 0",
@@ -1704,15 +1929,16 @@ def render(derived: DerivedSystem) -> str:
         "",
     ]
     try:
-        vector_field, prepare = _vector_field(derived)
+        vector_field, hoist = _vector_field(derived)
         field_lines = _prune(vector_field)
         inline_field = len(field_lines) <= INLINE_FIELD_LINES
+        impact = _impact(derived, hoist)
         parts = [
             head,
-            prepare,
+            hoist.function(derived),
             vector_field,
             _reaction(vector_field, n) if inline_field else _reaction_through_field(2 * d, n),
-            _impact(derived),
+            impact,
             _scalar_function("constraint_rates", "Da(q) q' into out[:n].", "p, y, yo, out",
                              derived, list(derived.jacobian * sp.Matrix(system.dq))
                              if n else [], "out", inputs=False),

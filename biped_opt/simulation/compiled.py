@@ -197,12 +197,13 @@ _GENERATOR: list[str] = []
 
 def _generator_key() -> str:
     """A hash of everything a rendered module may depend on besides the request: every source
-    file of biped_opt (the generator, the library, the checks) and the versions of SymPy (its
-    printing and common subexpressions) and SciPy (the DOP853 tableau)."""
+    file of biped_opt (the generator, the library, the checks, the library robots' URDFs) and
+    the versions of SymPy (its printing and common subexpressions) and SciPy (the DOP853
+    tableau)."""
     if not _GENERATOR:
         digest = hashlib.sha256()
         root = PACKAGE_DIR
-        for path in sorted(root.rglob("*.py")):
+        for path in sorted([*root.rglob("*.py"), *root.rglob("*.urdf")]):
             digest.update(f"{path.relative_to(root).as_posix()}\0".encode())
             digest.update(path.read_bytes())
         for dist in ("sympy", "scipy"):

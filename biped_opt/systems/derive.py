@@ -487,13 +487,9 @@ def _bodies(system: System, normalise: Callable[[Any], Any],
             turn = normalise(sp.Matrix(body.rotation))
             check_symbols(f"{item}: rotation", turn, config, "a coordinate or a parameter")
             _check_rotation(system, item, turn)
-        for c in sorted((offset.free_symbols | turn.free_symbols) & set(system.q), key=str):
-            if c in mover:
-                raise SystemDescriptionError(
-                    f"{where}: {item}: coordinate {c} already moves body {mover[c]!r}: each "
-                    "coordinate moves one body relative to its parent (declare the other "
-                    "body as this one's child)")
-            mover[c] = body.name
+        for c in (offset.free_symbols | turn.free_symbols) & set(system.q):
+            # (a coordinate may move several bodies: a mimic joint's followers turn with it)
+            mover.setdefault(c, body.name)
         # relative to the parent: the angular velocity (parent's axes, w^ = R_rel' R_rel^T)
         # and the origin's velocity per coordinate rate, and their accelerations at q'' = 0
         rel_jw = _spin_jacobian(turn, partial, body_axes=False)

@@ -34,7 +34,7 @@ import sympy as sp
 from biped_opt.errors import BipedOptError
 
 __all__ = ["System", "Body", "ManeuverDescription", "SystemDescriptionError", "Symbols", "Frame",
-           "Shape", "WORLD", "SHAPE_KINDS"]
+           "Shape", "WORLD", "SHAPE_KINDS", "IMPORTERS"]
 
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -116,6 +116,12 @@ SHAPE_KINDS = ("box", "sphere", "line")
 #: the colours shapes take in turn when none is given (RGBA, each in [0, 1])
 PALETTE = ((0.20, 0.45, 0.75, 1.0), (0.85, 0.40, 0.10, 1.0), (0.30, 0.65, 0.30, 1.0),
            (0.60, 0.35, 0.70, 1.0), (0.55, 0.55, 0.55, 1.0))
+
+
+#: importers of robot descriptions by format, each registered by its own module (which
+#: imports this one): ``urdf`` is :func:`biped_opt.systems.urdf.system_from_urdf`, imported
+#: with ``biped_opt.systems``
+IMPORTERS: dict[str, Callable[..., System]] = {}
 
 
 @dataclass(frozen=True)
@@ -225,9 +231,19 @@ class System:
         self.maneuvers: dict[str, ManeuverDescription] = {}
         #: optimal-control problems by name (see :mod:`biped_opt.control.problems`)
         self.problems: dict[str, dict[str, Any]] = {}
+        #: what a system imported from a robot description keeps of it (for a URDF:
+        #: :class:`biped_opt.systems.urdf.Imported`), None for one written with this API
+        self.robot: Any = None
         self.source: str | None = None  #: the file a system was loaded from, for messages
         #: the files a system file read: itself, then modules beside it that it imported
         self.reads: tuple[Path, ...] = ()
+
+    @classmethod
+    def from_urdf(cls, source: str | Path, **options: Any) -> System:
+        """A system of rigid bodies from a robot's URDF (a path or the URDF text itself):
+        :func:`biped_opt.systems.urdf.system_from_urdf`, whose keyword options it takes
+        (``base``, ``contacts``, ``lock``, ``posture``, ...; SYSTEMS.md Sec. 4a)."""
+        return IMPORTERS["urdf"](source, **options)
 
     # -- building ---------------------------------------------------------------------------
     @property

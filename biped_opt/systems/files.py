@@ -1,6 +1,8 @@
 """Systems by name or from a user's file (SYSTEMS.md Sec. 4).
 
-``load_system("rocking_bar")`` builds a library system; ``load_system("path/to/file.py")`` runs
+``load_system("rocking_bar")`` builds a library system (``solo12``, ``bolt`` and ``talos`` from
+their vendored URDFs); ``load_system("robot.urdf:contacts=A+B")`` imports a robot's URDF
+(:mod:`biped_opt.systems.urdf`, SYSTEMS.md Sec. 4a); ``load_system("path/to/file.py")`` runs
 a plain Python file that builds one with the :class:`~biped_opt.systems.description.System`
 API and leaves it in a module-level variable ``SYSTEM`` (or as the only System it defines), or
 defines a factory ``make_system(**arguments)``: ``load_system("chain.py:links=5")`` calls it with
@@ -24,7 +26,7 @@ from typing import Any
 from biped_opt.errors import InvalidInputError, quoted
 from biped_opt.system_spec import FACTORY, parse_file_spec
 from biped_opt.systems.description import System, SystemDescriptionError
-from biped_opt.systems.library import BY_NAME, LIBRARY, SIZES, chain, walker
+from biped_opt.systems.library import BY_NAME, LIBRARY, ROBOTS, SIZES, chain, walker
 
 __all__ = ["load_system", "library_size", "WALKER", "CHAIN", "LIBRARY_PATTERNS"]
 
@@ -33,7 +35,8 @@ WALKER = re.compile(r"^walker(?P<n>[1-9][0-9]?)(?:_(?P<law>coupled|decoupled))?$
 #: library names of planar chains by their number of coordinates d = 3 + 2 segments: chain7
 CHAIN = re.compile(r"^chain(?P<d>5|7|9|11)$")
 #: the library's names beyond LIBRARY's, for messages
-LIBRARY_PATTERNS = "walkerN[_coupled|_decoupled], chain5|7|9|11, quadruped"
+LIBRARY_PATTERNS = ("walkerN[_coupled|_decoupled], chain5|7|9|11, quadruped, "
+                    + ", ".join(ROBOTS))
 
 
 def library_size(name: str) -> tuple[int, int] | None:
@@ -72,10 +75,17 @@ def load_system(spec: str | Path | System) -> System:
     if file is None:
         raise SystemDescriptionError(
             f"unknown system {quoted(text)}: neither a library system "
-            f"({', '.join(LIBRARY)}, {LIBRARY_PATTERNS}) nor a .py file")
+            f"({', '.join(LIBRARY)}, {LIBRARY_PATTERNS}) nor a .py or .urdf file")
     path = file.path
     if not path.is_file():
         raise SystemDescriptionError(f"{path}: no such system file")
+    if path.suffix == ".urdf":
+        from biped_opt.systems.urdf import from_file_arguments
+
+        robot = from_file_arguments(path, dict(file.arguments))
+        robot.source = str(file)
+        robot.reads = (path.resolve(),)
+        return robot
     namespace, reads = _run(path)
     found = [v for v in namespace.values() if isinstance(v, System)]
     factory = namespace.get(FACTORY)

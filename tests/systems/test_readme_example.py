@@ -15,7 +15,8 @@ README = Path(__file__).resolve().parents[2] / "README.md"
 
 def _blocks() -> list[str]:
     text = README.read_text()
-    section = text[text.index("## Your own system"):text.index("## Speed")]
+    start = text.index("## Your own system")
+    section = text[start:text.index("\n## ", start)]  # (to the next section)
     return re.findall(r"```python\n(.*?)```", section, re.S)
 
 

@@ -1,4 +1,4 @@
-"""The systems that ship with biped_opt (SYSTEMS.md Secs. 2-3b), each a short description."""
+"""The systems that ship with biped_opt (SYSTEMS.md Secs. 2-3c), each a short description."""
 
 from __future__ import annotations
 
@@ -8,10 +8,12 @@ from biped_opt.systems.description import System
 from biped_opt.systems.library.biped import biped
 from biped_opt.systems.library.chain import chain
 from biped_opt.systems.library.quadruped import quadruped
+from biped_opt.systems.library.robots import ROBOT_SIZES, ROBOTS
 from biped_opt.systems.library.rocking_bar import rocking_bar
 from biped_opt.systems.library.walker import walker
 
-__all__ = ["LIBRARY", "BY_NAME", "SIZES", "biped", "chain", "quadruped", "rocking_bar", "walker"]
+__all__ = ["LIBRARY", "BY_NAME", "SIZES", "ROBOTS", "biped", "chain", "quadruped", "rocking_bar",
+           "walker"]
 
 #: name -> factory of the library's systems (the walker with its defaults: n = 3, coupled; the
 #: chain with one link per leg)
@@ -26,6 +28,7 @@ LIBRARY: dict[str, Callable[[], System]] = {
 #: kinematics), too long for every listing of the library
 BY_NAME: dict[str, Callable[[], System]] = {
     "quadruped": quadruped,
+    **ROBOTS,  # (robots from their URDFs: SYSTEMS.md Sec. 3c)
 }
 
 #: (constraints, coordinates) of the fixed-size library systems, known without building them
@@ -36,4 +39,5 @@ SIZES: dict[str, tuple[int, int]] = {
     "rocking_bar": (2, 3),
     "chain": (2, 5),
     "quadruped": (4, 20),
+    **ROBOT_SIZES,
 }
