@@ -39,7 +39,7 @@ def sincos(x: float) -> tuple[float, float]:
 
     Written with one return and no early exit: the generated systems' DOP853 step has this
     body expanded into each of its stages, on its syntax tree with every argument bound to a
-    name first (:func:`biped_opt.codegen.render._expand`).
+    name first (:func:`biped_opt.codegen.inline.expand`).
     """
     x2 = x * x
     x4 = x2 * x2

@@ -112,7 +112,7 @@ def _constants(module: ModuleType) -> dict[str, Any]:
 
 def _prepare_source(text: str) -> str:
     """The source of ``prepare_parameters`` in a generated module's text (plain Python of NumPy
-    and math, see render._Hoisted), up to the next top-level statement."""
+    and math, see hoist.Hoisted), up to the next top-level statement."""
     start = text.index("\ndef prepare_parameters(") + 1
     lines = text[start:].split("\n")
     end = next(i for i, line in enumerate(lines[1:], 1) if line and not line[0].isspace())

@@ -51,7 +51,7 @@ class DerivedBody:
     none), its parent's index (-1: the world) and its frame's pose in the parent's, the
     relative angular velocity (parent's axes) and origin velocity per coordinate rate
     (3 x d each) and their accelerations at q'' = 0, and its frame's axes and origin in the
-    world. The compiled code follows the tree from these (render's ``_Tree``).
+    world. The compiled code follows the tree from these (``biped_opt.codegen.tree.BodyTree``).
 
     In world terms (for :class:`NumericSystem` and the symbolic M and forces, derived when
     first asked for): the centre's velocity Jacobian Jv (3 x d, world axes), the angular

@@ -20,8 +20,9 @@ Two steps, each one function:
   (frictionless, restitution ``gamma``): a named link's frame origin, the lowest point of a
   collision sphere, the four bottom corners of a collision box.
 
-The tree algorithms are not here: ``derive`` and the generated code (render's ``_Tree``) make
-M and the forces from the bodies, as they do for any description of bodies.
+The tree algorithms are not here: ``derive`` and the generated code
+(``biped_opt.codegen.tree.BodyTree``) make M and the forces from the bodies, as they do for any
+description of bodies.
 """
 
 from __future__ import annotations

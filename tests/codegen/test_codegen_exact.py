@@ -20,7 +20,9 @@ import sympy as sp
 from scipy.integrate import solve_ivp
 from scipy.special import ellipk
 
-from biped_opt.codegen.render import UnsupportedExpressionError, _expand, render
+from biped_opt.codegen.emit import UnsupportedExpressionError
+from biped_opt.codegen.inline import expand
+from biped_opt.codegen.render import render
 from biped_opt.codegen.runtime import Status
 from biped_opt.simulation.compiled import compile_system
 from biped_opt.simulation.options import SimulatorOptions
@@ -64,7 +66,7 @@ def test_expanding_a_call_keeps_its_meaning(args):
               f"    s, c, n = square({args})\n"
               f"    t, u, v = square(th - {args})\n"
               "    return s, c, n, t, u, v, x2, x2_1\n")
-    expanded = _expand(caller, {"square": _SQUARE}, invariant=set())
+    expanded = expand(caller, {"square": _SQUARE}, invariant=set())
     assert "square(" not in expanded
     called, inlined = {}, {}
     exec(_SQUARE + caller, called)  # noqa: S102 - our own test text
@@ -81,7 +83,7 @@ def test_expanding_hoists_invariant_values_and_renames_assigned_parameters():
               "    a, c0 = scale(k, v, c0)\n"
               "    b, c1 = scale(k, w, c0)\n"
               "    return a, b, c0, c1\n")
-    expanded = _expand(caller, {"scale": _SCALE}, invariant={"k"})
+    expanded = expand(caller, {"scale": _SCALE}, invariant={"k"})
     assert expanded.count("k * 2.0") == 1
     called, inlined = {}, {}
     exec(_SCALE + caller, called)  # noqa: S102
@@ -94,7 +96,7 @@ def test_expanding_refuses_a_caller_that_shadows_a_global_of_the_body():
     body = "def h(x):\n    y = math.sqrt(x)\n    return y\n"
     caller = "def f(x):\n    math = 3.0\n    z = h(x)\n    return z + math\n"
     with pytest.raises(ValueError, match="math"):
-        _expand(caller, {"h": body}, invariant=set())
+        expand(caller, {"h": body}, invariant=set())
 
 
 # --- the offset pendulum: the minimal case, in closed form ------------------------

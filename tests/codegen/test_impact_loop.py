@@ -1,4 +1,4 @@
-"""The impact map as one loop over the active constraints (codegen/render.py,
+"""The impact map as one loop over the active constraints (codegen/impact.py,
 ``IMPACT_LOOP_CONSTRAINTS``) instead of one unrolled branch per contact mode.
 
 Two checks. (1) The rocking bar, whose block Da M^-1 Da^T is full (both ends move with the
@@ -16,7 +16,7 @@ import importlib
 import numpy as np
 import pytest
 
-from biped_opt.codegen import render
+from biped_opt.codegen import impact
 from biped_opt.simulation.compiled import CompiledSystem
 from biped_opt.systems.library import rocking_bar, walker
 
@@ -29,7 +29,7 @@ OUTCOME_TOL = 1e-9
 
 def test_the_loop_is_the_unrolled_impact_to_the_bit(monkeypatch):
     unrolled = CompiledSystem(rocking_bar())
-    monkeypatch.setattr(render, "IMPACT_LOOP_CONSTRAINTS", 1)
+    monkeypatch.setattr(impact, "IMPACT_LOOP_CONSTRAINTS", 1)
     looped = CompiledSystem(rocking_bar())
     assert looped.module is not unrolled.module
     assert "act = np.empty(" in looped.module.__loader__.get_source(looped.module.__name__)
