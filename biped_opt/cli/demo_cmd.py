@@ -82,7 +82,8 @@ def run(args: argparse.Namespace) -> int:
     print("\nSummary")
     for s in recorded:
         print(f"  {s.path}  {sum(s.counts.values())} messages, {s.failed} failed points")
-    for path in (*offline.figures, *result.figures, result.captions, experiment,
+    page = (offline.page,) if offline.page is not None else ()
+    for path in (*page, *offline.figures, *result.figures, result.captions, experiment,
                  *study_figures, *movies):
         print(f"  {path}")
     print(f"  total {time.perf_counter() - start:.1f} s")

@@ -13,19 +13,21 @@ from biped_opt.control.problems import Problem, get_problem, load_problem
 from biped_opt.control.solve import compiled_for, optimal_policy
 from biped_opt.errors import InvalidParameterError
 
-README = Path(__file__).resolve().parents[2] / "README.md"
+#: the manual's tutorial that README's "Your own system" points to
+TUTORIAL = Path(__file__).resolve().parents[2] / "docs" / "tutorials" / "own_system.md"
 
 
 def _readme_blocks(section: str, lang: str) -> list[str]:
-    text = README.read_text()
+    text = TUTORIAL.read_text()
     part = text[text.index(f"## {section}"):]
-    part = part[: part.index("\n## ", 3)]
+    end = part.find("\n## ", 3)  # (to the next section, or the page's end)
+    part = part if end < 0 else part[:end]
     return re.findall(rf"```{lang}\n(.*?)```", part, re.S)
 
 
 @pytest.fixture(scope="module")
 def hopper(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The README's hopper (compiled once for the README's own test: same content, same
+    """The tutorial's hopper (compiled once for the tutorial's own test: same content, same
     cache entry), plus a declared problem (problems do not change the compiled module)."""
     folder = tmp_path_factory.mktemp("hopper")
     system_file = _readme_blocks("Your own system", "python")[0]
@@ -48,7 +50,7 @@ def test_the_biped_declares_the_papers_problems() -> None:
 
 
 def test_the_readme_problem_file_runs_next_to_the_system_file(hopper: Path) -> None:
-    """The README's problem file, as written: the system path is relative to the file, the
+    """The tutorial's problem file, as written: the system path is relative to the file, the
     final-state term enters the cost, and the optimum is the brute-force one."""
     (problem_text,) = _readme_blocks("Problems on any system", "yaml")
     (hopper / "far.yaml").write_text(problem_text)

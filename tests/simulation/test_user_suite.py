@@ -1,7 +1,8 @@
 """User systems against independent references (issue 22, item 6).
 
-The system files in ``tests/simulation/user/`` are written as README's "Your own system" section
-tells a user to write them; the references next to them import nothing from biped_opt:
+The system files in ``tests/simulation/user/`` are written as the manual's "Your own system"
+tutorial (docs/tutorials/own_system.md) tells a user to write them; the references next to
+them import nothing from biped_opt:
 
 - ``reference_flight``: closed-form flights with certified event isolation for the corner
   (a point mass between the floor and a wall leaning back, coupled normals, restitution), the

@@ -1,4 +1,4 @@
-"""The README's "Your own system" example runs as written: the file builds, compiles and
+"""The "Your own system" tutorial's example runs as written: the file builds, compiles and
 simulates, and its outcome is checked against the same maneuver run on the description's
 NumPy evaluation of Eq. (1) with SciPy (an implementation that shares only the description)."""
 
@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-README = Path(__file__).resolve().parents[2] / "README.md"
+TUTORIAL = Path(__file__).resolve().parents[2] / "docs" / "tutorials" / "own_system.md"
 
 
 def _blocks() -> list[str]:
-    text = README.read_text()
+    text = TUTORIAL.read_text()
     start = text.index("## Your own system")
     section = text[start:text.index("\n## ", start)]  # (to the next section)
     return re.findall(r"```python\n(.*?)```", section, re.S)
@@ -25,7 +25,7 @@ def test_the_example_file_is_short_and_runs(tmp_path, monkeypatch, capsys):
     assert len(system_file.splitlines()) < 40
     (tmp_path / "hopper.py").write_text(system_file)
     monkeypatch.chdir(tmp_path)
-    exec(compile(usage, "README usage", "exec"), {})  # noqa: S102 - the README's own code
+    exec(compile(usage, "tutorial usage", "exec"), {})  # noqa: S102 - the tutorial's own code
     status, *_ = capsys.readouterr().out.split()
     assert status == "OK"
 
