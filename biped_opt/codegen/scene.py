@@ -42,7 +42,11 @@ class _ScenePrinter(NumPyPrinter):
 
 def scene_facts(system: System) -> dict[str, Any]:
     """What a start needs to read ``scene_values``' columns: frame names, shapes (name, kind,
-    frame, colour, number of points) and the contact points' constraint indices."""
+    frame, colour, number of points), the contact points' constraint indices and, for a
+    system imported from a URDF, its tree of joints (:func:`biped_opt.systems.urdf.tree_facts`:
+    what ``/robot_description`` and ``/joint_states`` carry)."""
+    from biped_opt.systems.urdf import tree_facts
+
     names = list(system.constraints)
     return {
         "world": WORLD,
@@ -50,6 +54,7 @@ def scene_facts(system: System) -> dict[str, Any]:
         "shapes": [{"name": s.name, "kind": s.kind, "frame": s.frame, "color": list(s.color),
                     "points": len(s.points)} for s in system.shapes.values()],
         "contacts": [names.index(c) for c in system.contact_points],
+        "tree": tree_facts(system),
     }
 
 

@@ -1,0 +1,237 @@
+"""A URDF in gives the same robot out (issue: URDF out and /joint_states).
+
+For robots imported from a URDF, ``/robot_description`` carries the robot's own tree of joints,
+``/joint_states`` its joint values and ``/tf`` only world -> base. Checked with parsers that are
+not the importer's:
+
+- the emitted URDF against the original file, both read with ElementTree here: the same joints
+  (type, parent, child, origin, axis, limits, dynamics, mimic) and the same links' inertials,
+  number for number (the writer prints each double as the shortest text that reads back as
+  itself, so equality is exact);
+- both files through Pinocchio's URDF parser: the same body inertias (fixed links merged as
+  Pinocchio merges them) and joint placements;
+- forward kinematics: each link's world pose from Pinocchio's model of the *emitted* URDF at
+  the joint values and base pose read back from the CDR of ``/joint_states`` and ``/tf`` (a mimic
+  joint's value from its ``<mimic>`` tag, as robot_state_publisher does) equals the system's own
+  frame of that link (the generated scene code) to 1e-12.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pin = pytest.importorskip("pinocchio")
+
+from biped_opt.record.scene import JOINT_STATES_TOPIC, MARKERS_TOPIC, SceneMessages  # noqa: E402
+from biped_opt.ros.interfaces import load_interfaces  # noqa: E402
+from biped_opt.simulation.compiled import _import, _scene_for, cache_dir  # noqa: E402
+from biped_opt.simulation.scene import Scene  # noqa: E402
+from biped_opt.systems.library.robots import ROBOT_FILES, ROBOTS  # noqa: E402
+from biped_opt.systems.urdf import system_from_urdf  # noqa: E402
+
+HERE = Path(__file__).resolve().parents[1] / "systems" / "urdf"
+#: (label, how to build it, its URDF): the library's point-footed quadruped and biped, the
+#: humanoid with locked joints, and the test gripper (slider, skew axis, mimic, fixed links,
+#: inertias off their origins and turned)
+CASES = {
+    "solo12": (ROBOTS["solo12"], ROBOT_FILES["solo12"]),
+    "bolt": (ROBOTS["bolt"], ROBOT_FILES["bolt"]),
+    "g1": (ROBOTS["g1"], ROBOT_FILES["g1"]),
+    "gripper": (lambda: system_from_urdf(HERE / "gripper.urdf", contacts="base_link+tip"),
+                HERE / "gripper.urdf"),
+    "hopper_fixed": (lambda: system_from_urdf(HERE / "hopper.urdf", base="fixed"),
+                     HERE / "hopper.urdf"),
+}
+#: exact arithmetic but for rounding: FK through ~10 joints and rpy <-> quaternion conversions
+#: of O(1) numbers stays within a few hundred ulps of 1
+FK_TOL = 1e-12
+
+
+def _scene(system) -> Scene:
+    facts = _scene_for(system)
+    module = _import(facts["module"], cache_dir() / f"{facts['module']}.py")
+    return Scene(system.name, facts, module.scene_values, tuple(system.constraints))
+
+
+@pytest.fixture(scope="module", params=list(CASES))
+def robot(request):
+    build, path = CASES[request.param]
+    system = build()
+    return system, _scene(system), path
+
+
+def _numbers(e: ET.Element | None, key: str, default: str) -> list[float]:
+    text = default if e is None else e.get(key, default)
+    return [float(v) for v in text.split()]
+
+
+def _joints(root: ET.Element) -> dict[str, dict]:
+    out = {}
+    for j in root.findall("joint"):
+        limit, origin = j.find("limit"), j.find("origin")
+        dyn, mimic = j.find("dynamics"), j.find("mimic")
+        out[j.get("name")] = {
+            "type": j.get("type"), "parent": j.find("parent").get("link"),
+            "child": j.find("child").get("link"),
+            "xyz": _numbers(origin, "xyz", "0 0 0"), "rpy": _numbers(origin, "rpy", "0 0 0"),
+            "axis": _numbers(j.find("axis"), "xyz", "1 0 0"),
+            "limit": {k: float(limit.get(k)) for k in ("lower", "upper", "effort", "velocity")
+                      if limit is not None and limit.get(k) is not None},
+            "damping": _numbers(dyn, "damping", "0")[0],
+            "mimic": None if mimic is None else (mimic.get("joint"),
+                                                 float(mimic.get("multiplier", "1")),
+                                                 float(mimic.get("offset", "0")))}
+    return out
+
+
+def _inertials(root: ET.Element) -> dict[str, list[float] | None]:
+    out = {}
+    for link in root.findall("link"):
+        i = link.find("inertial")
+        if i is None:
+            out[link.get("name")] = None
+            continue
+        t = i.find("inertia")
+        out[link.get("name")] = [
+            *_numbers(i.find("origin"), "xyz", "0 0 0"), *_numbers(i.find("origin"), "rpy", "0 0 0"),
+            float(i.find("mass").get("value")),
+            *(float(t.get(k, "0")) for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"))]
+    return out
+
+
+def test_the_emitted_urdf_has_the_input_s_joints_and_inertias(robot):
+    system, scene, path = robot
+    original = ET.parse(path).getroot()
+    emitted = ET.fromstring(scene.urdf([], np.zeros((1, len(system.coordinate_names)))))
+    a, b = _joints(original), _joints(emitted)
+    dropped = {n for n, j in a.items() if j["parent"] == "world"}
+    assert set(b) == set(a) - dropped
+    axis_normalised = 0
+    for name, j in b.items():
+        ref = a[name]
+        for key in ("type", "parent", "child", "xyz", "rpy", "damping"):
+            assert j[key] == ref[key], (name, key)
+        if j["type"] != "fixed":
+            norm = math.sqrt(sum(v * v for v in ref["axis"]))
+            assert j["axis"] == [v / norm for v in ref["axis"]] if norm != 1 else j["axis"] \
+                == ref["axis"], name
+            axis_normalised += norm != 1
+            for k, v in ref["limit"].items():
+                if j["type"] == "continuous" and k in ("lower", "upper"):
+                    continue  # (a continuous joint has no position limits)
+                assert j["limit"][k] == v, (name, k)
+        # a mimic goes out as it came in where the follower moves with its leader
+        if ref["mimic"] is not None and name in system.robot.mimic:
+            assert j["mimic"] == ref["mimic"], name
+        else:
+            assert j["mimic"] is None
+    assert _inertials(emitted) == {k: v for k, v in _inertials(original).items()
+                                   if k != "world"}
+    assert emitted.get("name") == system.name
+
+
+def _model(text: str):
+    return pin.buildModelFromXML(text)
+
+
+def test_pinocchio_reads_the_same_bodies_from_both(robot):
+    system, scene, path = robot
+    original = path.read_text()
+    emitted = scene.urdf([], np.zeros((1, len(system.coordinate_names))))
+    m1, m2 = _model(original), _model(emitted)
+    # (a root link 'world' with its joint to the base is left out of the emitted URDF: the
+    # base's pose is on /tf; the joints below it are compared by name)
+    names1 = {m1.names[i]: i for i in range(1, m1.njoints)}
+    names2 = [m2.names[i] for i in range(1, m2.njoints)]
+    assert set(names2) <= set(names1) and len(names1) - len(names2) <= 1
+    for i, name in enumerate(names2, start=1):
+        j = names1[name]
+        # the same numbers through the same parser: equal up to its own arithmetic on them
+        np.testing.assert_allclose(m2.inertias[i].toDynamicParameters(),
+                                   m1.inertias[j].toDynamicParameters(), rtol=0, atol=1e-15)
+        np.testing.assert_allclose(m2.jointPlacements[i].homogeneous,
+                                   m1.jointPlacements[j].homogeneous, rtol=0, atol=1e-15)
+
+
+def _quaternion_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def test_links_placed_from_joint_states_and_tf_are_the_system_s_frames(robot):
+    system, scene, _path = robot
+    typestore = load_interfaces().typestore
+    d, nc = len(system.coordinate_names), len(system.constraints)
+    messages = SceneMessages(typestore, scene, list(system.defaults.values()), d)
+    rng = np.random.default_rng(35)
+    n = 5
+    samples = np.zeros((n, 2 + 2 * d + nc))
+    samples[:, 0] = np.arange(n) * 0.01
+    samples[:, 1 : 1 + 2 * d] = rng.uniform(-1.0, 1.0, (n, 2 * d))
+    _stamps, out = messages.messages(samples, 0)
+    assert set(out) == {"/clock", "/tf", MARKERS_TOPIC, JOINT_STATES_TOPIC}
+    urdf = scene.urdf([], samples[:1, 1 : 1 + d])
+    model = _model(urdf)
+    data = model.createData()
+    mimic = {name: j["mimic"] for name, j in _joints(ET.fromstring(urdf)).items() if j["mimic"]}
+    links = [lk.get("name") for lk in ET.fromstring(urdf).findall("link")]
+    own = scene.evaluate(samples[:, 1 : 1 + d], list(system.defaults.values()))
+    checked = 0
+    for k in range(n):
+        js = typestore.deserialize_cdr(out[JOINT_STATES_TOPIC][k], "sensor_msgs/msg/JointState")
+        (tf,) = typestore.deserialize_cdr(out["/tf"][k], "tf2_msgs/msg/TFMessage").transforms
+        assert (tf.header.frame_id, tf.child_frame_id) == ("world", scene.base)
+        values = dict(zip(js.name, js.position))
+        assert len(js.velocity) == len(js.name) and len(js.effort) == 0
+        for follower, (leader, mult, offset) in mimic.items():
+            values[follower] = mult * values[leader] + offset
+        q = pin.neutral(model)
+        for i in range(1, model.njoints):
+            joint = model.joints[i]
+            value = values[model.names[i]]
+            if joint.nq == 2:  # (continuous: cos, sin)
+                q[joint.idx_q : joint.idx_q + 2] = math.cos(value), math.sin(value)
+            else:
+                q[joint.idx_q] = value
+        pin.framesForwardKinematics(model, data, q)
+        r = tf.transform.rotation
+        R0 = _quaternion_matrix(r.x, r.y, r.z, r.w)
+        p0 = np.array([tf.transform.translation.x, tf.transform.translation.y,
+                       tf.transform.translation.z])
+        for link in links:
+            if link not in scene.frames:
+                continue
+            f = model.getFrameId(link, pin.BODY)
+            placement = data.oMf[f]
+            at = p0 + R0 @ placement.translation
+            axes = R0 @ placement.rotation
+            i = scene.frames.index(link)
+            np.testing.assert_allclose(at, own.positions[k, i], rtol=0, atol=FK_TOL)
+            np.testing.assert_allclose(axes, _quaternion_matrix(*own.quaternions[k, i]), rtol=0,
+                                       atol=FK_TOL)
+            checked += 1
+    # every link of the emitted URDF is a frame of the system's, each checked at n samples
+    assert checked == n * len(links)
+
+
+def test_efforts_are_the_inputs_when_every_joint_has_one(robot):
+    system, scene, _path = robot
+    typestore = load_interfaces().typestore
+    d, nc = len(system.coordinate_names), len(system.constraints)
+    messages = SceneMessages(typestore, scene, list(system.defaults.values()), d)
+    samples = np.zeros((1, 2 + 2 * d + nc))
+    inputs = np.arange(1.0, 1 + len(system.u.names()))
+    _stamps, out = messages.messages(samples, 0, inputs=inputs)
+    js = typestore.deserialize_cdr(out[JOINT_STATES_TOPIC][0], "sensor_msgs/msg/JointState")
+    named = dict(zip(system.u.names(), inputs))
+    want = [named.get(system.robot.inputs.get(j)) for j in js.name]
+    if None in want:  # (a locked joint has no effort input: efforts are left empty)
+        assert len(js.effort) == 0
+    else:
+        assert list(js.effort) == want
