@@ -106,6 +106,10 @@ class SceneMessages:
             for name in scene.contact_names:
                 self._markers.append((f"{name}_force", ARROW, self.world, 2))
         self._clock = compile_layout(typestore, SCENE_TOPICS["/clock"][0], {})
+        #: the topics this scene publishes (:data:`SCENE_TOPICS`; /joint_states for a tree
+        #: only), as ``SCENE_TOPICS`` maps them
+        self.topics: dict[str, tuple[str, dict[str, int]]] = {
+            t: v for t, v in SCENE_TOPICS.items() if self.tree or t != JOINT_STATES_TOPIC}
         #: the frames on /tf
         self.tf_frames: tuple[str, ...] = (str(scene.base),) if self.tree else scene.frames
         tf_strings = {}

@@ -47,7 +47,8 @@ from biped_opt.systems.rotations import rotation_rpy, rotation_x, rotation_y, ro
 
 __all__ = ["Robot", "Link", "Joint", "Inertial", "Shape", "Geometry", "Pose", "Limit", "Mimic",
            "Imported", "UrdfError", "parse_urdf", "read_urdf", "system_from_urdf",
-           "description_urdf", "base_link", "tree_facts", "MAX_BYTES", "MAX_ELEMENTS", "BASE", "OPTIONS"]
+           "description_urdf", "base_link", "tree_facts", "MAX_BYTES", "MAX_ELEMENTS", "BASE",
+           "OPTIONS"]
 
 #: the largest URDF text read (bytes): a humanoid's is ~110 kB
 MAX_BYTES = 4_000_000

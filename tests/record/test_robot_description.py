@@ -98,7 +98,8 @@ def _inertials(root: ET.Element) -> dict[str, list[float] | None]:
             continue
         t = i.find("inertia")
         out[link.get("name")] = [
-            *_numbers(i.find("origin"), "xyz", "0 0 0"), *_numbers(i.find("origin"), "rpy", "0 0 0"),
+            *_numbers(i.find("origin"), "xyz", "0 0 0"),
+            *_numbers(i.find("origin"), "rpy", "0 0 0"),
             float(i.find("mass").get("value")),
             *(float(t.get(k, "0")) for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"))]
     return out
