@@ -236,3 +236,41 @@ def test_efforts_are_the_inputs_when_every_joint_has_one(robot):
         assert len(js.effort) == 0
     else:
         assert list(js.effort) == want
+
+
+def test_a_recording_carries_the_joint_states_that_mcap_ros2_decodes(robot, tmp_path):
+    """MCAP.md's scene topics for a tree of joints: /joint_states among them, its schema
+    sensor_msgs/msg/JointState, decoded by mcap-ros2-support (not the project's reader) to the
+    values the system's coordinates give."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    from biped_opt.record import SweepWriter
+
+    system, scene, _path = robot
+    d, nc = len(system.coordinate_names), len(system.constraints)
+    path = tmp_path / "tree.mcap"
+    rng = np.random.default_rng(36)
+    samples = np.zeros((4, 2 + 2 * d + nc))
+    samples[:, 0] = np.arange(4) * 0.02
+    samples[:, 1 : 1 + 2 * d] = rng.uniform(-1.0, 1.0, (4, 2 * d))
+    with SweepWriter(path, topics=("/biped/sweep",)
+                     + tuple(SceneMessages(load_interfaces().typestore, scene, [], d).topics)
+                     ) as writer:
+        messages = SceneMessages(writer.typestore, scene, list(system.defaults.values()), d)
+        writer.write_robot_description(messages)
+        assert writer.write_scene(messages, samples=samples, stamp_offset_ns=0) == 4
+    got: dict[str, list] = {}
+    with open(path, "rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        for schema, channel, _message, msg in reader.iter_decoded_messages():
+            got.setdefault(channel.topic, []).append((schema.name, msg))
+    assert {name for name, _m in got[JOINT_STATES_TOPIC]} == {"sensor_msgs/msg/JointState"}
+    positions, velocities = scene.joint_states(samples[:, 1 : 1 + d], samples[:, 1 + d : 1 + 2 * d])
+    for k, (_name, msg) in enumerate(got[JOINT_STATES_TOPIC]):
+        assert list(msg.name) == list(scene.joint_names)
+        # the same doubles, serialized and decoded: equal
+        assert list(msg.position) == list(positions[k]) and list(msg.velocity) == \
+            list(velocities[k])
+    ((_name, description),) = got["/robot_description"]
+    assert description.data == scene.urdf([], samples[:1, 1 : 1 + d])
