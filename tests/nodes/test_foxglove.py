@@ -368,7 +368,7 @@ def test_other_subprotocols_get_a_400_that_names_the_accepted_ones(bridged, offe
 
 def test_a_request_head_without_end_is_cut_off_at_its_bound(bridged):
     """A peer that sends header lines for ever is dropped after HEAD_MAX bytes, unanswered."""
-    from biped_opt.nodes.ws_front import HEAD_MAX
+    from biped_opt.nodes.ws_front import HANDSHAKE_S, HEAD_MAX
 
     with socket.create_connection(("127.0.0.1", bridged.bridge.port), timeout=10.0) as sock:
         sock.sendall(b"GET / HTTP/1.1\r\n")
@@ -379,11 +379,38 @@ def test_a_request_head_without_end_is_cut_off_at_its_bound(bridged):
                 sent += 1012
         except OSError:
             pass  # (the front closed the connection while we were still sending)
+        sock.settimeout(HANDSHAKE_S / 2)  # (a front without the bound would wait for more)
         try:
             answer = sock.recv(1024)
-        except OSError:
+        except ConnectionResetError:  # (closed with our bytes unread: a reset)
             answer = b""
     assert answer == b""  # closed, nothing said
+
+
+def test_connections_beyond_the_bound_are_closed_at_once(bridged, monkeypatch):
+    """Peers that open connections and say nothing hold at most MAX_CONNECTIONS places (each
+    for at most HANDSHAKE_S); one more is closed unanswered, and a place freed serves again."""
+    from biped_opt.nodes import ws_front
+
+    monkeypatch.setattr(ws_front, "MAX_CONNECTIONS", 2)
+    front = bridged.bridge._front
+    idle = [socket.create_connection(("127.0.0.1", bridged.bridge.port), timeout=10.0)
+            for _ in range(4)]  # (2 x MAX_CONNECTIONS sockets: the bound counts both ends)
+    try:
+        deadline = time.monotonic() + 10.0
+        while front.connections < 4 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert front.connections >= 4
+        # (at once: well before the HANDSHAKE_S an admitted connection would be given)
+        with socket.create_connection(("127.0.0.1", bridged.bridge.port), timeout=2.0) as extra:
+            assert extra.recv(1024) == b""  # closed, nothing said
+    finally:
+        for sock in idle:
+            sock.close()
+    deadline = time.monotonic() + 10.0
+    while front.connections and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert _handshake(bridged.bridge.port, ["foxglove.sdk.v1"])[0] == 101
 
 
 @needs_client
