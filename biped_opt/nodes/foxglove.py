@@ -8,10 +8,11 @@ Serves the topics of the ROS graph over the Foxglove WebSocket protocol with the
 app, foxglove-sdk clients, ``foxglove_bridge`` 3.x) or ``foxglove.websocket.v1`` (clients of
 ``@foxglove/ws-protocol``): :class:`~biped_opt.nodes.ws_front.SubprotocolFront` listens on
 ``HOST:PORT``, passes either through to the SDK's server (on a loopback port of its own) and
-answers any other request with HTTP 400 naming the two. Every few seconds (``discovery_period``) the node lists the graph's topics
-and bridges each one whose type the project's interfaces know (``biped_opt_interfaces`` and the
-ROS 2 Humble messages rosbags knows: ``std_msgs``, ``geometry_msgs``, ``tf2_msgs``,
-``visualization_msgs``, ``rosgraph_msgs``...):
+answers any other request with HTTP 400 naming the two. Every few seconds
+(``discovery_period``) the node lists the graph's topics and bridges each one whose type the
+project's interfaces know (``biped_opt_interfaces`` and the ROS 2 Humble messages rosbags
+knows: ``std_msgs``, ``geometry_msgs``, ``tf2_msgs``, ``visualization_msgs``,
+``rosgraph_msgs``...):
 
 - a Foxglove channel per topic with schema encoding ``ros2msg`` (the ``.msg`` text followed by
   each nested type after a line of ``=`` and ``MSG: pkg/Name``, as in our MCAP files) and

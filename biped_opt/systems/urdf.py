@@ -1154,14 +1154,13 @@ def description_urdf(imported: Imported, name: str) -> str:
     robot = imported.robot
     top = base_link(imported)
     below = {top}
-    joints: list[Joint] = []
     stack = [top]
     children: dict[str, list[Joint]] = {}
     for j in robot.joints:
         children.setdefault(j.parent, []).append(j)
     while stack:
-        link = stack.pop(0)
-        for j in children.get(link, []):
+        parent = stack.pop(0)
+        for j in children.get(parent, []):
             below.add(j.child)
             stack.append(j.child)
     joints = [j for j in robot.joints if j.parent in below]
