@@ -70,7 +70,8 @@ class Scene:
     """The drawable parts of a compiled system (see the module docstring)."""
 
     def __init__(self, system: str, facts: dict[str, Any],
-                 values: Callable[[Array, Array], Array], constraints: tuple[str, ...]) -> None:
+                 values: Callable[[Array, Array], Array], constraints: tuple[str, ...],
+                 tree_values: Callable[[Array], Array] | None = None) -> None:
         self.system = system
         #: the fixed frame (the description's name for it, kept in the facts: reading it from
         #: the description would import SymPy on a cached start)
@@ -86,6 +87,10 @@ class Scene:
         #: that is not one
         self.tree: dict[str, Any] | None = facts.get("tree")
         self._values = values
+        #: a tree of bodies' URDF numbers at given parameters (codegen/tree.py)
+        self._tree_values = tree_values
+        if self.tree is not None and "urdf" not in self.tree and tree_values is None:
+            self.tree = None  # (a template without its numbers: shown as frames instead)
         if self.tree is not None:
             joints = self.tree["joints"]
             #: the joints on ``/joint_states``, their coordinates' indices (-1: locked), their
@@ -153,7 +158,11 @@ class Scene:
         """The URDF of the system (see the module docstring); shape sizes for ``parameters``,
         ``q`` any configuration (sizes do not depend on it)."""
         if self.tree is not None:
-            return str(self.tree["urdf"])
+            if "urdf" in self.tree:
+                return str(self.tree["urdf"])
+            assert self._tree_values is not None
+            numbers = self._tree_values(np.asarray(parameters, dtype=np.float64))
+            return str(self.tree["urdf_template"]).format(*(repr(float(v)) for v in numbers))
         state = self.evaluate(q, parameters)
         out = ['<?xml version="1.0"?>', f"<robot name={quoteattr(self.system)}>",
                f"  <link name={quoteattr(self.world)}/>"]

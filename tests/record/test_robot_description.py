@@ -55,7 +55,8 @@ FK_TOL = 1e-12
 def _scene(system) -> Scene:
     facts = _scene_for(system)
     module = _import(facts["module"], cache_dir() / f"{facts['module']}.py")
-    return Scene(system.name, facts, module.scene_values, tuple(system.constraints))
+    return Scene(system.name, facts, module.scene_values, tuple(system.constraints),
+                 getattr(module, "tree_values", None))
 
 
 @pytest.fixture(scope="module", params=list(CASES))
@@ -348,3 +349,103 @@ def test_a_simulator_serving_a_urdf_robot_publishes_its_tree(domain_id):
     first = got[MARKERS_TOPIC][0].markers[0]
     assert first.action == 3 and first.ns == ""  # DELETEALL, then the scene
     assert all(m.action == 0 for a in got[MARKERS_TOPIC] for m in a.markers[1:])
+
+
+# -- a system of bodies declared with System.body: the library's quadruped ----------------------
+
+@pytest.fixture(scope="module")
+def quadruped_scene():
+    from biped_opt.systems.library.quadruped import quadruped
+
+    system = quadruped()
+    return system, _scene(system)
+
+
+#: the quadruped's parameters changed from their defaults (lengths, masses, the hips' spread):
+#: the URDF follows them without a recompile
+CHANGED = {"L": 0.2, "w": 0.12, "l1": 0.25, "l2": 0.18, "m_trunk": 4.0, "m_thigh": 0.7,
+           "m_shank": 0.2, "h_trunk": 0.1, "r_leg": 0.03}
+
+
+@pytest.mark.parametrize("changed", [False, True])
+def test_the_quadruped_s_urdf_places_its_frames_and_has_its_mass_matrix(quadruped_scene,
+                                                                        changed):
+    """Its bodies as links on hinges (codegen/tree.py): Pinocchio's model of the emitted URDF,
+    placed by /tf and /joint_states, puts the quadruped's declared frames (each trunk half's
+    centre, L/2 along its x axis from the spine; each foot l2 below its knee) where the
+    system's own scene code does, to 1e-12, and its mass matrix (CRBA) is the one the
+    description's bodies give (NumericSystem), to 1e-12 relative, at the defaults and at changed
+    parameters."""
+    from biped_opt.systems.derive import derive
+
+    system, scene = quadruped_scene
+    names = list(system.defaults)
+    values = dict(system.defaults)
+    if changed:
+        values.update(CHANGED)
+    parameters = [values[k] for k in names]
+    d, nc = len(system.coordinate_names), len(system.constraints)
+    typestore = load_interfaces().typestore
+    messages = SceneMessages(typestore, scene, parameters, d)
+    assert scene.base == "front_trunk" and messages.tf_frames == ("front_trunk",)
+    rng = np.random.default_rng(37)
+    n = 4
+    samples = np.zeros((n, 2 + 2 * d + nc))
+    samples[:, 0] = np.arange(n) * 0.01
+    samples[:, 1 : 1 + 2 * d] = rng.uniform(-1.0, 1.0, (n, 2 * d))
+    _stamps, out = messages.messages(samples, 0)
+    urdf = scene.urdf(parameters, samples[:1, 1 : 1 + d])
+    assert "{" not in urdf
+    model = pin.buildModelFromXML(urdf)
+    data = model.createData()
+    own = scene.evaluate(samples[:, 1 : 1 + d], parameters)
+    numeric = derive(system).numeric(**values)
+    L, l2 = values["L"], values["l2"]
+    # (the system's frames: each a link's frame moved by a fixed offset in the link's axes)
+    frames = {"base_link": ("front_trunk", (L / 2, 0.0, 0.0), True),
+              "rear_link": ("rear_trunk", (-L / 2, 0.0, 0.0), True),
+              **{f"{leg}_foot": (f"{leg}_shank", (0.0, 0.0, -l2), False)
+                 for leg in ("fl", "fr", "rl", "rr")}}
+    for k in range(n):
+        js = typestore.deserialize_cdr(out[JOINT_STATES_TOPIC][k], "sensor_msgs/msg/JointState")
+        (tf,) = typestore.deserialize_cdr(out["/tf"][k], "tf2_msgs/msg/TFMessage").transforms
+        position = dict(zip(js.name, js.position))
+        qp = pin.neutral(model)
+        for i in range(1, model.njoints):
+            joint = model.joints[i]
+            value = position[model.names[i]]
+            qp[joint.idx_q : joint.idx_q + 2] = np.cos(value), np.sin(value)  # (continuous)
+        pin.framesForwardKinematics(model, data, qp)
+        r = tf.transform.rotation
+        R0 = _quaternion_matrix(r.x, r.y, r.z, r.w)
+        p0 = np.array([tf.transform.translation.x, tf.transform.translation.y,
+                       tf.transform.translation.z])
+        for frame, (link, offset, oriented) in frames.items():
+            placement = data.oMf[model.getFrameId(link, pin.BODY)]
+            at = p0 + R0 @ (placement.translation + placement.rotation @ np.array(offset))
+            i = scene.frames.index(frame)
+            np.testing.assert_allclose(at, own.positions[k, i], rtol=0, atol=FK_TOL)
+            if oriented:
+                np.testing.assert_allclose(R0 @ placement.rotation,
+                                           _quaternion_matrix(*own.quaternions[k, i]),
+                                           rtol=0, atol=FK_TOL)
+        # M: Pinocchio's with a free base in the quadruped's coordinates (x, y, z, yaw, pitch,
+        # roll: a translation, then hinges about z, y, x) and hinges in its order
+        root = pin.JointModelComposite(pin.JointModelTranslation())
+        for hinge in (pin.JointModelRZ(), pin.JointModelRY(), pin.JointModelRX()):
+            root.addJoint(hinge)
+        free = pin.buildModelFromXML(urdf, root)
+        fdata = free.createData()
+        q = samples[k, 1 : 1 + d]
+        qf = pin.neutral(free)
+        qf[:6] = q[:6]
+        order = list(range(6))
+        for i in range(2, free.njoints):  # (joint 1 is the root)
+            joint = free.joints[i]
+            c = system.coordinate_names.index(free.names[i])
+            qf[joint.idx_q : joint.idx_q + 2] = np.cos(q[c]), np.sin(q[c])
+            order.append(c)
+        M = pin.crba(free, fdata, qf)
+        M = np.triu(M) + np.triu(M, 1).T
+        ours = numeric.mass_matrix(q)[np.ix_(order, order)]
+        assert np.abs(M - ours).max() <= 1e-12 * np.abs(ours).max()
