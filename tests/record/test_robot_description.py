@@ -166,16 +166,22 @@ def _quaternion_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
 
 
+def _random_samples(d: int, nc: int, n: int, seed: int) -> np.ndarray:
+    """``n`` sample rows (t, q, q', mode, lambda) with q and q' uniform in [-1, 1]."""
+    rng = np.random.default_rng(seed)
+    samples = np.zeros((n, 2 + 2 * d + nc))
+    samples[:, 0] = np.arange(n) * 0.01
+    samples[:, 1 : 1 + 2 * d] = rng.uniform(-1.0, 1.0, (n, 2 * d))
+    return samples
+
+
 def test_links_placed_from_joint_states_and_tf_are_the_system_s_frames(robot):
     system, scene, _path = robot
     typestore = load_interfaces().typestore
     d, nc = len(system.coordinate_names), len(system.constraints)
     messages = SceneMessages(typestore, scene, list(system.defaults.values()), d)
-    rng = np.random.default_rng(35)
     n = 5
-    samples = np.zeros((n, 2 + 2 * d + nc))
-    samples[:, 0] = np.arange(n) * 0.01
-    samples[:, 1 : 1 + 2 * d] = rng.uniform(-1.0, 1.0, (n, 2 * d))
+    samples = _random_samples(d, nc, n, 35)
     _stamps, out = messages.messages(samples, 0)
     assert set(out) == {"/clock", "/tf", MARKERS_TOPIC, JOINT_STATES_TOPIC}
     urdf = scene.urdf([], samples[:1, 1 : 1 + d])
@@ -388,11 +394,8 @@ def test_the_quadruped_s_urdf_places_its_frames_and_has_its_mass_matrix(quadrupe
     typestore = load_interfaces().typestore
     messages = SceneMessages(typestore, scene, parameters, d)
     assert scene.base == "front_trunk" and messages.tf_frames == ("front_trunk",)
-    rng = np.random.default_rng(37)
     n = 4
-    samples = np.zeros((n, 2 + 2 * d + nc))
-    samples[:, 0] = np.arange(n) * 0.01
-    samples[:, 1 : 1 + 2 * d] = rng.uniform(-1.0, 1.0, (n, 2 * d))
+    samples = _random_samples(d, nc, n, 37)
     _stamps, out = messages.messages(samples, 0)
     urdf = scene.urdf(parameters, samples[:1, 1 : 1 + d])
     assert "{" not in urdf
