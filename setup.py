@@ -25,7 +25,9 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{package_name}"]),
         (f"share/{package_name}", ["package.xml"]),
         (f"share/{package_name}/launch", sorted(glob("launch/*_launch.py"))),
-        (f"share/{package_name}/config", sorted(glob("config/*.yaml"))),
+        # the node parameters, the RViz2 view and the Foxglove layout
+        (f"share/{package_name}/config",
+         sorted(glob("config/*.yaml") + glob("config/*.rviz") + glob("config/*.json"))),
         # the interface definitions the built-in DDS backend generates its types from
         (f"share/{package_name}/msg_defs", ["msg_defs/package.xml", "msg_defs/CMakeLists.txt"]),
         (f"share/{package_name}/msg_defs/msg", sorted(glob("msg_defs/msg/*.msg"))),

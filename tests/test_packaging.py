@@ -82,7 +82,9 @@ def test_data_files_exist_and_cover_the_share_directory(setup_kwargs):
     assert (ROOT / "resource" / PKG).is_file()
     assert installed["package.xml"] == f"share/{PKG}"
     expected = [p for p in (ROOT / "launch").glob("*.py") if not p.name.startswith("_")]
-    expected += list((ROOT / "config").glob("*.yaml"))
+    for pattern in ("*.yaml", "*.rviz", "*.json"):  # parameters, RViz2 view, Foxglove layout
+        expected += list((ROOT / "config").glob(pattern))
+    assert (ROOT / "config" / "biped_opt.rviz").is_file()
     assert expected, "no launch files or config YAML found"
     for path in expected:
         rel = path.relative_to(ROOT).as_posix()
@@ -213,6 +215,7 @@ def test_colcon_install_layout(colcon_install):
     assert marker.is_file()
     share = prefix / "share" / PKG
     for rel in ("package.xml", "launch/biped_launch.py", "config/biped.yaml",
+                "config/biped_opt.rviz", "config/foxglove_layout.json",
                 "msg_defs/package.xml", "msg_defs/CMakeLists.txt"):
         assert (share / rel).is_file(), rel
     for path in (ROOT / "msg_defs").rglob("*.*"):

@@ -42,14 +42,21 @@ class _ScenePrinter(NumPyPrinter):
 
 def scene_facts(system: System) -> dict[str, Any]:
     """What a start needs to read ``scene_values``' columns: frame names, shapes (name, kind,
-    frame, colour, number of points) and the contact points' constraint indices."""
+    frame, colour, number of points), the contact points' constraint indices and, for a
+    system imported from a URDF, its tree of joints (:func:`biped_opt.systems.urdf.tree_facts`:
+    what ``/robot_description`` and ``/joint_states`` carry)."""
+    from biped_opt.codegen.joint_tree import tree_of
+    from biped_opt.systems.urdf import tree_facts
+
     names = list(system.constraints)
+    bodies = tree_of(system)
     return {
         "world": WORLD,
         "frames": list(system.frames),
         "shapes": [{"name": s.name, "kind": s.kind, "frame": s.frame, "color": list(s.color),
                     "points": len(s.points)} for s in system.shapes.values()],
         "contacts": [names.index(c) for c in system.contact_points],
+        "tree": tree_facts(system) if bodies is None else bodies.facts(),
     }
 
 
@@ -109,4 +116,15 @@ def render_scene(system: System) -> str:
     for k, e in enumerate(cols):
         lines.append(f"    out[:, {k}] = {printer.doprint(e)}")
     lines.append("    return out")
+    from biped_opt.codegen.joint_tree import tree_of
+
+    tree = tree_of(system)
+    if tree is not None:  # (a tree of bodies: its URDF's numbers, codegen/joint_tree.py)
+        lines += ["", "", "def tree_values(p):",
+                  f'    """The {len(tree.values)} numbers of the URDF template at the parameters '
+                  'p."""']
+        for k, sym in enumerate(system.p):
+            lines.append(f"    {names[sym]} = p[{k}]")
+        body = ", ".join(printer.doprint(e) for e in tree.values)
+        lines.append(f"    return numpy.array([{body}], dtype=float)")
     return "\n".join(lines) + "\n"

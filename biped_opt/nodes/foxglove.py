@@ -4,10 +4,15 @@ The specification is ROS.md, "Live view in Foxglove".
 
 Serves the topics of the ROS graph over the Foxglove WebSocket protocol with the official
 ``foxglove-sdk`` server: open Foxglove, "Open connection", "Foxglove WebSocket",
-``ws://HOST:PORT``. Every few seconds (``discovery_period``) the node lists the graph's topics
-and bridges each one whose type the project's interfaces know (``biped_opt_interfaces`` and the
-ROS 2 Humble messages rosbags knows: ``std_msgs``, ``geometry_msgs``, ``tf2_msgs``,
-``visualization_msgs``, ``rosgraph_msgs``...):
+``ws://HOST:PORT``. A client offers the WebSocket subprotocol ``foxglove.sdk.v1`` (the Foxglove
+app, foxglove-sdk clients, ``foxglove_bridge`` 3.x) or ``foxglove.websocket.v1`` (clients of
+``@foxglove/ws-protocol``): :class:`~biped_opt.nodes.ws_front.SubprotocolFront` listens on
+``HOST:PORT``, passes either through to the SDK's server (on a loopback port of its own) and
+answers any other request with HTTP 400 naming the two. Every few seconds
+(``discovery_period``) the node lists the graph's topics and bridges each one whose type the
+project's interfaces know (``biped_opt_interfaces`` and the ROS 2 Humble messages rosbags
+knows: ``std_msgs``, ``geometry_msgs``, ``tf2_msgs``, ``visualization_msgs``,
+``rosgraph_msgs``...):
 
 - a Foxglove channel per topic with schema encoding ``ros2msg`` (the ``.msg`` text followed by
   each nested type after a line of ``=`` and ``MSG: pkg/Name``, as in our MCAP files) and
@@ -76,6 +81,7 @@ from biped_opt import ros
 from biped_opt.errors import InvalidParameterError, quoted
 from biped_opt.nodes.parameters import float_parameter, int_parameter, string_list_parameter
 from biped_opt.nodes.run import announce_ready, run_node
+from biped_opt.nodes.ws_front import SubprotocolFront
 from biped_opt.ros.interfaces import InterfaceError, load_interfaces
 
 __all__ = ["FoxgloveNode", "main", "MAX_CHANNELS", "BACKLOG", "QUEUE_DEPTH", "LATCHED_MESSAGES",
@@ -230,6 +236,7 @@ class FoxgloveNode(ros.Node):
         self._lock = threading.Lock()
         self._bridged: dict[str, _Bridged] = {}
         self._server: Any = None
+        self._front: SubprotocolFront | None = None
         self.declare_parameter("port", 8765)
         self.declare_parameter("host", "127.0.0.1")
         self.declare_parameter("topics", [])
@@ -266,8 +273,9 @@ class FoxgloveNode(ros.Node):
         self._skipped: set[str] = set()  # topics said once not to be served
         self._listener = _Listener()
         self._server = self._start_server(host, port)
+        assert self._front is not None
         #: the port the server listens on (the one chosen when ``port`` is 0)
-        self.port: int = int(self._server.port)
+        self.port: int = int(self._front.port)
         self.url = f"ws://{host}:{self.port}"
         self._discover()
         self._discovery_timer = self.create_timer(period, self._discover)
@@ -275,10 +283,12 @@ class FoxgloveNode(ros.Node):
         announce_ready(self, serves=(f"{self.url} (Foxglove WebSocket)",))
 
     def _start_server(self, host: str, port: int) -> Any:
+        """The SDK's server on a loopback port of its own, behind :class:`SubprotocolFront` on
+        ``host:port`` (the subprotocols accepted, ROS.md Sec. 7)."""
         self._context = foxglove.Context()  # (this node's channels only)
         try:
-            return foxglove.start_server(
-                name="biped_opt", host=host, port=port, capabilities=[],
+            server = foxglove.start_server(
+                name="biped_opt", host="127.0.0.1", port=0, capabilities=[],
                 server_listener=self._listener, supported_encodings=[], services=None,
                 context=self._context,
                 message_backlog_size=backlog(self.client_queue_bytes, self.max_message_bytes))
@@ -286,7 +296,15 @@ class FoxgloveNode(ros.Node):
             text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             text = text.removeprefix("FoxgloveError: ")
             raise InvalidParameterError(
-                f"host, port: cannot listen on {host}:{port}: {text}") from None
+                f"host, port: cannot listen on 127.0.0.1 (the server behind the front): "
+                f"{text}") from None
+        try:
+            self._front = SubprotocolFront(host, port, int(server.port))
+        except OSError as exc:
+            server.stop()
+            raise InvalidParameterError(
+                f"host, port: cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+        return server
 
     # -- discovery ------------------------------------------------------------------------
     def bridged(self) -> dict[str, str]:
@@ -423,6 +441,9 @@ class FoxgloveNode(ros.Node):
 
     # -- lifecycle ------------------------------------------------------------------------
     def destroy_node(self) -> None:
+        front, self._front = self._front, None
+        if front is not None:
+            front.stop()
         server, self._server = self._server, None
         if server is not None:
             server.stop()

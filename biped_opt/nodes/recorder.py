@@ -65,7 +65,7 @@ from biped_opt.paper.biped import FIXED_INPUTS, parse_maneuver
 from biped_opt.paper.problems import OptimalControlProblem, get_problem
 from biped_opt.piecewise import theta_grid
 from biped_opt.record import SweepWriter
-from biped_opt.record.scene import SCENE_TOPICS, SceneMessages
+from biped_opt.record.scene import SceneMessages
 from biped_opt.record.writer import BIPED_TOPICS, SYSTEM_TOPICS
 from biped_opt.ros.interfaces import load_interfaces
 
@@ -306,7 +306,7 @@ class RecorderNode(ros.Node):
         }
         scene = self._scene("biped")
         writer = SweepWriter(req.output, metadata={k: str(v) for k, v in metadata.items()},
-                             topics=BIPED_TOPICS + (tuple(SCENE_TOPICS) if scene else ()))
+                             topics=BIPED_TOPICS + (tuple(scene.topics) if scene else ()))
         return self._sweep(writer, req, grid, lambda th, offset: self._record_point(
             writer, maneuver, th, req.optimal, fixed, problem, offset, scene), scene)
 
@@ -329,7 +329,7 @@ class RecorderNode(ros.Node):
         scene = self._scene(req.system.strip())
         writer = SweepWriter(req.output, metadata={k: str(v) for k, v in metadata.items()},
                              system=info,
-                             topics=SYSTEM_TOPICS + (tuple(SCENE_TOPICS) if scene else ()))
+                             topics=SYSTEM_TOPICS + (tuple(scene.topics) if scene else ()))
         ndof = len(info["coordinates"])
         return self._sweep(writer, req, grid, lambda s, offset: self._record_system_point(
             writer, req, s, inputs, ndof, offset, scene), scene)

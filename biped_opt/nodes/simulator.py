@@ -177,12 +177,12 @@ class SimulatorNode(ros.Node):
             len(compiled.coordinates))
         self._scene_pubs: dict[str, tuple[Any, type]] = {}
         if self.scene is not None:
-            for topic, (typename, _) in SCENE_TOPICS.items():
+            for topic, (typename, _) in self.scene.topics.items():
                 cls = ros.message_type(typename)
                 assert cls is not None, typename
                 self._scene_pubs[topic] = (
                     self.create_publisher(cls, topic, scene_qos(topic)), cls)
-            topics += tuple(SCENE_TOPICS)
+            topics += tuple(self.scene.topics)
             pub, cls = self._scene_pubs["/robot_description"]
             pub.publish(ros.from_cdr(cls, self.scene.robot_description()))
         #: the simulated clock: where the next run starts [ns]

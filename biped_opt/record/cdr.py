@@ -84,7 +84,8 @@ def compile_layout(typestore: Any, typename: str, strings: dict[str, str],
                    empty_rest: bool = False) -> FixedLayout:
     """Layout of ``typename`` with the string fields set to ``strings`` (dotted path -> text)
     and the sequences to ``lengths`` (dotted path -> number of elements). The elements of a
-    sequence of messages are paths ``<sequence>.<index>.<field>``. ``empty_rest``: strings and
+    sequence of messages are paths ``<sequence>.<index>.<field>``, those of a sequence of strings
+    (given in ``lengths``) ``<sequence>.<index>`` in ``strings``. ``empty_rest``: strings and
     sequences not given are empty (a message with unused optional parts, such as a Marker's
     texture); otherwise each must be given."""
     lengths = lengths or {}
@@ -129,6 +130,19 @@ def compile_layout(typestore: Any, typename: str, strings: dict[str, str],
                 offset += 4
                 for i in range(count):
                     offset = walk(spec[0][1], f"{path}.{i}.", offset)
+            elif kind == "SEQUENCE" and getattr(spec[0][0], "name", spec[0][0]) == "BASE" \
+                    and spec[0][1][0] == "string" and path in lengths:
+                count = int(lengths[path])  # strings fixed once: length, then each string
+                offset = _align(offset, 4)
+                constant[offset] = count.to_bytes(4, "little")
+                offset += 4
+                for i in range(count):
+                    if f"{path}.{i}" not in strings:
+                        raise LayoutError(f"{typename}: string {path}.{i} needs a value")
+                    data = strings[f"{path}.{i}"].encode() + b"\x00"
+                    offset = _align(offset, 4)
+                    constant[offset] = len(data).to_bytes(4, "little") + data
+                    offset += 4 + len(data)
             elif kind == "ARRAY" or path in lengths or empty_rest:
                 what = "array" if kind == "ARRAY" else "sequence"
                 (elem_kind, elem_spec), count = spec

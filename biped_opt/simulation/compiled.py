@@ -412,7 +412,7 @@ class CompiledSystem:
             with _LOCK:
                 module = _import(name, cache_dir() / f"{name}.py")
             self._scene = Scene(self._name, self._scene_facts, module.scene_values,
-                                self._constraints)
+                                self._constraints, getattr(module, "tree_values", None))
         return self._scene
 
     @property

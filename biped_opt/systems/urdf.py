@@ -36,6 +36,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+from xml.sax.saxutils import quoteattr
 
 import numpy as np
 import numpy.typing as npt
@@ -47,7 +48,8 @@ from biped_opt.systems.rotations import rotation_rpy, rotation_x, rotation_y, ro
 
 __all__ = ["Robot", "Link", "Joint", "Inertial", "Shape", "Geometry", "Pose", "Limit", "Mimic",
            "Imported", "UrdfError", "parse_urdf", "read_urdf", "system_from_urdf",
-           "MAX_BYTES", "MAX_ELEMENTS", "BASE", "OPTIONS"]
+           "description_urdf", "base_link", "tree_facts", "MAX_BYTES", "MAX_ELEMENTS", "BASE",
+           "OPTIONS"]
 
 #: the largest URDF text read (bytes): a humanoid's is ~110 kB
 MAX_BYTES = 4_000_000
@@ -1108,3 +1110,142 @@ def from_file_arguments(path: Path, arguments: Mapping[str, Any]) -> System:
 
 
 IMPORTERS["urdf"] = system_from_urdf  # (System.from_urdf)
+
+
+# -- the robot description out ----------------------------------------------------------------
+
+def _fmt(values: Iterable[float]) -> str:
+    """Numbers as URDF attributes, each the shortest text that reads back as the same double."""
+    return " ".join(repr(float(v)) for v in values)
+
+
+def _origin(pose: Pose) -> str:
+    return f'<origin xyz="{_fmt(pose.xyz)}" rpy="{_fmt(pose.rpy)}"/>'
+
+
+def _geometry(g: Geometry) -> str | None:
+    if g.kind == "box":
+        return f'<box size="{_fmt(g.size)}"/>'
+    if g.kind == "sphere":
+        return f'<sphere radius="{_fmt(g.size)}"/>'
+    if g.kind == "cylinder":
+        return f'<cylinder radius="{_fmt(g.size[:1])}" length="{_fmt(g.size[1:])}"/>'
+    return None  # (a mesh names a file: left out, see description_urdf)
+
+
+def base_link(imported: Imported) -> str:
+    """The link whose pose in the world goes on ``/tf``: the root link, or, when the URDF's root
+    is ``world``, the link its one joint carries."""
+    robot = imported.robot
+    if robot.root != "world":
+        return robot.root
+    return next(j.child for j in robot.joints if j.parent == "world")
+
+
+def description_urdf(imported: Imported, name: str) -> str:
+    """The robot as a URDF again, for ``/robot_description`` (ROS.md Sec. 6): every link from
+    :func:`base_link` down with its inertial as read, its box, sphere and cylinder collisions,
+    and visuals (its box, sphere and cylinder visuals, else its collisions); every joint below
+    it with its type, origin, axis, limits and dynamics as read, and its mimic where the
+    importer made it a follower (a locked joint keeps its type: its value is on
+    ``/joint_states``). Left out: the link ``world`` and its joint (the base's pose is on
+    ``/tf``), meshes (they name files a viewer would open), materials. Numbers are written as
+    the shortest text that reads back as the same double, so the kinematics and inertias that
+    come back are the ones that went in."""
+    robot = imported.robot
+    top = base_link(imported)
+    below = {top}
+    stack = [top]
+    children: dict[str, list[Joint]] = {}
+    for j in robot.joints:
+        children.setdefault(j.parent, []).append(j)
+    while stack:
+        parent = stack.pop(0)
+        for j in children.get(parent, []):
+            below.add(j.child)
+            stack.append(j.child)
+    joints = [j for j in robot.joints if j.parent in below]
+    out = ['<?xml version="1.0"?>', f"<robot name={quoteattr(name)}>"]
+    for link in robot.links:
+        if link.name not in below:
+            continue
+        out.append(f"  <link name={quoteattr(link.name)}>")
+        if link.inertial is not None:
+            i = link.inertial
+            xx, xy, xz, yy, yz, zz = (repr(float(v)) for v in i.inertia)
+            out += ["    <inertial>", f"      {_origin(i.origin)}",
+                    f'      <mass value="{_fmt([i.mass])}"/>',
+                    f'      <inertia ixx="{xx}" ixy="{xy}" ixz="{xz}" iyy="{yy}" iyz="{yz}" '
+                    f'izz="{zz}"/>', "    </inertial>"]
+        collisions = [(s, g) for s in link.collisions if (g := _geometry(s.geometry))]
+        visuals = [(s, g) for s in link.visuals if (g := _geometry(s.geometry))] or collisions
+        for tag, shapes in (("visual", visuals), ("collision", collisions)):
+            for shape, geometry in shapes:
+                named = f" name={quoteattr(shape.name)}" if shape.name else ""
+                out += [f"    <{tag}{named}>", f"      {_origin(shape.origin)}",
+                        f"      <geometry>{geometry}</geometry>", f"    </{tag}>"]
+        out.append("  </link>")
+    for j in joints:
+        out += [f"  <joint name={quoteattr(j.name)} type={quoteattr(j.kind)}>",
+                f"    {_origin(j.origin)}", f"    <parent link={quoteattr(j.parent)}/>",
+                f"    <child link={quoteattr(j.child)}/>"]
+        if j.kind in MOVING:
+            out.append(f'    <axis xyz="{_fmt(j.axis)}"/>')
+            lim = j.limit
+            values = {"lower": lim.lower, "upper": lim.upper, "effort": lim.effort,
+                      "velocity": lim.velocity}
+            if j.kind == "continuous":
+                values["lower"] = values["upper"] = None
+            if j.kind != "continuous" or lim.effort is not None or lim.velocity is not None:
+                # (URDF requires effort and velocity on a limit: 0 where none was read)
+                values["effort"] = values["effort"] or 0.0
+                values["velocity"] = values["velocity"] or 0.0
+                attrs = " ".join(f'{k}="{_fmt([v])}"' for k, v in values.items()
+                                 if v is not None)
+                out.append(f"    <limit {attrs}/>")
+            if j.damping or j.friction:
+                out.append(f'    <dynamics damping="{_fmt([j.damping])}" '
+                           f'friction="{_fmt([j.friction])}"/>')
+            if j.name in imported.mimic and j.mimic is not None:
+                m = j.mimic
+                out.append(f"    <mimic joint={quoteattr(m.joint)} multiplier="
+                           f'"{_fmt([m.multiplier])}" offset="{_fmt([m.offset])}"/>')
+        out.append("  </joint>")
+    out.append("</robot>")
+    return "\n".join(out) + "\n"
+
+
+def tree_facts(system: System) -> dict[str, Any] | None:
+    """What ``/robot_description``, ``/joint_states`` and ``/tf`` need of a system imported
+    from a URDF, as JSON data a cached start reads without SymPy (None for any other system):
+    the URDF (:func:`description_urdf`), the base link, the indices of the six base
+    coordinates in q (floating base) or the base's fixed pose (x, y, z, roll, pitch, yaw), and
+    per published joint (every revolute, continuous or prismatic joint that is not a follower
+    of a mimic, in the file's order): its name, the index of its coordinate in q (-1: locked)
+    and its value when locked, and the index of its effort among the inputs (-1: none)."""
+    imported = system.robot
+    if not isinstance(imported, Imported):
+        return None
+    robot = imported.robot
+    names = list(system.coordinate_names)
+    inputs = list(system.u.names())
+    top = base_link(imported)
+    if imported.base == "floating":
+        base_q: list[int] | None = [names.index(c) for c in BASE]
+        base_pose = None
+    else:
+        base_q = None
+        joint = next((j for j in robot.joints if j.child == top), None)
+        pose = joint.origin if joint is not None else Pose()
+        base_pose = [*pose.xyz, *pose.rpy]
+    joints = []
+    for j in robot.joints:
+        if j.kind not in MOVING or j.name in imported.mimic:
+            continue
+        coordinate = imported.coordinates.get(j.name)
+        index = names.index(coordinate) if coordinate is not None else -1
+        value = float(imported.locked.get(j.name, 0.0))
+        effort = imported.inputs.get(j.name)
+        joints.append([j.name, index, value, inputs.index(effort) if effort in inputs else -1])
+    return {"urdf": description_urdf(imported, system.name), "base": top,
+            "base_coordinates": base_q, "base_pose": base_pose, "joints": joints}

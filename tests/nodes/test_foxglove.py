@@ -82,9 +82,10 @@ class Client:
     """``client.js`` as a process; its JSON lines gathered by a thread as they come."""
 
     def __init__(self, url: str, counts: dict[str, int], timeout_s: float = 30.0,
-                 try_publish: bool = False) -> None:
+                 try_publish: bool = False, subprotocol: str | None = None) -> None:
         argv = ["node", str(CLIENT), url, "1", str(timeout_s)]
         argv += ["--try-publish"] if try_publish else []
+        argv += [f"--subprotocol={subprotocol}"] if subprotocol else []
         argv += [f"{topic}:{n}" for topic, n in counts.items()]
         self.proc = subprocess.Popen(argv, stdout=subprocess.PIPE,
                                      stderr=subprocess.PIPE, text=True)
@@ -305,6 +306,125 @@ def test_a_client_cannot_publish(bridged):
     assert "/biped/simulate_from_client" not in topics
 
 
+# -- the subprotocols: foxglove.sdk.v1 and its older name ----------------------------------------
+
+def _handshake(port: int, protocols: list[str] | None) -> tuple[int, dict[str, str], bytes]:
+    """A WebSocket upgrade request written by hand (RFC 6455 Sec. 4.1) offering ``protocols``
+    (None: no Sec-WebSocket-Protocol header): the answer's status, headers and what follows
+    them (a 400's body, or the first frames after a 101)."""
+    lines = ["GET / HTTP/1.1", f"Host: 127.0.0.1:{port}", "Upgrade: websocket",
+             "Connection: Upgrade", "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==",
+             "Sec-WebSocket-Version: 13"]
+    if protocols is not None:
+        lines.append(f"Sec-WebSocket-Protocol: {', '.join(protocols)}")
+    with socket.create_connection(("127.0.0.1", port), timeout=10.0) as sock:
+        sock.sendall(("\r\n".join(lines) + "\r\n\r\n").encode())
+        data = b""
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline:
+            head, sep, rest = data.partition(b"\r\n\r\n")
+            if sep and (not head.startswith(b"HTTP/1.1 101") or len(rest) >= 2):
+                if not head.startswith(b"HTTP/1.1 101"):
+                    length = int(dict(
+                        ln.lower().split(": ", 1) for ln in head.decode().split("\r\n")[1:]
+                    ).get("content-length", "0"))
+                    if len(rest) >= length:
+                        break
+                else:
+                    break
+            chunk = sock.recv(65536)
+            if not chunk:
+                break
+            data += chunk
+    head, _sep, rest = data.partition(b"\r\n\r\n")
+    status_line, *header_lines = head.decode("latin-1").split("\r\n")
+    headers = {k.lower(): v for k, v in (ln.split(": ", 1) for ln in header_lines)}
+    return int(status_line.split()[1]), headers, rest
+
+
+@pytest.mark.parametrize("offered", [["foxglove.sdk.v1"], ["foxglove.websocket.v1"],
+                                     ["other", "foxglove.websocket.v1"],
+                                     ["foxglove.websocket.v1", "foxglove.sdk.v1"]])
+def test_either_subprotocol_name_is_answered_with_the_one_offered(bridged, offered):
+    status, headers, rest = _handshake(bridged.bridge.port, offered)
+    assert status == 101, (status, headers, rest)
+    # the answer names a subprotocol the client offered (else a WebSocket client drops it):
+    # the SDK's own name when offered, else the older one
+    want = "foxglove.sdk.v1" if "foxglove.sdk.v1" in offered else "foxglove.websocket.v1"
+    assert headers["sec-websocket-protocol"] == want
+    # then the server speaks: a text frame (opcode 1) whose JSON is serverInfo
+    assert rest[0] & 0x0F == 1, rest[:4]
+
+
+@pytest.mark.parametrize("offered", [None, ["foxglove.websocket.v2"], ["ros1"]])
+def test_other_subprotocols_get_a_400_that_names_the_accepted_ones(bridged, offered):
+    status, headers, body = _handshake(bridged.bridge.port, offered)
+    assert status == 400
+    text = body.decode()
+    assert int(headers["content-length"]) == len(body)
+    assert "foxglove.sdk.v1" in text and "foxglove.websocket.v1" in text
+    assert f"offered: {', '.join(offered) if offered else 'none'}" in text
+
+
+def test_a_request_head_without_end_is_cut_off_at_its_bound(bridged):
+    """A peer that sends header lines for ever is dropped after HEAD_MAX bytes, unanswered."""
+    from biped_opt.nodes.ws_front import HANDSHAKE_S, HEAD_MAX
+
+    with socket.create_connection(("127.0.0.1", bridged.bridge.port), timeout=10.0) as sock:
+        sock.sendall(b"GET / HTTP/1.1\r\n")
+        sent = 0
+        try:
+            while sent <= 4 * HEAD_MAX:
+                sock.sendall(b"X-Filler: " + b"a" * 1000 + b"\r\n")
+                sent += 1012
+        except OSError:
+            pass  # (the front closed the connection while we were still sending)
+        sock.settimeout(HANDSHAKE_S / 2)  # (a front without the bound would wait for more)
+        try:
+            answer = sock.recv(1024)
+        except ConnectionResetError:  # (closed with our bytes unread: a reset)
+            answer = b""
+    assert answer == b""  # closed, nothing said
+
+
+def test_connections_beyond_the_bound_are_closed_at_once(bridged, monkeypatch):
+    """Peers that open connections and say nothing hold at most MAX_CONNECTIONS places (each
+    for at most HANDSHAKE_S); one more is closed unanswered, and a place freed serves again."""
+    from biped_opt.nodes import ws_front
+
+    monkeypatch.setattr(ws_front, "MAX_CONNECTIONS", 2)
+    front = bridged.bridge._front
+    idle = [socket.create_connection(("127.0.0.1", bridged.bridge.port), timeout=10.0)
+            for _ in range(4)]  # (2 x MAX_CONNECTIONS sockets: the bound counts both ends)
+    try:
+        deadline = time.monotonic() + 10.0
+        while front.connections < 4 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert front.connections >= 4
+        # (at once: well before the HANDSHAKE_S an admitted connection would be given)
+        with socket.create_connection(("127.0.0.1", bridged.bridge.port), timeout=2.0) as extra:
+            assert extra.recv(1024) == b""  # closed, nothing said
+    finally:
+        for sock in idle:
+            sock.close()
+    deadline = time.monotonic() + 10.0
+    while front.connections and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert _handshake(bridged.bridge.port, ["foxglove.sdk.v1"])[0] == 101
+
+
+@needs_client
+def test_a_ws_protocol_client_on_the_older_name_gets_the_topics(bridged):
+    """Foxglove's ws-protocol client offering only foxglove.websocket.v1: served as well."""
+    client = Client(bridged.url, {"/robot_description": 1}, timeout_s=20.0,
+                    subprotocol="foxglove.websocket.v1")
+    assert client.finish() == 0, (client.lines[-5:], client.proc.stderr.read())
+    (info,) = client.of("serverInfo")
+    assert info["capabilities"] == []
+    (urdf,) = client.of("message", "/robot_description")
+    assert urdf["data"]["data"].startswith("<?xml") and not urdf["trailingBytes"]
+
+
 # -- the bytes ----------------------------------------------------------------------------------
 
 def _filled(typestore, ros_type: str, depth: int = 0):
@@ -474,8 +594,8 @@ def _busy_port() -> socket.socket:
     ("max_message_bytes:=100", "foxglove: error: max_message_bytes must be an integer >= 1024"),
     ("client_queue_bytes:=2048", "foxglove: error: client_queue_bytes (2048) must hold at least "
                                  "one message of max_message_bytes (65536)"),
-    ("port:=BUSY", "foxglove: error: host, port: cannot listen on 127.0.0.1:BUSY: Failed to "
-                   "bind port"),
+    ("port:=BUSY", "foxglove: error: host, port: cannot listen on 127.0.0.1:BUSY: Address "
+                   "already in use"),
 ])
 def test_a_bad_parameter_ends_the_node_with_status_2_and_one_line(domain_id, param, message):
     sock = _busy_port()

@@ -17,6 +17,7 @@ import time
 import xml.etree.ElementTree as ET
 from collections import defaultdict
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -34,7 +35,12 @@ from biped_opt.paper.biped import compiled_biped, simulate
 from biped_opt.piecewise import theta_grid
 from biped_opt.record import SweepWriter
 from biped_opt.record.rosbag2 import export_rosbag2
-from biped_opt.record.scene import SCENE_TOPICS, SceneMessages
+from biped_opt.record.scene import (
+    DELETEALL,
+    JOINT_STATES_TOPIC,
+    SCENE_TOPICS,
+    SceneMessages,
+)
 from biped_opt.record.writer import BIPED_TOPICS, SYSTEM_TOPICS
 from biped_opt.simulation.compiled import CompiledSystem
 from biped_opt.systems.library.walker import BODY_DEPTH, BODY_THICKNESS, FOOT_RADIUS, LEG_WIDTH
@@ -51,6 +57,9 @@ TABLE = {
     "/biped/markers": ("visualization_msgs/msg/MarkerArray", 10, QosDurability.VOLATILE),
     "/robot_description": ("std_msgs/msg/String", 1, QosDurability.TRANSIENT_LOCAL),
 }
+#: the scene topics the recorder writes for a system that is not a tree of joints (the walker,
+#: the bar): all but /joint_states (SceneMessages.topics)
+PLANAR_SCENE = tuple(t for t in SCENE_TOPICS if t != JOINT_STATES_TOPIC)
 #: visualization_msgs/Marker type constants (the message definition's)
 ARROW, CUBE, SPHERE, LINE_STRIP, SPHERE_LIST = 0, 1, 2, 4, 7
 #: the frames each system declares (SYSTEMS.md Sec. 6: the walker's body and feet, the bar)
@@ -74,7 +83,7 @@ def record_biped_sweep(path: Path, *, maneuver: str = "touchdown", lo: float = -
     with SweepWriter(path, metadata={"maneuver": maneuver, "theta0_min": str(lo),
                                      "theta0_max": str(hi), "num": str(num),
                                      "optimal": "False", "fixed_inputs": json.dumps(inputs)},
-                     topics=BIPED_TOPICS + tuple(SCENE_TOPICS)) as w:
+                     topics=BIPED_TOPICS + PLANAR_SCENE) as w:
         scene = _described(w, compiled)
         offset = 0
         for th in theta_grid(lo, hi, num):
@@ -103,7 +112,7 @@ def record_system_sweep(path: Path, name: str, maneuver: str, inputs: tuple[floa
     info = convert.system_info_fields(compiled, name)
     out = {}
     with SweepWriter(path, metadata={"system": name, "maneuver": maneuver}, system=info,
-                     topics=SYSTEM_TOPICS + tuple(SCENE_TOPICS)) as w:
+                     topics=SYSTEM_TOPICS + PLANAR_SCENE) as w:
         scene = _described(w, compiled)
         offset = 0
         for s in theta_grid(lo, hi, num):
@@ -120,6 +129,7 @@ def _described(writer: SweepWriter, compiled: Any) -> SceneMessages:
     """The scene of ``compiled``, its URDF written first (as the recorder does)."""
     scene = SceneMessages(writer.typestore, compiled.scene, list(compiled.parameters.values()),
                           len(compiled.coordinates))
+    assert tuple(scene.topics) == PLANAR_SCENE  # (what the recorder asks the writer for)
     writer.write_robot_description(scene)
     return scene
 
@@ -351,7 +361,15 @@ def test_markers_have_the_tables_types_ids_and_closed_form_geometry(rec):
     compiled = compiled_biped() if rec.name == "biped" else CompiledSystem(rec.name)
     w = compiled.parameters["w"]
     seen_modes = set()
-    for log_time, m, _r in rec.messages["/biped/markers"]:
+    for k, (log_time, m, _r) in enumerate(rec.messages["/biped/markers"]):
+        markers_ = list(m.markers)
+        if k == 0:
+            # a new scene's first array starts by clearing what an earlier system left
+            # (ROS.md Sec. 6): one DELETEALL in every namespace, at the array's stamp
+            clear = markers_.pop(0)
+            assert (clear.action, clear.ns) == (DELETEALL, "")
+            assert clear.header.stamp == markers_[0].header.stamp
+        m = SimpleNamespace(markers=markers_)
         by_ns: dict[str, list[Any]] = defaultdict(list)
         for marker in m.markers:
             by_ns[marker.ns].append(marker)

@@ -140,7 +140,8 @@ BODY_THICKNESS, BODY_DEPTH, FOOT_RADIUS, LEG_WIDTH = 0.06, 0.12, 0.035, 0.02
 def _looks(s: System, feet: list[str], hips: list[sp.Rational]) -> None:
     """How the walker looks (SYSTEMS.md Sec. 6): the body as a bar between its outer hips
     (frame ``base_link``, pitch -th: th turns x towards +z, a ROS pitch towards -z), each foot
-    as a ball (frame ``<foot>_foot``) and each leg as a line from its hip to its foot."""
+    as a ball (frame and sphere ``<foot>``, or ``<foot>_foot`` where the foot's name does not
+    say foot: ``foot1``, ``left_foot``) and each leg as a line from its hip to its foot."""
     x, z, th = s.q[:3]
     w = s.p.w
     s.frame("base_link", x=x, z=z, pitch=-th)
@@ -149,8 +150,9 @@ def _looks(s: System, feet: list[str], hips: list[sp.Rational]) -> None:
           color=(0.20, 0.45, 0.75))
     for i, (foot, si) in enumerate(zip(feet, hips)):
         xf, zf = s.q[3 + 2 * i], s.q[4 + 2 * i]
-        s.frame(f"{foot}_foot", x=xf, z=zf)
-        s.sphere(f"{foot}_foot", f"{foot}_foot", FOOT_RADIUS, color=(0.15, 0.15, 0.15))
+        name = foot if "foot" in foot else f"{foot}_foot"
+        s.frame(name, x=xf, z=zf)
+        s.sphere(name, name, FOOT_RADIUS, color=(0.15, 0.15, 0.15))
         hip = (x + si * w * sp.cos(th), 0, z + si * w * sp.sin(th))
         s.line(f"{foot}_leg", [hip, (xf, 0, zf)], width=LEG_WIDTH, color=(0.85, 0.40, 0.10))
 

@@ -3,7 +3,7 @@
 // message with the channel's own schema (ROS 2 .msg text, CDR payload) and prints one JSON line
 // per event on stdout. tests/nodes/test_foxglove.py runs it and asserts on what it prints.
 //
-//   node client.js URL COUNT TIMEOUT_S [--try-publish] TOPIC[:COUNT]...
+//   node client.js URL COUNT TIMEOUT_S [--try-publish] [--subprotocol=NAME] TOPIC[:COUNT]...
 //
 // Lines: {"op": "serverInfo", ...} once; {"op": "advertise", "topic", "encoding",
 // "schemaName", "schemaEncoding"} per advertised channel; {"op": "message", "topic",
@@ -25,6 +25,8 @@ const count = Number(args.shift());
 const timeoutS = Number(args.shift());
 const tryPublish = args[0] === "--try-publish";
 if (tryPublish) args.shift();
+// the subprotocol offered: foxglove-sdk's name by default, or the older ws-protocol name
+const subprotocolArg = args[0] && args[0].startsWith("--subprotocol=") ? args.shift() : null;
 const wanted = new Map(args.map((arg) => {
   const [topic, n] = arg.split(":");
   return [topic, n === undefined ? count : Number(n)];
@@ -55,8 +57,9 @@ function finish(code) {
 }
 
 // foxglove-sdk servers accept the subprotocol "foxglove.sdk.v1" (the Foxglove app's), the same
-// protocol as ws-protocol's "foxglove.websocket.v1" under its new name
-const SUBPROTOCOL = "foxglove.sdk.v1";
+// protocol as ws-protocol's "foxglove.websocket.v1" under its new name (which the bridge's front
+// also accepts)
+const SUBPROTOCOL = subprotocolArg ? subprotocolArg.split("=")[1] : "foxglove.sdk.v1";
 const client = new FoxgloveClient({ ws: new WebSocket(url, [SUBPROTOCOL]) });
 const timer = setTimeout(() => finish(3), timeoutS * 1000);
 
