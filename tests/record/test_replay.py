@@ -142,17 +142,23 @@ def test_replay_order_and_timing_at_rate_1(tmp_path, domain_id):
 
 @pytest.mark.alone  # (millisecond bounds on arrival times)
 def test_rate_topics_and_errors(tmp_path, domain_id):
+    """At rate 4, only the topic asked for, in a quarter of the recording's span, no message
+    more than 5 ms late (as above: up to three runs, since other work on the cores can stall a
+    thread for that long; the topics and the span are checked in every run)."""
     path = tmp_path / "short.mcap"
     samples = _record(path)
-    published = []
-    player = Player(path, rate=4.0, topics=["/biped/state"], domain_id=domain_id, delay=0.0)
-    start = time.monotonic()
-    stats = player.run(on_publish=lambda topic, ns: published.append(topic))
-    took = time.monotonic() - start
-    assert set(published) == {"/biped/state"} and len(published) == 40
     span = samples[-1, 0] / 4.0
-    assert span - 5e-3 < took < span + 1.0
-    assert stats.max_late < 5e-3
+    for _attempt in range(3):
+        published = []
+        player = Player(path, rate=4.0, topics=["/biped/state"], domain_id=domain_id, delay=0.0)
+        start = time.monotonic()
+        stats = player.run(on_publish=lambda topic, ns, out=published: out.append(topic))
+        took = time.monotonic() - start
+        assert set(published) == {"/biped/state"} and len(published) == 40
+        assert span - 5e-3 < took < span + 1.0
+        if stats.max_late < 5e-3:
+            break
+    assert stats.max_late < 5e-3, f"a message {stats.max_late * 1e3:.2f} ms late (3 runs)"
     with pytest.raises(ReplayError, match="not in short.mcap: /nope"):
         Player(path, topics=["/nope"])
     with pytest.raises(ReplayError, match="rate must be a positive"):
