@@ -1,4 +1,4 @@
-"""The simulator node's ROS 2 Simulation Interfaces and its live simulation (docs/SIMULATOR.md).
+"""The simulator node's ROS 2 Simulation Interfaces and its live simulation (ROS.md Sec. 8).
 
 The services of the ``simulation_interfaces`` standard (2.1.0), under the node's private names
 as Gazebo's ``gzserver`` offers them (``/simulator/get_simulation_state``...), and the

@@ -27,8 +27,8 @@ unknown system or a bad system file stops the node at start-up with one line say
 does (with ``autostart``) a run the parameters cannot start.
 
 **Simulated time and the scene** (ROS.md Sec. 6). The node keeps a simulated clock that starts at
-0 and runs on through successive runs (a run starts where the previous one ended). Every message
-is stamped with it, and while a run plays the node publishes:
+0 and runs on through successive runs (a run starts 1 ns after the previous one ended). Every
+message is stamped with it, and while a run plays the node publishes:
 
 - ``/clock`` (rosgraph_msgs/Clock): the time of every shown sample, so nodes with
   ``use_sim_time`` run on simulated time;
@@ -36,6 +36,13 @@ is stamped with it, and while a run plays the node publishes:
 - ``/biped/markers`` (visualization_msgs/MarkerArray): the ground, the shapes, the contact points
   (active ones red) and the contact forces as arrows;
 - ``/robot_description`` (std_msgs/String, transient local, once): the URDF of the frames.
+
+**A simulator a ROS stack drives** (ROS.md Sec. 8, :mod:`biped_opt.nodes.sim_control`): the ROS 2
+Simulation Interfaces under ``/simulator/...`` (state, reset, step, entity state, delete), a
+live world that plays at ``real_time_factor`` with the inputs of ``/biped/command``
+(``std_msgs/Float64MultiArray``), ``/clock`` at the current time while nothing plays, and
+``/diagnostics`` with the real-time factor achieved. A run starts 1 ns after the previous one's
+last sample, so no stamp is shown twice; ``/biped/simulate`` is refused while the world plays.
 
 A run played as fast as possible (``real_time_factor`` 0, as a sweep asks) publishes its states
 and contact modes as before but ``/clock``, ``/tf`` and the markers of its last sample only: no
