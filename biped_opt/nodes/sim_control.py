@@ -5,6 +5,10 @@ as Gazebo's ``gzserver`` offers them (``/simulator/get_simulation_state``...), a
 ``SimulateSteps`` action, drive one *world* that holds at most one entity (the served system at
 start-up, or one spawned later) with a state ``(y, contact mode)`` at the simulated time:
 
+- **the entity**: the served system at start-up; ``SpawnEntity`` puts a library system or one
+  in ``system_paths`` (by name, in ``uri``) or a robot's URDF text (``resource_string``, no
+  file or mesh opened) into an empty world, compiled by the node's compiler thread (a first
+  request answers ``busy: ...; retry``); ``DeleteEntity`` empties it.
 - **states** (:data:`STOPPED`, :data:`PLAYING`, :data:`PAUSED`): the node starts stopped. Playing
   integrates at ``real_time_factor`` (0: as fast as the machine goes) with the last valid command
   of ``/biped/command``; paused holds; stopping resets (time, state, spawned entities), as the
@@ -35,6 +39,7 @@ start-up, or one spawned later) with a state ``(y, contact mode)`` at the simula
 
 from __future__ import annotations
 
+import hashlib
 import math
 import threading
 import time
@@ -44,9 +49,12 @@ from typing import Any
 import numpy as np
 
 from biped_opt import ros
-from biped_opt.errors import BipedOptError, InvalidInputError
+from biped_opt.errors import BipedOptError, InvalidInputError, quoted
 from biped_opt.nodes import convert
+from biped_opt.nodes.compiler import COMPILE_TIMEOUT_S, Busy, Compiler
+from biped_opt.nodes.parameters import float_parameter, int_parameter
 from biped_opt.nodes.refusals import LOG_THROTTLE_S, failure_message, public
+from biped_opt.nodes.sources import check_name, declare_request_limits
 from biped_opt.record.scene import SceneMessages
 
 __all__ = ["SimControl", "Entity", "STOPPED", "PLAYING", "PAUSED", "COMMAND_TOPIC",
@@ -227,6 +235,15 @@ class SimControl:
         node.declare_parameter("clock_rate_hz", 20.0)
         node.declare_parameter("max_steps", 100_000)
         node.declare_parameter("max_lag", 0.25)
+        node.declare_parameter("max_resource_bytes", 1_000_000)
+        node.declare_parameter("compile_queue", 2)
+        node.declare_parameter("compile_timeout", COMPILE_TIMEOUT_S)
+        self.sources, _, _ = declare_request_limits(node)
+        node.private_paths = self.sources.system_paths
+        self.max_resource_bytes = int_parameter(node, "max_resource_bytes", 1)
+        self.compiler = Compiler(node.get_logger(),
+                                 queue_size=int_parameter(node, "compile_queue", 0),
+                                 timeout=float_parameter(node, "compile_timeout"))
         self.step_size = float(node.get_parameter("step_size").value)
         if not (math.isfinite(self.step_size) and 1e-6 <= self.step_size <= 1.0):
             raise InvalidInputError(f"step_size must be in [1e-6, 1] (simulated time), got "
@@ -304,12 +321,13 @@ class SimControl:
     def _on_get_simulator_features(self, _request: Any, response: Any) -> None:
         f = self.msgs.SimulatorFeatures
         response.features.features = [
-            f.DELETING, f.ENTITY_STATE_GETTING, f.ENTITY_STATE_SETTING,
+            f.SPAWNING, f.SPAWNING_RESOURCE_STRING, f.DELETING, f.ENTITY_STATE_GETTING,
+            f.ENTITY_STATE_SETTING,
             f.SIMULATION_RESET, f.SIMULATION_RESET_TIME, f.SIMULATION_RESET_STATE,
             f.SIMULATION_RESET_SPAWNED, f.SIMULATION_STATE_GETTING, f.SIMULATION_STATE_SETTING,
             f.SIMULATION_STATE_PAUSE, f.STEP_SIMULATION_SINGLE, f.STEP_SIMULATION_MULTIPLE,
             *([f.STEP_SIMULATION_ACTION] if getattr(self.node, "steps_action", None) else ())]
-        response.features.spawn_formats = []
+        response.features.spawn_formats = ["urdf"]
         response.features.custom_info = (
             f"biped_opt simulator: one entity at a time; a step is step_size = "
             f"{self.step_size:g} of simulated time with contact events located exactly inside "
@@ -442,7 +460,99 @@ class SimControl:
         self.spawn(request, response)
 
     def spawn(self, request: Any, response: Any) -> None:
-        raise Refused(self.msgs.Result.RESULT_FEATURE_UNSUPPORTED, "spawning is not offered")
+        """SpawnEntity: a library system or one in ``system_paths`` named by
+        ``entity_resource.uri``, or a robot's URDF text in ``resource_string``, compiled by
+        the node's compiler thread (the first request for a system answers ``busy: ...;
+        retry``); one entity at a time."""
+        codes = self.srvs.SpawnEntity.Response
+        failed = self.msgs.Result.RESULT_OPERATION_FAILED
+        if self.entity is not None:
+            if request.name == self.entity.name:
+                raise Refused(codes.NAME_NOT_UNIQUE, f"{request.name!r} is in the world")
+            raise Refused(failed, f"this simulator holds one entity at a time: delete "
+                                  f"{self.entity.name!r} first")
+        if request.entity_namespace:
+            raise Refused(self.msgs.Result.RESULT_FEATURE_UNSUPPORTED,
+                          "entity_namespace: entities have no interfaces of their own here")
+        uri, text = request.entity_resource.uri, request.entity_resource.resource_string
+        if request.name:
+            try:
+                check_name("name", request.name, "plain")
+            except InvalidInputError as exc:
+                raise Refused(codes.NAME_INVALID, str(exc)) from None
+        if uri:
+            if "/" in uri or ":" in uri:
+                raise Refused(codes.UNSUPPORTED_FORMAT,
+                              f"uri: {quoted(uri[:80])}: a uri names a library system or one "
+                              "in the node's system_paths by name (no files, no package://)")
+            try:
+                check_name("uri", uri)
+                self.sources.check_request(uri, "")
+                job = self._job("study", system=uri, problem="")
+                self.compiler.get(("study", uri, ""), f"system {uri}", job)
+                source, _ = self.sources.study(uri, None)
+            except Busy as exc:
+                raise Refused(failed, str(exc)) from None
+            except InvalidInputError as exc:
+                raise Refused(codes.RESOURCE_PARSE_ERROR if "cannot" in str(exc) else
+                              self.msgs.Result.RESULT_NOT_FOUND, str(exc)) from None
+            from biped_opt.simulation.compiled import compiled_with
+
+            compiled = compiled_with(source)
+        elif text:
+            if len(text.encode()) > self.max_resource_bytes:
+                raise Refused(failed, f"resource_string: longer than {self.max_resource_bytes} "
+                                      "bytes (max_resource_bytes)")
+            if not text.lstrip("\ufeff \t\r\n").startswith("<"):
+                raise Refused(codes.UNSUPPORTED_FORMAT,
+                              "resource_string: a URDF text (XML) is the one format taken")
+            from biped_opt.systems.urdf import parse_urdf
+
+            try:
+                parse_urdf(text, source="resource_string")
+            except BipedOptError as exc:
+                raise Refused(codes.RESOURCE_PARSE_ERROR, str(exc)) from None
+            digest = hashlib.sha256(text.encode()).hexdigest()
+            try:
+                compiled = self.compiler.get(("urdf", digest), f"the URDF robot {digest[:12]}",
+                                             {**self._job("urdf"), "urdf": text})
+            except Busy as exc:
+                raise Refused(failed, str(exc)) from None
+            except InvalidInputError as exc:
+                raise Refused(codes.RESOURCE_PARSE_ERROR, str(exc)) from None
+        else:
+            raise Refused(codes.NO_RESOURCE, "entity_resource: both uri and resource_string "
+                                             "are empty")
+        name = request.name or compiled.name
+        try:
+            check_name("name", name, "plain")
+        except InvalidInputError as exc:
+            raise Refused(codes.NAME_INVALID, f"{exc} (give a name)") from None
+        entity = Entity(name=name, compiled=compiled, maneuver=compiled.maneuvers[0],
+                        s=0.0, y=np.zeros(0), mode=0, spawned=True,
+                        scene=self.node.scene_for(compiled), biped=False)
+        entity.restart()
+        pose = request.initial_pose.pose
+        q = pose.orientation
+        if (pose.position.x, pose.position.y, pose.position.z) != (0.0, 0.0, 0.0) or \
+                (q.x, q.y, q.z) != (0.0, 0.0, 0.0) or q.w not in (0.0, 1.0):
+            if request.initial_pose.header.frame_id not in ("", "world"):
+                raise Refused(codes.INVALID_POSE, "initial_pose: poses are in 'world' (or '')")
+            try:
+                entity.y, entity.mode = set_base(compiled.coordinates, entity.y, pose), 0
+            except Refused as exc:
+                raise Refused(codes.INVALID_POSE, f"initial_pose: {exc}") from None
+        self._set_entity(entity)
+        response.entity_name = name
+        self.node.get_logger().info(f"spawned {name!r}")
+
+    def _job(self, kind: str, **fields: Any) -> dict[str, Any]:
+        return {"kind": kind, "system_paths": [str(p) for p in self.sources.system_paths],
+                "max_legs": self.sources.limits.max_legs,
+                "max_coordinates": self.sources.limits.max_coordinates, **fields}
+
+    def close(self) -> None:
+        self.compiler.close()
 
     # -- the world's entity ----------------------------------------------------------------
     def _set_entity(self, entity: Entity | None) -> None:

@@ -181,12 +181,8 @@ class SimulatorNode(ros.Node):
             topics = ("/biped/system_state", "/biped/system_info")
         self.declare_parameter("scene", True)
         compiled = compiled_biped() if biped else self.system
-        scene = compiled.scene
         #: the scene's messages (None: turned off, or the system declares no looks)
-        self.scene: SceneMessages | None = None \
-            if scene.empty or self.get_parameter("scene").value is not True else SceneMessages(
-            load_interfaces().typestore, scene, list(compiled.parameters.values()),
-            len(compiled.coordinates))
+        self.scene: SceneMessages | None = self.scene_for(compiled)
         self._scene_pubs: dict[str, tuple[Any, type]] = {}
         if self.scene is not None:
             for topic, (typename, _) in SCENE_TOPICS.items():
@@ -375,6 +371,20 @@ class SimulatorNode(ros.Node):
         msg = cls()  # type: ignore[misc]
         msg.clock = convert.stamp(ns)
         self.scene_publisher("/clock").publish(msg)
+
+    def scene_for(self, compiled: Any) -> SceneMessages | None:
+        """The scene messages of a system spawned in the live world (None: the node's scene
+        is turned off, or the system declares no looks)."""
+        if compiled.scene.empty or self.get_parameter("scene").value is not True:
+            return None
+        return SceneMessages(load_interfaces().typestore, compiled.scene,
+                             list(compiled.parameters.values()), len(compiled.coordinates))
+
+    def destroy_node(self) -> None:
+        control = getattr(self, "control", None)
+        if control is not None:
+            control.close()
+        super().destroy_node()
 
     def entity_changed(self, entity: Entity | None) -> None:
         """A new entity in the live world (spawned, or the served system back): its

@@ -142,6 +142,8 @@ def _defaults(fields: dict) -> dict:
             out[key] = False
         elif ann is t.float64:
             out[key] = 0.0
+        elif "sequence" in repr(ann):
+            out[key] = list
         else:
             out[key] = 0
     return out
@@ -528,3 +530,108 @@ def test_runs_never_repeat_a_stamp_and_maneuvers_wait_while_playing(world):
         time.sleep(0.2)
     assert len(seen["tf"]) > 10 and np.all(np.diff(seen["tf"]) > 0)
     assert np.all(np.diff(seen["clock"]) >= 0)
+@dataclass
+class Resource(IdlStruct, typename=f"{SI}::msg::dds_::Resource_"):
+    uri: str = ""
+    resource_string: str = ""
+
+
+@dataclass
+class PoseStamped(IdlStruct, typename="geometry_msgs::msg::dds_::PoseStamped_"):
+    header: Header = field(default_factory=Header)
+    pose: Pose = field(default_factory=Pose)
+
+
+@dataclass
+class EntityCategory(IdlStruct, typename=f"{SI}::msg::dds_::EntityCategory_"):
+    category: t.byte = 0
+
+
+@dataclass
+class TagsFilter(IdlStruct, typename=f"{SI}::msg::dds_::TagsFilter_"):
+    tags: t.sequence[str] = field(default_factory=list)
+    filter_mode: t.byte = 0
+
+
+@dataclass
+class Bounds(IdlStruct, typename=f"{SI}::msg::dds_::Bounds_"):
+    type: t.byte = 0
+    points: t.sequence[Vector3] = field(default_factory=list)
+
+
+@dataclass
+class EntityFilters(IdlStruct, typename=f"{SI}::msg::dds_::EntityFilters_"):
+    filter: str = ""
+    categories: t.sequence[EntityCategory] = field(default_factory=list)
+    tags: TagsFilter = field(default_factory=TagsFilter)
+    bounds: Bounds = field(default_factory=Bounds)
+
+
+GET_ENTITIES = _service("GetEntities", {"filters": EntityFilters},
+                        {"result": Result, "entities": t.sequence[str]})
+SPAWN = _service("SpawnEntity", {"name": str, "allow_renaming": bool,
+                                 "entity_resource": Resource, "entity_namespace": str,
+                                 "initial_pose": PoseStamped},
+                 {"result": Result, "entity_name": str})
+DELETE = _service("DeleteEntity", {"entity": str}, {"result": Result})
+NAME_NOT_UNIQUE, NAME_INVALID, UNSUPPORTED_FORMAT, NO_RESOURCE = 101, 102, 103, 104
+RESOURCE_PARSE_ERROR = 106
+
+
+def _spawn(client, timeout=120.0, **fields):
+    """SpawnEntity, asked again while the node answers that it is compiling the system."""
+    deadline = time.monotonic() + timeout
+    while True:
+        reply = client.call(_sim("spawn_entity"), SPAWN, **fields)
+        if not reply.result.error_message.startswith("busy: "):
+            return reply
+        assert time.monotonic() < deadline, reply.result.error_message
+        time.sleep(0.2)
+
+
+def test_spawn_and_delete_one_entity_at_a_time(world):
+    graph, client, _ = world
+    taken = _spawn(client, name="biped", entity_resource=Resource(uri="rocking_bar"))
+    assert taken.result.result == NAME_NOT_UNIQUE
+    second = _spawn(client, entity_resource=Resource(uri="rocking_bar"))
+    assert second.result.result == OPERATION_FAILED and "delete 'biped'" in \
+        second.result.error_message
+    assert client.call(_sim("delete_entity"), DELETE, entity="nobody").result.result == NOT_FOUND
+    assert client.call(_sim("delete_entity"), DELETE, entity="biped").result.result == OK
+    assert client.call(_sim("get_entities"), GET_ENTITIES).entities == []
+    refusals = [({"entity_resource": Resource()}, NO_RESOURCE),
+                ({"entity_resource": Resource(uri="file:///etc/passwd")}, UNSUPPORTED_FORMAT),
+                ({"entity_resource": Resource(uri="package://robot/urdf/r.urdf")},
+                 UNSUPPORTED_FORMAT),
+                ({"entity_resource": Resource(uri="no_such_system")}, NOT_FOUND),
+                ({"entity_resource": Resource(resource_string="/etc/passwd")},
+                 UNSUPPORTED_FORMAT),
+                ({"entity_resource": Resource(resource_string="<robot name='r'><link")},
+                 RESOURCE_PARSE_ERROR),
+                ({"name": "a b", "entity_resource": Resource(uri="rocking_bar")}, NAME_INVALID),
+                ({"entity_resource": Resource(uri="rocking_bar"), "entity_namespace": "ns"},
+                 FEATURE_UNSUPPORTED)]
+    for fields, code in refusals:
+        reply = _spawn(client, **fields)
+        assert reply.result.result == code and reply.result.error_message, (fields, reply)
+    assert _set_state(client, PAUSED).result == OK
+    pose = PoseStamped(pose=Pose(position=Point(x=0.25, z=2.0)))
+    spawned = _spawn(client, entity_resource=Resource(uri="rocking_bar"), initial_pose=pose)
+    assert spawned.result.result == OK and spawned.entity_name == "rocking_bar"
+    state = client.call(_sim("get_entity_state"), GET_ENTITY, entity="rocking_bar").state
+    assert (state.pose.position.x, state.pose.position.z) == (0.25, 2.0)
+    assert client.call(_sim("step_simulation"), STEP, steps=100).result.result == OK
+    fallen = client.call(_sim("get_entity_state"), GET_ENTITY, entity="rocking_bar").state
+    # (0.1 of free fall from rest with gravity as the bar declares it: z = 2 - g t^2 / 2)
+    g = graph.simulator.control.entity.compiled.parameters["g"]
+    assert abs(fallen.pose.position.z - (2.0 - g * 0.01 / 2)) < 1e-9
+    # a reset of the spawned scope brings the served system back
+    assert client.call(_sim("reset_simulation"), RESET, scope=4).result.result == OK
+    back = client.call(_sim("get_entity_state"), GET_ENTITY, entity="biped")
+    assert back.result.result == OK
+    assert client.call(_sim("get_entities"), GET_ENTITIES,
+                       filters=EntityFilters(filter="^bip")).entities == ["biped"]
+    assert client.call(_sim("get_entities"), GET_ENTITIES,
+                       filters=EntityFilters(filter="bar")).entities == []
+    assert client.call(_sim("get_entities"), GET_ENTITIES,
+                       filters=EntityFilters(filter="(")).result.result == OPERATION_FAILED
