@@ -265,6 +265,12 @@ class SimControl:
         self.services = [node.create_service(getattr(srvs, t), f"~/{name}",
                                              self._answer(getattr(self, f"_on_{name}")))
                          for name, t in SERVICES.items()]
+        self._stepping = threading.Lock()  # one SimulateSteps goal at a time
+        self.steps_action = ros.ActionServer(
+            node, ros.sim_actions.SimulateSteps, "~/simulate_steps", self._simulate_steps,
+            goal_callback=self._on_steps_goal,
+            cancel_callback=lambda _handle: ros.CancelResponse.ACCEPT,
+            callback_group=ros.ReentrantCallbackGroup())
         array = ros.message_type("std_msgs/msg/Float64MultiArray")
         self._command_sub = node.create_subscription(array, COMMAND_TOPIC, self._on_command, 10)
         self._clock_cls = ros.message_type("rosgraph_msgs/msg/Clock")
@@ -326,7 +332,7 @@ class SimControl:
             f.SIMULATION_RESET, f.SIMULATION_RESET_TIME, f.SIMULATION_RESET_STATE,
             f.SIMULATION_RESET_SPAWNED, f.SIMULATION_STATE_GETTING, f.SIMULATION_STATE_SETTING,
             f.SIMULATION_STATE_PAUSE, f.STEP_SIMULATION_SINGLE, f.STEP_SIMULATION_MULTIPLE,
-            *([f.STEP_SIMULATION_ACTION] if getattr(self.node, "steps_action", None) else ())]
+            f.STEP_SIMULATION_ACTION]
         response.features.spawn_formats = ["urdf"]
         response.features.custom_info = (
             f"biped_opt simulator: one entity at a time; a step is step_size = "
@@ -397,6 +403,48 @@ class SimControl:
             raise Refused(self.msgs.Result.RESULT_OPERATION_FAILED,
                           f"steps must be 1 to {self.max_steps} (max_steps), got {steps}")
         self._need_entity()
+
+    def _on_steps_goal(self, _goal: Any) -> Any:
+        """One SimulateSteps goal at a time (another is rejected while one runs)."""
+        return ros.GoalResponse.REJECT if self._stepping.locked() else ros.GoalResponse.ACCEPT
+
+    def _simulate_steps(self, handle: Any) -> Any:
+        """SimulateSteps: the steps one at a time, feedback after each; a cancel ends it after
+        the step under way; a world that stops being paused aborts it."""
+        action = ros.sim_actions.SimulateSteps
+        result = action.Result()
+        steps = int(handle.request.steps)
+        done = 0
+        with self._stepping:
+            try:
+                while True:
+                    with self.lock:
+                        if done == 0:
+                            self._check_steps(steps)
+                        elif self.state != PAUSED:
+                            raise Refused(self.msgs.Result.RESULT_OPERATION_FAILED,
+                                          f"the simulation was {_STATE_NAMES[self.state]} "
+                                          f"after {done} of {steps} steps")
+                        self.step(1)
+                    done += 1
+                    handle.publish_feedback(action.Feedback(completed_steps=done,
+                                                            remaining_steps=steps - done))
+                    if done == steps or handle.is_cancel_requested:
+                        break
+            except Exception as exc:  # a refusal, or a bug: the goal aborts, says why
+                result.result.result = exc.code if isinstance(exc, Refused) else \
+                    self.msgs.Result.RESULT_OPERATION_FAILED
+                result.result.error_message = public(failure_message(exc),
+                                                     getattr(self.node, "private_paths", ()))
+                handle.abort()
+                return result
+        result.result.result = self.msgs.Result.RESULT_OK
+        if done < steps:
+            result.result.error_message = f"canceled after {done} of {steps} steps"
+            handle.canceled()
+        else:
+            handle.succeed()
+        return result
 
     def _on_get_entities(self, request: Any, response: Any) -> None:
         f = request.filters
@@ -553,6 +601,7 @@ class SimControl:
 
     def close(self) -> None:
         self.compiler.close()
+        self.steps_action.destroy()
 
     # -- the world's entity ----------------------------------------------------------------
     def _set_entity(self, entity: Entity | None) -> None:

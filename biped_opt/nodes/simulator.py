@@ -217,7 +217,8 @@ class SimulatorNode(ros.Node):
         #: the ROS 2 Simulation Interfaces and the live simulation (sim_control)
         self.control = SimControl(self, entity)
         serves = ("/biped/simulate", *(f"{self.get_fully_qualified_name()}/{name}"
-                                       for name in SERVICES))
+                                       for name in SERVICES),
+                  f"{self.get_fully_qualified_name()}/simulate_steps (action)")
         if self.get_parameter("autostart").value:
             try:
                 self.start(

@@ -329,8 +329,9 @@ def test_simulator_in_a_subprocess_exits_cleanly_on_sigterm(domain_id):
         _stop(proc, signal.SIGTERM,
               "ready: serving /biped/simulate, "
               + ", ".join(f"/simulator/{name}" for name in SERVICES)
-              + "; publishing /biped/state, /biped/contact_mode, /clock, /tf, /biped/markers, "
-              "/robot_description, /diagnostics, /biped/command (subscribed)")
+              + ", /simulator/simulate_steps (action); publishing /biped/state, "
+              "/biped/contact_mode, /clock, /tf, /biped/markers, /robot_description, "
+              "/diagnostics, /biped/command (subscribed)")
     finally:
         proc.kill()
 

@@ -635,3 +635,38 @@ def test_spawn_and_delete_one_entity_at_a_time(world):
                        filters=EntityFilters(filter="bar")).entities == []
     assert client.call(_sim("get_entities"), GET_ENTITIES,
                        filters=EntityFilters(filter="(")).result.result == OPERATION_FAILED
+
+
+def test_simulate_steps_action_gives_feedback_after_each_step(world):
+    """The SimulateSteps action (through an rclpy-style ActionClient): feedback
+    after every step, the clock at the steps' end, refused while not paused."""
+    graph, client, _ = world
+    action_t = ros.sim_actions.SimulateSteps
+    with _test_node(graph, "stepper") as node:
+        action = ros.ActionClient(node, action_t, "/simulator/simulate_steps")
+        assert action.wait_for_server(timeout_sec=10)
+
+        def run(steps):
+            feedback = []
+            sent = action.send_goal_async(action_t.Goal(steps=steps),
+                                          feedback_callback=feedback.append)
+            deadline = time.monotonic() + 30
+            while not sent.done():
+                assert time.monotonic() < deadline
+                time.sleep(0.01)
+            result = sent.result().get_result_async()
+            while not result.done():
+                assert time.monotonic() < deadline
+                time.sleep(0.01)
+            time.sleep(0.1)  # (the last feedback may come after the result)
+            return result.result().result, [f.feedback for f in feedback]
+
+        stopped, _ = run(3)
+        assert stopped.result.result == OPERATION_FAILED
+        assert _set_state(client, PAUSED).result == OK
+        result, feedback = run(20)
+        assert result.result.result == OK
+        # (feedback is KEEP_LAST 10, as rclpy's: a burst of 20 keeps at least its last 10)
+        got = [(f.completed_steps, f.remaining_steps) for f in feedback]
+        assert len(got) >= 10 and got == [(k, 20 - k) for k in range(21 - len(got), 21)]
+        assert graph.simulator.sim_ns == 20 * 1_000_000
