@@ -84,6 +84,9 @@ FLOATING = ("base_x", "base_y", "base_z", "base_roll", "base_pitch", "base_yaw")
 PLANAR = ("x", "z", "th")
 #: a step's integration goes on after the maneuver's terminal event at most this often
 MAX_PIECES = 10_000
+#: wall time a tick of a world playing as fast as possible integrates for [s] (then the node
+#: serves what waits)
+FAST_TICK_S = 0.004
 #: at most one real-time warning this often [s]
 LAG_LOG_S = 5.0
 
@@ -622,10 +625,11 @@ class SimControl:
         self.node.show_live(e, row[None, :], [], self.node.sim_ns)
 
     # -- stepping --------------------------------------------------------------------------
-    def step(self, steps: int) -> None:
+    def step(self, steps: int, fast: bool = False) -> None:
         """``steps`` steps of ``step_size`` from the current state with the current command
         (held over them all: integrated as one span, the kernel's own steps and events
-        independent of where ours begin), the samples and events shown once reached."""
+        independent of where ours begin), the samples and events shown once reached (``fast``:
+        the state and scene of the last sample only, and the contact events)."""
         e = self._need_entity()
         span = steps * self.step_size
         start_ns = self.node.sim_ns
@@ -665,7 +669,7 @@ class SimControl:
             self.node.advance_clock(start_ns + (steps * round(self.step_size * NS)
                                                 if t >= span else round(t * NS)))
             if rows:
-                self.node.show_live(e, np.concatenate(rows), events, start_ns)
+                self.node.show_live(e, np.concatenate(rows), events, start_ns, fast)
 
     def _on_live_tick(self) -> None:
         with self.lock:
@@ -693,7 +697,11 @@ class SimControl:
             if steps <= 0:
                 return
             try:
-                self.step(int(min(steps, self.max_steps)))
+                if factor > 0:
+                    self.step(int(min(steps, self.max_steps)))
+                else:  # as fast as it goes: 50 ms pieces for FAST_TICK_S of wall time
+                    while time.monotonic() - now < FAST_TICK_S:
+                        self.step(int(min(steps, self.max_steps)), fast=True)
             except Refused as exc:
                 self.state = PAUSED
                 self.node.get_logger().error(f"simulation paused: {exc}")

@@ -395,14 +395,15 @@ class SimulatorNode(ros.Node):
                 self._scene_pubs["/robot_description"][1], entity.scene.robot_description()))
 
     def show_live(self, entity: Entity, rows: Any, events: list[tuple[float, int]],
-                  start_ns: int) -> None:
+                  start_ns: int, fast: bool = False) -> None:
         """Publish the live world's samples (rows [t, y, mode, lambda], t from ``start_ns``)
-        whose stamps are later than anything shown, and its contact events."""
+        whose stamps are later than anything shown, and its contact events (``fast``: the
+        last sample only)."""
         stamps = start_ns + np.round(rows[:, 0] * convert.NS).astype(np.int64)
         fresh = stamps > self._shown_ns
         if not fresh.any():
             return
-        rows = rows[fresh]
+        rows = rows[fresh][-1:] if fast else rows[fresh]
         # publish_rate_hz samples per unit of simulated time, every event's rows, the last
         rate = float(self.get_parameter("publish_rate_hz").value)
         t = rows[:, 0]
