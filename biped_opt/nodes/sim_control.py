@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import re
 import threading
 import time
 from dataclasses import dataclass
@@ -49,7 +50,7 @@ from typing import Any
 import numpy as np
 
 from biped_opt import ros
-from biped_opt.errors import BipedOptError, InvalidInputError, quoted
+from biped_opt.errors import BipedOptError, InvalidInputError, InvalidParameterError, quoted
 from biped_opt.nodes import convert
 from biped_opt.nodes.compiler import COMPILE_TIMEOUT_S, Busy, Compiler
 from biped_opt.nodes.parameters import float_parameter, int_parameter
@@ -58,7 +59,7 @@ from biped_opt.nodes.sources import check_name, declare_request_limits
 from biped_opt.record.scene import SceneMessages
 
 __all__ = ["SimControl", "Entity", "STOPPED", "PLAYING", "PAUSED", "COMMAND_TOPIC",
-           "SERVICES", "base_pose", "set_base"]
+           "SERVICES", "base_pose", "set_base", "name_filter"]
 
 NS = convert.NS
 STOPPED, PLAYING, PAUSED = 0, 1, 2
@@ -97,6 +98,22 @@ class Refused(BipedOptError, ValueError):
     def __init__(self, code: int, message: str) -> None:
         super().__init__(message)
         self.code = code
+
+
+#: the longest name filter, and the most ``.*`` in one (a pattern a peer sends is matched
+#: here: these keep its backtracking to a few thousand steps on a 64-character name)
+MAX_FILTER, MAX_WILDCARDS = 256, 2
+_FILTER = re.compile(r"\^?(?:[A-Za-z0-9_/-]|\.\*|\.)*\$?")
+
+
+def name_filter(text: str) -> re.Pattern[str] | None:
+    """GetEntities' filter (a POSIX extended regular expression) if it keeps to the subset
+    this node matches safely: name characters, ``.``, ``.*``, ``^`` first and ``$`` last;
+    else None."""
+    if len(text) > MAX_FILTER or not _FILTER.fullmatch(text) or \
+            text.count(".*") > MAX_WILDCARDS:
+        return None
+    return re.compile(text)
 
 
 # -- the base's pose and twist ------------------------------------------------------------------
@@ -247,12 +264,13 @@ class SimControl:
         self.compiler = Compiler(node.get_logger(),
                                  queue_size=int_parameter(node, "compile_queue", 0),
                                  timeout=float_parameter(node, "compile_timeout"))
-        self.step_size = float(node.get_parameter("step_size").value)
-        if not (math.isfinite(self.step_size) and 1e-6 <= self.step_size <= 1.0):
-            raise InvalidInputError(f"step_size must be in [1e-6, 1] (simulated time), got "
-                                    f"{self.step_size}")
-        self.max_steps = int(node.get_parameter("max_steps").value)
-        self.max_lag = float(node.get_parameter("max_lag").value)
+        self.step_size = float_parameter(node, "step_size")
+        if not 1e-6 <= self.step_size <= 1.0:
+            raise InvalidParameterError(f"step_size must be in [1e-6, 1] (simulated time), "
+                                        f"got {self.step_size}")
+        self.max_steps = int_parameter(node, "max_steps", 1)
+        self.max_lag = float_parameter(node, "max_lag")
+        clock_rate = float_parameter(node, "clock_rate_hz")
         self.lock = threading.RLock()
         self.state = STOPPED
         self.initial = entity
@@ -264,6 +282,11 @@ class SimControl:
         self._achieved: list[tuple[float, int]] = []
         self._last_mode: int | None = None
         msgs, srvs = ros.sim_msgs, ros.sim_srvs
+        if msgs is None:
+            raise InvalidParameterError(
+                "the ROS 2 Simulation Interfaces need the simulation_interfaces package: "
+                "install it (apt: ros-$ROS_DISTRO-simulation-interfaces) or use the built-in "
+                "backend (BIPED_OPT_BACKEND=dds)")
         self.msgs, self.srvs = msgs, srvs
         self.services = [node.create_service(getattr(srvs, t), f"~/{name}",
                                              self._answer(getattr(self, f"_on_{name}")))
@@ -281,8 +304,7 @@ class SimControl:
         self._diag_cls = ros.message_type("diagnostic_msgs/msg/DiagnosticArray")
         self._diag_pub = None if self._diag_cls is None else node.create_publisher(
             self._diag_cls, "/diagnostics", 10)
-        rate = float(node.get_parameter("clock_rate_hz").value)
-        self._clock_timer = node.create_timer(1.0 / rate if rate > 0 else 1.0, self._idle_clock)
+        self._clock_timer = node.create_timer(1.0 / clock_rate, self._idle_clock)
         self._live_timer = node.create_timer(0.005, self._on_live_tick)
         self._diag_timer = node.create_timer(1.0, self._diagnostics)
 
@@ -456,16 +478,12 @@ class SimControl:
                           "only the name filter is supported (no categories, tags or bounds)")
         names = [] if self.entity is None else [self.entity.name]
         if f.filter:
-            import re
-
-            if len(f.filter) > 256:
-                raise Refused(self.msgs.Result.RESULT_OPERATION_FAILED,
-                              "filter: at most 256 characters")
-            try:
-                pattern = re.compile(f.filter)
-            except re.error as exc:
-                raise Refused(self.msgs.Result.RESULT_OPERATION_FAILED,
-                              f"filter: not a regular expression: {exc}") from None
+            pattern = name_filter(f.filter)
+            if pattern is None:
+                raise Refused(self.msgs.Result.RESULT_FEATURE_UNSUPPORTED,
+                              "filter: only the regular expressions of name characters, '.', "
+                              f"at most {MAX_WILDCARDS} '.*', '^' and '$' are supported (at "
+                              f"most {MAX_FILTER} characters)")
             names = [n for n in names if pattern.search(n)]
         response.entities = names
 
@@ -631,6 +649,7 @@ class SimControl:
         independent of where ours begin), the samples and events shown once reached (``fast``:
         the state and scene of the last sample only, and the contact events)."""
         e = self._need_entity()
+        self.node.end_playback()  # (its stamps would come after the steps': tf goes back)
         span = steps * self.step_size
         start_ns = self.node.sim_ns
         rate = float(self.node.get_parameter("publish_rate_hz").value)
@@ -729,7 +748,8 @@ class SimControl:
         status_cls = ros.message_type("diagnostic_msgs/msg/DiagnosticStatus")
         kv_cls = ros.message_type("diagnostic_msgs/msg/KeyValue")
         status = status_cls()
-        status.level = 1 if target > 0 and achieved < 0.9 * target else 0  # (OK, WARN)
+        level = 1 if target > 0 and achieved < 0.9 * target else 0  # (OK, WARN)
+        status.level = bytes([level]) if ros.BACKEND == "rclpy" else level  # (a byte field)
         status.name = f"{self.node.get_name()}: real time"
         status.hardware_id = "biped_opt"
         status.message = (f"real_time_factor {achieved:.3f} of {target:g} requested"
