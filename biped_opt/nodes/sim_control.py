@@ -78,6 +78,8 @@ SERVICES = {
     "delete_entity": "DeleteEntity",
     "spawn_entity": "SpawnEntity",
 }
+#: a constraint of a state set is on its surface within SURFACE_TOL, at rest within REST_TOL
+SURFACE_TOL, REST_TOL = 1e-9, 1e-6
 #: a state set must be within this of a unit quaternion, of the x-z plane (planar systems)
 QUATERNION_TOL, PLANE_TOL = 1e-6, 1e-9
 #: the floating base's coordinates (biped_opt.systems.urdf.BASE) and a planar base's
@@ -518,8 +520,31 @@ class SimControl:
         except Refused as exc:
             code = exc.code if exc.code in (101, 4) else self.msgs.Result.RESULT_OPERATION_FAILED
             raise Refused(code, str(exc)) from None
-        # the entity goes on in flight: contacts are found as events from the next step on
-        e.y, e.mode = y, 0
+        e.y, e.mode = y, self._contacts_after_set(e, y, 101)
+
+    def _contacts_after_set(self, e: Entity, y: np.ndarray, code: int) -> int:
+        """The contact mode of a state set: the contacts of the mode before that are still on
+        their surface (|a_j| <= SURFACE_TOL) and at rest on it (|a_j'| <= REST_TOL); the others
+        go on free, found again as events. A constraint below its surface is refused
+        (``code``)."""
+        m = e.compiled.module
+        d = len(e.compiled.coordinates)
+        p = e.compiled.prepared
+        h = 1e-7  # (a_j' by a central difference along q': error ~ h^2, far below REST_TOL)
+        ahead, back = y.copy(), y.copy()
+        ahead[:d] += h * y[d:]
+        back[:d] -= h * y[d:]
+        mode = 0
+        for j, name in enumerate(e.compiled.constraints):
+            a = float(m.constraint_value(j, p, y, 0))
+            if a < -SURFACE_TOL:
+                raise Refused(code, f"the state puts {name!r} below its surface "
+                                    f"(a = {a:.3g})")
+            rate = (float(m.constraint_value(j, p, ahead, 0))
+                    - float(m.constraint_value(j, p, back, 0))) / (2 * h)
+            if e.mode >> j & 1 and abs(a) <= SURFACE_TOL and abs(rate) <= REST_TOL:
+                mode |= 1 << j
+        return mode
 
     def _on_delete_entity(self, request: Any, _response: Any) -> None:
         self._need_entity(request.entity)
@@ -608,7 +633,8 @@ class SimControl:
             if request.initial_pose.header.frame_id not in ("", "world"):
                 raise Refused(codes.INVALID_POSE, "initial_pose: poses are in 'world' (or '')")
             try:
-                entity.y, entity.mode = set_base(compiled.coordinates, entity.y, pose), 0
+                y = set_base(compiled.coordinates, entity.y, pose)
+                entity.y, entity.mode = y, self._contacts_after_set(entity, y, 109)
             except Refused as exc:
                 raise Refused(codes.INVALID_POSE, f"initial_pose: {exc}") from None
         self._set_entity(entity)

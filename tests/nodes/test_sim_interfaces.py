@@ -625,6 +625,14 @@ def test_spawn_and_delete_one_entity_at_a_time(world):
     # (0.1 of free fall from rest with gravity as the bar declares it: z = 2 - g t^2 / 2)
     g = graph.simulator.control.entity.compiled.parameters["g"]
     assert abs(fallen.pose.position.z - (2.0 - g * 0.01 / 2)) < 1e-9
+    # a pose that puts an end of the bar below the ground is refused, and changes nothing
+    sunk = EntityState(pose=Pose(position=Point(x=0.25, z=-0.1)))
+    reply = client.call(_sim("set_entity_state"), SET_ENTITY, entity="rocking_bar",
+                        state=sunk, set_pose=True)
+    assert reply.result.result == INVALID_POSE and "below its surface" in \
+        reply.result.error_message
+    assert client.call(_sim("get_entity_state"), GET_ENTITY,
+                       entity="rocking_bar").state.pose == fallen.pose
     # a reset of the spawned scope brings the served system back
     assert client.call(_sim("reset_simulation"), RESET, scope=4).result.result == OK
     back = client.call(_sim("get_entity_state"), GET_ENTITY, entity="biped")
@@ -674,3 +682,35 @@ def test_simulate_steps_action_gives_feedback_after_each_step(world):
         got = [(f.completed_steps, f.remaining_steps) for f in feedback]
         assert len(got) >= 10 and got == [(k, 20 - k) for k in range(21 - len(got), 21)]
         assert graph.simulator.sim_ns == 20 * 1_000_000
+
+
+@pytest.fixture()
+def standing(domain_id):
+    """The biped standing on both feet (the liftoff maneuver's start at th0 = 0)."""
+    g = Graph(domain_id=domain_id, threads=2,
+              overrides={"simulator": {"autostart": False, "maneuver": "liftoff",
+                                       "theta0": 0.0}})
+    client = RawClient(domain_id)
+    yield g, client
+    client.close()
+    g.close()
+
+
+def test_a_state_set_keeps_the_contacts_still_at_rest_on_their_surface(standing):
+    """Moving the standing biped's body keeps its feet on the ground (their coordinates are
+    their own): the next steps go on in double stance, as a simulation from the moved state in
+    that mode does; giving the body a velocity keeps them too (the feet do not move)."""
+    graph, client = standing
+    assert _set_state(client, PAUSED).result == OK
+    before = client.call(_sim("get_entity_state"), GET_ENTITY, entity="biped").state
+    moved = EntityState(pose=Pose(position=Point(x=0.0, z=before.pose.position.z + 0.01),
+                                  orientation=Quaternion(w=1.0)),
+                        twist=Twist(linear=Vector3(z=0.1)))
+    assert client.call(_sim("set_entity_state"), SET_ENTITY, entity="biped", state=moved,
+                       set_pose=True, set_twist=True).result.result == OK
+    entity = graph.simulator.control.entity
+    assert entity.mode == 3  # (both feet)
+    y0 = entity.y.copy()
+    assert client.call(_sim("step_simulation"), STEP, steps=50).result.result == OK
+    ref = compiled_biped().advance("liftoff", y0, 3, (0.0, 0.0, 0.0), 0.05)
+    assert ref.mode_final == entity.mode and np.max(np.abs(ref.y_final - entity.y)) < 1e-9
