@@ -85,6 +85,8 @@ QUATERNION_TOL, PLANE_TOL = 1e-6, 1e-9
 #: the floating base's coordinates (biped_opt.systems.urdf.BASE) and a planar base's
 FLOATING = ("base_x", "base_y", "base_z", "base_roll", "base_pitch", "base_yaw")
 PLANAR = ("x", "z", "th")
+#: the most steps of a SimulateSteps goal (a goal ends on a cancel, a stop or a reset too)
+MAX_GOAL_STEPS = 1_000_000_000
 #: a step's integration goes on after the maneuver's terminal event at most this often
 MAX_PIECES = 10_000
 #: wall time a tick of a world playing as fast as possible integrates for [s] (then the node
@@ -255,7 +257,7 @@ class SimControl:
         self.node = node
         node.declare_parameter("step_size", 0.001)
         node.declare_parameter("clock_rate_hz", 20.0)
-        node.declare_parameter("max_steps", 100_000)
+        node.declare_parameter("max_steps", 2000)
         node.declare_parameter("max_lag", 0.25)
         node.declare_parameter("max_resource_bytes", 1_000_000)
         node.declare_parameter("compile_queue", 2)
@@ -421,14 +423,18 @@ class SimControl:
         self._check_steps(steps)
         self.step(steps)
 
-    def _check_steps(self, steps: int) -> None:
+    def _check_steps(self, steps: int, limit: int | None = None) -> None:
+        """A request for ``steps`` steps: paused, an entity, at most ``limit`` steps (default
+        ``max_steps``: StepSimulation holds the node until they are done)."""
         if self.state != PAUSED:
             raise Refused(self.msgs.Result.RESULT_OPERATION_FAILED,
                           f"the simulation is {_STATE_NAMES[self.state]}: it steps only while "
                           "paused")
-        if not 1 <= steps <= self.max_steps:
+        limit = self.max_steps if limit is None else limit
+        if not 1 <= steps <= limit:
+            what = "max_steps; SimulateSteps takes more" if limit == self.max_steps else "a goal"
             raise Refused(self.msgs.Result.RESULT_OPERATION_FAILED,
-                          f"steps must be 1 to {self.max_steps} (max_steps), got {steps}")
+                          f"steps must be 1 to {limit} ({what}), got {steps}")
         self._need_entity()
 
     def _on_steps_goal(self, _goal: Any) -> Any:
@@ -446,8 +452,8 @@ class SimControl:
             try:
                 while True:
                     with self.lock:
-                        if done == 0:
-                            self._check_steps(steps)
+                        if done == 0:  # (one step at a time: the node serves in between)
+                            self._check_steps(steps, MAX_GOAL_STEPS)
                         elif self.state != PAUSED:
                             raise Refused(self.msgs.Result.RESULT_OPERATION_FAILED,
                                           f"the simulation was {_STATE_NAMES[self.state]} "

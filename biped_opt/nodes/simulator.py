@@ -206,8 +206,12 @@ class SimulatorNode(ros.Node):
         self._playback: _Playback | None = None
         self._timer = self.create_timer(0.005, self._on_tick)
         self._system_state_pub: Any = self._state_pub if not biped else None
+        # (the world starts as the parameters' run would; a maneuver the system lacks, left
+        # in a shared parameter file with autostart off, gives way to the system's first)
+        maneuver = str(self.get_parameter("maneuver").value)
         entity = Entity(name=compiled.name, compiled=compiled,
-                        maneuver=str(self.get_parameter("maneuver").value),
+                        maneuver=maneuver if maneuver in compiled.maneuvers
+                        else compiled.maneuvers[0],
                         s=float(self.get_parameter("theta0").value), y=np.zeros(0), mode=0,
                         spawned=False, scene=self.scene, biped=biped)
         try:
