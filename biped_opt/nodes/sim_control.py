@@ -658,6 +658,8 @@ class SimControl:
 
     # -- the world's entity ----------------------------------------------------------------
     def _set_entity(self, entity: Entity | None) -> None:
+        if entity is not None and entity is not self.entity:
+            entity.scene = self.node.scene_for(entity.compiled)  # (a new scene: a new system)
         self.entity = entity
         if entity is not None and entity is self.initial:
             entity.restart()
