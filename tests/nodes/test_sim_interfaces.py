@@ -292,9 +292,10 @@ def test_states_transitions_and_result_codes(world):
 def test_steps_end_where_one_simulation_ends(world):
     """1000 steps of 1e-3 with the command (2, 0.5, 0) end at t = 1 after the touchdown at
     t = 0.977: the state equals the dense sample of one simulation at t = 1 (the interpolant of
-    the same integrator, rtol 1e-11; the steps' integration restarts at every step boundary,
-    so the two agree to about 1e-11 and not to the last bit: 1e-9 leaves room for the error
-    bound, while a step's time or an event misplaced by one step would be off by ~1e-3)."""
+    the same integrator, rtol 1e-11, against the steps' end point, in 4 requests whose
+    integration restarts at each: they agree to about 2e-12, not to the last bit; 1e-9 leaves
+    room for the integrator's error bound, while a step's time or an event misplaced by one
+    step would be off by ~1e-3)."""
     graph, client, command = world
     assert _set_state(client, PAUSED).result == OK
     command.write(Float64MultiArray(data=[2.0, 0.5, 0.0]))
