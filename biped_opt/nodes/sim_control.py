@@ -87,7 +87,8 @@ FLOATING = ("base_x", "base_y", "base_z", "base_roll", "base_pitch", "base_yaw")
 PLANAR = ("x", "z", "th")
 #: the most steps of a SimulateSteps goal (a goal ends on a cancel, a stop or a reset too)
 MAX_GOAL_STEPS = 1_000_000_000
-#: a step's integration goes on after the maneuver's terminal event at most this often
+#: a step's integration goes on after the maneuver's terminal event or event budget at most
+#: this often
 MAX_PIECES = 10_000
 #: wall time a tick of a world playing as fast as possible integrates for [s] (then the node
 #: serves what waits)
@@ -697,8 +698,9 @@ class SimControl:
                 tr = e.compiled.advance(e.maneuver, e.y, e.mode, u, span - t,
                                         sample_dt=sample_dt)
                 # (OK, APEX_IN_CONTACT: the maneuver's terminal event, which ends a maneuver
-                # but not a world: go on from it)
-                if tr.status.name not in ("OK", "HORIZON", "APEX_IN_CONTACT"):
+                # but not a world; MAX_EVENTS: the maneuver's event budget for one call, used
+                # up after an event: go on from there)
+                if tr.status.name not in ("OK", "HORIZON", "APEX_IN_CONTACT", "MAX_EVENTS"):
                     raise Refused(self.msgs.Result.RESULT_OPERATION_FAILED,
                                   f"the step from t = {start_ns / NS:.9g} failed at t = "
                                   f"{start_ns / NS + t + tr.t_final:.9g}: {tr.status.message}")
@@ -716,7 +718,8 @@ class SimControl:
                 if pieces > MAX_PIECES:
                     raise Refused(self.msgs.Result.RESULT_OPERATION_FAILED,
                                   f"the step from t = {start_ns / NS:.9g} met the maneuver's "
-                                  f"terminal event {MAX_PIECES} times")
+                                  f"terminal event or event budget {MAX_PIECES} times (a Zeno "
+                                  "cascade of impacts?)")
                 t += tr.t_final
         finally:
             self.node.advance_clock(start_ns + (steps * round(self.step_size * NS)
@@ -742,9 +745,8 @@ class SimControl:
                             f"cannot keep real_time_factor {factor:g}: {behind:.3f} s of "
                             "simulated time behind; playing slower (the factor achieved is "
                             "on /diagnostics)")
-                    steps = max(1, round(self.max_lag * NS) // h_ns)
-                    self._wall0 = now
-                    self._sim0_ns = self.node.sim_ns + steps * h_ns
+                    steps = max(1, round(self.max_lag * NS) // h_ns)  # (this tick: max_lag)
+                    self._wall0, self._sim0_ns = now, self.node.sim_ns + steps * h_ns
             else:
                 steps = max(1, round(0.05 * NS) // h_ns)
             if steps <= 0:
@@ -816,7 +818,8 @@ class SimControl:
             self.command = values if n else self._zeros()
 
     def _idle_clock(self) -> None:
-        if self._clock_pub is None or self.state == PLAYING or self.node.playing_back():
+        if self._clock_pub is None or self.node.playing_back() or (
+                self.state == PLAYING and self.entity is not None):  # (the steps publish it)
             return
         ns = self.node.clock_ns
         msg = self._clock_cls()
