@@ -33,6 +33,12 @@ setup(
         (f"share/{package_name}/msg_defs/msg", sorted(glob("msg_defs/msg/*.msg"))),
         (f"share/{package_name}/msg_defs/srv", sorted(glob("msg_defs/srv/*.srv"))),
         (f"share/{package_name}/msg_defs/action", sorted(glob("msg_defs/action/*.action"))),
+        # standard packages rosbags lacks, as published (with their licence): the types of
+        # the simulator's ROS 2 Simulation Interfaces on the built-in backend
+        *((f"share/{package_name}/{folder}", sorted(str(p) for p in Path(folder).iterdir()
+                                                    if p.is_file()))
+          for folder in sorted({str(p.parent) for p in Path("msg_defs/vendor").rglob("*")
+                                if p.is_file()})),
     ],
     install_requires=pinned_requirements(),
     python_requires=">=3.10",

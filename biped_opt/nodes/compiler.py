@@ -50,9 +50,20 @@ def _sources(job: dict[str, Any]) -> Sources:
 def prepare(job: dict[str, Any]) -> Any:
     """Build and exercise what a job names (in the compile process, then in the node):
     ``kind`` "policy" (an OptimalPolicy request's names, as :meth:`Sources.check_request`
-    resolved them: returns its Problem) or "study" (a study's system and problem: returns
-    None)."""
+    resolved them: returns its Problem), "study" (a study's system and problem: returns
+    None) or "urdf" (a robot's URDF text, ``urdf``: returns its CompiledSystem)."""
     sources = _sources(job)
+    if job["kind"] == "urdf":  # a robot spawned from its URDF text: its CompiledSystem
+        from biped_opt.systems.urdf import parse_urdf, system_from_urdf
+
+        system = system_from_urdf(parse_urdf(job["urdf"], source="resource_string"))
+        sources.limits.check("resource_string", system)
+        from biped_opt.simulation.compiled import CompiledSystem
+
+        compiled = CompiledSystem(system)
+        for maneuver in compiled.maneuvers:
+            compiled.simulate(maneuver, 0.0)
+        return compiled
     if job["kind"] == "policy":
         problem = sources.problem(Names(**job["names"]))
     else:  # a study: the fixed-input kernels, and its problem's if it has one
@@ -284,7 +295,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         prepare(job)
     except BaseException as exc:  # (a system file's SystemExit too): one line, status 2
-        print(failure_message(exc, f"system {job['system'] or 'biped'}"), file=sys.stderr,
+        print(failure_message(exc, f"system {job.get('system') or 'biped'}"), file=sys.stderr,
               flush=True)
         return 2
     return 0

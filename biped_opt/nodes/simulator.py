@@ -27,8 +27,8 @@ unknown system or a bad system file stops the node at start-up with one line say
 does (with ``autostart``) a run the parameters cannot start.
 
 **Simulated time and the scene** (ROS.md Sec. 6). The node keeps a simulated clock that starts at
-0 and runs on through successive runs (a run starts where the previous one ended). Every message
-is stamped with it, and while a run plays the node publishes:
+0 and runs on through successive runs (a run starts 1 ns after the previous one ended). Every
+message is stamped with it, and while a run plays the node publishes:
 
 - ``/clock`` (rosgraph_msgs/Clock): the time of every shown sample, so nodes with
   ``use_sim_time`` run on simulated time;
@@ -36,6 +36,13 @@ is stamped with it, and while a run plays the node publishes:
 - ``/biped/markers`` (visualization_msgs/MarkerArray): the ground, the shapes, the contact points
   (active ones red) and the contact forces as arrows;
 - ``/robot_description`` (std_msgs/String, transient local, once): the URDF of the frames.
+
+**A simulator a ROS stack drives** (ROS.md Sec. 8, :mod:`biped_opt.nodes.sim_control`): the ROS 2
+Simulation Interfaces under ``/simulator/...`` (state, reset, step, entity state, delete), a
+live world that plays at ``real_time_factor`` with the inputs of ``/biped/command``
+(``std_msgs/Float64MultiArray``), ``/clock`` at the current time while nothing plays, and
+``/diagnostics`` with the real-time factor achieved. A run starts 1 ns after the previous one's
+last sample, so no stamp is shown twice; ``/biped/simulate`` is refused while the world plays.
 
 A run played as fast as possible (``real_time_factor`` 0, as a sweep asks) publishes its states
 and contact modes as before but ``/clock``, ``/tf`` and the markers of its last sample only: no
@@ -47,14 +54,18 @@ from __future__ import annotations
 
 import threading
 import time
+import types
 from dataclasses import dataclass
 from typing import Any
+
+import numpy as np
 
 from biped_opt import ros
 from biped_opt.errors import BipedOptError, InvalidInputError, InvalidParameterError
 from biped_opt.nodes import convert
 from biped_opt.nodes.refusals import refuse
 from biped_opt.nodes.run import announce_ready, run_node, warm_up_kernels
+from biped_opt.nodes.sim_control import COMMAND_TOPIC, PLAYING, SERVICES, Entity, SimControl
 from biped_opt.paper.biped import compiled_biped, simulate
 from biped_opt.record.scene import SCENE_TOPICS, SceneMessages
 from biped_opt.ros.interfaces import load_interfaces
@@ -117,6 +128,7 @@ class _Playback:
     scene: list[tuple[float, dict[str, bytes]]]
     rate: float  # real-time factor; 0 = everything at once
     wall_start: float
+    start_ns: int = 0  #: the run's start on the simulated clock
     #: (maneuver, theta0, inputs) of the run, to play it again on the clock when looping
     request: tuple[str, float, Any] = ("", 0.0, ())
     next_state: int = 0
@@ -169,12 +181,8 @@ class SimulatorNode(ros.Node):
             topics = ("/biped/system_state", "/biped/system_info")
         self.declare_parameter("scene", True)
         compiled = compiled_biped() if biped else self.system
-        scene = compiled.scene
         #: the scene's messages (None: turned off, or the system declares no looks)
-        self.scene: SceneMessages | None = None \
-            if scene.empty or self.get_parameter("scene").value is not True else SceneMessages(
-            load_interfaces().typestore, scene, list(compiled.parameters.values()),
-            len(compiled.coordinates))
+        self.scene: SceneMessages | None = self.scene_for(compiled)
         self._scene_pubs: dict[str, tuple[Any, type]] = {}
         if self.scene is not None:
             for topic, (typename, _) in self.scene.topics.items():
@@ -185,14 +193,36 @@ class SimulatorNode(ros.Node):
             topics += tuple(self.scene.topics)
             pub, cls = self._scene_pubs["/robot_description"]
             pub.publish(ros.from_cdr(cls, self.scene.robot_description()))
-        #: the simulated clock: where the next run starts [ns]
+        #: the simulated clock: the time reached (the end of the last run or step) [ns],
+        #: whether a sample is stamped with it, the last /clock and /tf stamps published
         self._sim_ns = 0
+        self._stamped = False
+        self.clock_ns = 0
+        self._shown_ns = -1
         self._service = self.create_service(
             ros.srvs.Simulate, "/biped/simulate", self._on_simulate
         )
-        self._lock = threading.Lock()
+        self._lock = threading.RLock()
         self._playback: _Playback | None = None
         self._timer = self.create_timer(0.005, self._on_tick)
+        self._system_state_pub: Any = self._state_pub if not biped else None
+        # (the world starts as the parameters' run would; a maneuver the system lacks, left
+        # in a shared parameter file with autostart off, gives way to the system's first)
+        maneuver = str(self.get_parameter("maneuver").value)
+        entity = Entity(name=compiled.name, compiled=compiled,
+                        maneuver=maneuver if maneuver in compiled.maneuvers
+                        else compiled.maneuvers[0],
+                        s=float(self.get_parameter("theta0").value), y=np.zeros(0), mode=0,
+                        spawned=False, scene=self.scene, biped=biped)
+        try:
+            entity.restart()
+        except BipedOptError as exc:
+            raise InvalidParameterError(f"maneuver, theta0: {exc}") from None
+        #: the ROS 2 Simulation Interfaces and the live simulation (sim_control)
+        self.control = SimControl(self, entity)
+        serves = ("/biped/simulate", *(f"{self.get_fully_qualified_name()}/{name}"
+                                       for name in SERVICES),
+                  f"{self.get_fully_qualified_name()}/simulate_steps (action)")
         if self.get_parameter("autostart").value:
             try:
                 self.start(
@@ -205,7 +235,9 @@ class SimulatorNode(ros.Node):
             except BipedOptError as exc:  # a bad parameter: the node stops (status 2)
                 raise InvalidParameterError(f"cannot start from the parameters: {exc}") \
                     from None
-        announce_ready(self, serves=("/biped/simulate",), publishes=topics)
+        announce_ready(self, serves=serves, publishes=(
+            *topics, *(() if "/clock" in topics else ("/clock",)), "/diagnostics",
+            COMMAND_TOPIC + " (subscribed)"))
 
     # -- running --------------------------------------------------------------------------
     def run(self, maneuver: str, theta0: float, inputs: Any) -> Any:
@@ -236,8 +268,11 @@ class SimulatorNode(ros.Node):
             )
         tr = self.run(maneuver, theta0, inputs)
         with self._lock:
-            start_ns = self._sim_ns
+            # (a run starts after the last stamp shown: one nanosecond after the previous
+            # run's last sample, so no stamp carries two states)
+            start_ns = self._sim_ns + self._stamped
             self._sim_ns = start_ns + max(round(tr.t_final * convert.NS), 1)
+            self._stamped = True
         if self.system is not None:
             states = convert.system_state_messages(tr, len(self.system.coordinates), start_ns)
             modes: list[tuple[float, Any]] = []
@@ -257,6 +292,7 @@ class SimulatorNode(ros.Node):
             scene=scene,
             rate=real_time_factor,
             wall_start=time.monotonic(),
+            start_ns=start_ns,
             request=(maneuver, theta0, inputs),
         )
         with self._lock:
@@ -276,9 +312,8 @@ class SimulatorNode(ros.Node):
                 self._mode_pub.publish(pb.modes[pb.next_mode][1])
                 pb.next_mode += 1
             while pb.next_scene < len(pb.scene) and pb.scene[pb.next_scene][0] <= sim_now:
-                for topic, data in pb.scene[pb.next_scene][1].items():
-                    pub, cls = self._scene_pubs[topic]
-                    pub.publish(ros.from_cdr(cls, data))
+                t, data = pb.scene[pb.next_scene]
+                self._publish_scene(data, pb.start_ns + round(t * convert.NS))
                 pb.next_scene += 1
             while pb.next_state < len(pb.states) and pb.states[pb.next_state].t <= sim_now:
                 self._state_pub.publish(pb.states[pb.next_state])
@@ -292,8 +327,134 @@ class SimulatorNode(ros.Node):
         if again is not None:  # the same run once more, later on the simulated clock
             self.start(*again.request, again.rate, publish_now=False)
 
+    # -- the clock, the scene and the live world (used by sim_control) ------------------------
+    @property
+    def sim_ns(self) -> int:
+        """The simulated time reached [ns]."""
+        return self._sim_ns
+
+    def advance_clock(self, ns: int) -> None:
+        """The live world reached ``ns`` (its sample there is shown)."""
+        with self._lock:
+            self._sim_ns, self._stamped = max(ns, self._sim_ns), True
+
+    def reset_clock(self) -> None:
+        """Simulated time back to 0 (a reset: the one time the clock goes back)."""
+        with self._lock:
+            self._sim_ns, self._stamped, self._shown_ns = 0, False, -1
+            self.clock_ns = 0
+            self._publish_clock(0)
+
+    def end_playback(self) -> None:
+        """Drop what is left of a run being played (live play or a step takes over; the
+        clock is at the run's end already)."""
+        with self._lock:
+            self._playback = None
+
+    def playing_back(self) -> bool:
+        return self._playback is not None
+
+    def scene_publisher(self, topic: str) -> Any:
+        """The publisher of a scene topic (made on first use)."""
+        if topic not in self._scene_pubs:
+            cls = ros.message_type(SCENE_TOPICS[topic][0])
+            assert cls is not None, topic
+            self._scene_pubs[topic] = (self.create_publisher(cls, topic, scene_qos(topic)), cls)
+        return self._scene_pubs[topic][0]
+
+    def _publish_scene(self, data: dict[str, bytes], ns: int) -> None:
+        for topic, cdr in data.items():
+            self.scene_publisher(topic)
+            pub, cls = self._scene_pubs[topic]
+            pub.publish(ros.from_cdr(cls, cdr))
+        self._shown_ns = max(self._shown_ns, ns)
+        if "/clock" in data:
+            self.clock_ns = max(self.clock_ns, ns)
+
+    def _publish_clock(self, ns: int) -> None:
+        cls = ros.message_type(SCENE_TOPICS["/clock"][0])
+        msg = cls()  # type: ignore[misc]
+        msg.clock = convert.stamp(ns)
+        self.scene_publisher("/clock").publish(msg)
+
+    def scene_for(self, compiled: Any) -> SceneMessages | None:
+        """The scene messages of a system spawned in the live world (None: the node's scene
+        is turned off, or the system declares no looks)."""
+        if compiled.scene.empty or self.get_parameter("scene").value is not True:
+            return None
+        return SceneMessages(load_interfaces().typestore, compiled.scene,
+                             list(compiled.parameters.values()), len(compiled.coordinates))
+
+    def destroy_node(self) -> None:
+        control = getattr(self, "control", None)
+        if control is not None:
+            control.close()
+        super().destroy_node()
+
+    def entity_changed(self, entity: Entity | None) -> None:
+        """A new entity in the live world (spawned, or the served system back): its
+        description and looks."""
+        if entity is not None and entity.scene is not None:
+            self.scene_publisher("/robot_description").publish(ros.from_cdr(
+                self._scene_pubs["/robot_description"][1], entity.scene.robot_description()))
+
+    def show_live(self, entity: Entity, rows: Any, events: list[tuple[float, int]],
+                  start_ns: int, fast: bool = False) -> None:
+        """Publish the live world's samples (rows [t, y, mode, lambda], t from ``start_ns``)
+        whose stamps are later than anything shown, and its contact events (``fast``: the
+        last sample only)."""
+        stamps = start_ns + np.round(rows[:, 0] * convert.NS).astype(np.int64)
+        fresh = stamps > self._shown_ns
+        if not fresh.any():
+            return
+        rows = rows[fresh][-1:] if fast else rows[fresh]
+        # publish_rate_hz samples per unit of simulated time, every event's rows, the last
+        rate = float(self.get_parameter("publish_rate_hz").value)
+        t = rows[:, 0]
+        keep = np.zeros(len(rows), dtype=bool)
+        keep[SceneMessages.shown(rows, rate if convert.finite(rate) and rate > 0 else 0.0)] = True
+        keep[:-1] |= t[:-1] == t[1:]  # (the state topic has an event's row before it too)
+        rows = rows[keep]
+        run = types.SimpleNamespace(samples=rows, maneuver=entity.maneuver, theta0=entity.s,
+                                    s=entity.s, system=entity.compiled.name)
+        if entity.biped and self.system is None:
+            for msg in convert.state_messages(run, start_ns):
+                self._state_pub.publish(msg)
+        else:
+            if self._system_state_pub is None:
+                self._system_state_pub = self.create_publisher(
+                    ros.msgs.SystemState, "/biped/system_state", ros.qos_profile_sensor_data)
+            for msg in convert.system_state_messages(run, len(entity.compiled.coordinates),
+                                                     start_ns):
+                self._system_state_pub.publish(msg)
+        if self.system is None and entity.biped:
+            mode = self.control._last_mode
+            first = int(rows[0, 1 + len(entity.y)])
+            for t, mask in [(float(rows[0, 0]), first), *events]:
+                ns = start_ns + round(t * convert.NS)
+                if mask != mode and ns > self._shown_ns:
+                    msg = ros.msgs.ContactMode()
+                    msg.header = convert.header(ns)
+                    msg.mode = int(mask)
+                    self._mode_pub.publish(msg)
+                    mode = mask
+            self.control._last_mode = mode
+        last = int(stamps[fresh][-1])
+        if entity.scene is not None:
+            shown, data = entity.scene.messages(rows, start_ns)  # (one row per stamp)
+            for i, ns in enumerate(shown):
+                self._publish_scene({k: v[i] for k, v in data.items()}, int(ns))
+        else:
+            self._publish_clock(last)
+            self.clock_ns = max(self.clock_ns, last)
+        self._shown_ns = max(self._shown_ns, last)
+
     # -- service --------------------------------------------------------------------------
     def _on_simulate(self, request: Any, response: Any) -> Any:
+        if self.control.state == PLAYING:
+            return refuse(self, "/biped/simulate", response, InvalidInputError(
+                "the simulation is playing (ROS 2 Simulation Interfaces): pause or stop it "
+                "first"))
         try:
             # (the states as stamped: the reply carries what the topic carried)
             tr, states = self.start(request.maneuver, request.theta0, request.inputs,

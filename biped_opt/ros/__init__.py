@@ -3,7 +3,9 @@
 ``from biped_opt import ros`` gives the rclpy subset the nodes use (``ros.init``, ``ros.Node``,
 ``ros.spin``, executors, QoS profiles...) plus the interface types
 ``ros.msgs.BipedState``, ``ros.srvs.OptimalPolicy`` (with ``.Request``/``.Response``),
-``ros.actions.Study`` (with ``.Goal``/``.Result``/``.Feedback``) and rclpy.action's
+``ros.actions.Study`` (with ``.Goal``/``.Result``/``.Feedback``), the ROS 2 Simulation
+Interfaces' types (``ros.sim_srvs.StepSimulation``...: the ``simulation_interfaces`` package's
+with rclpy, the vendored definitions' on the built-in backend) and rclpy.action's
 ``ActionServer``, ``ActionClient``, ``GoalResponse``, ``CancelResponse``.
 The backend is chosen once, at import:
 
@@ -19,11 +21,13 @@ from __future__ import annotations
 import importlib
 import os
 import types
+from typing import Any
 
 from biped_opt.errors import BipedOptError
 
 __all__ = [
     "BACKEND", "BackendError", "msgs", "srvs", "actions", "std_msgs", "message_type",
+    "SIM_PACKAGE", "sim_msgs", "sim_srvs", "sim_actions",
     "from_cdr",
     "ActionServer", "ActionClient", "GoalResponse", "CancelResponse",
     "init", "shutdown", "try_shutdown", "ok", "spin", "spin_once", "spin_until_future_complete",
@@ -32,6 +36,11 @@ __all__ = [
     "ReliabilityPolicy", "DurabilityPolicy", "qos_profile_sensor_data",
     "qos_profile_services_default", "qos_profile_system_default", "STARTUP_ERRORS",
 ]
+
+
+#: the ROS 2 Simulation Interfaces package: ``ros.sim_msgs``, ``ros.sim_srvs`` and
+#: ``ros.sim_actions`` are its types (None with rclpy when the package is not installed)
+SIM_PACKAGE = "simulation_interfaces"
 
 
 class BackendError(BipedOptError, ImportError):
@@ -68,6 +77,13 @@ if BACKEND == "rclpy":
     import biped_opt_interfaces.msg as msgs  # type: ignore[import-not-found, no-redef]
     import biped_opt_interfaces.srv as srvs  # type: ignore[import-not-found, no-redef]
     import std_msgs.msg as std_msgs  # type: ignore[import-not-found, no-redef]
+
+    try:  # (the standard's package, when installed: the simulator's Simulation Interfaces)
+        import simulation_interfaces.action as sim_actions  # type: ignore[import-not-found]
+        import simulation_interfaces.msg as sim_msgs  # type: ignore[import-not-found]
+        import simulation_interfaces.srv as sim_srvs  # type: ignore[import-not-found]
+    except ImportError:
+        sim_msgs = sim_srvs = sim_actions = None
     from rclpy import (  # type: ignore[import-not-found, no-redef]
         init,
         ok,
@@ -148,12 +164,19 @@ else:
     STARTUP_ERRORS = (BipedOptError,)
 
     _ifc = load_interfaces()
-    msgs = types.SimpleNamespace(**{
-        name.rsplit("/", 1)[1]: _ifc.message_class(name) for name in _ifc.msg_names})
-    srvs = types.SimpleNamespace(**{
-        name.rsplit("/", 1)[1]: svc for name, svc in _ifc.services.items()})
-    actions = types.SimpleNamespace(**{
-        name.rsplit("/", 1)[1]: action for name, action in _ifc.actions.items()})
+
+    def _package(pkg: str) -> tuple[types.SimpleNamespace, ...]:
+        def short(names: Any) -> dict[str, Any]:
+            return {name.rsplit("/", 1)[1]: value for name, value in names
+                    if name.startswith(pkg + "/")}
+
+        return (types.SimpleNamespace(**short(
+                    (name, _ifc.message_class(name)) for name in _ifc.msg_names)),
+                types.SimpleNamespace(**short(_ifc.services.items())),
+                types.SimpleNamespace(**short(_ifc.actions.items())))
+
+    msgs, srvs, actions = _package(PACKAGE)
+    sim_msgs, sim_srvs, sim_actions = _package(SIM_PACKAGE)
     std_msgs = types.SimpleNamespace(Header=_ifc.message_class("std_msgs/msg/Header"))
     del _ifc, PACKAGE
 

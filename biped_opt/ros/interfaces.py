@@ -136,7 +136,29 @@ def _idl_type(rostype: str, pkg: str) -> str:
     return "::".join(parts)
 
 
-def _half_to_idl(text: str, pkg: str, struct: str) -> str:
+#: a scalar field's default value in a definition (``uint64 steps 1``): the value rclpy's
+#: constructor gives the field (the wire has no defaults), by type name, then field
+FieldDefaults = dict[str, dict[str, Any]]
+
+
+def _default_value(idl: str, text: str, where: str) -> Any:
+    text = text.strip()
+    try:
+        if idl.startswith(("string", "wstring")):
+            return text.strip("'\"")
+        if idl == "boolean":
+            return text.lower() in ("true", "1")
+        if idl in ("float", "double"):
+            return float(text)
+        if idl in _IDL_BASE.values():
+            return int(text, 0)
+    except ValueError:
+        pass
+    raise InterfaceError(f"{where}: default value {text!r} of a {idl} field is not supported")
+
+
+def _half_to_idl(text: str, pkg: str, struct: str,
+                 defaults: FieldDefaults | None = None) -> str:
     consts: list[str] = []
     members: list[str] = []
     for lineno, raw in enumerate(text.splitlines(), 1):
@@ -159,9 +181,13 @@ def _half_to_idl(text: str, pkg: str, struct: str) -> str:
             consts.append(f"const {idl} {name} = {value};")
             continue
         if match["value"]:
-            # ROS field default values have no IDL equivalent that rosbags keeps; refuse them
-            # rather than silently dropping them.
-            raise InterfaceError(f"{struct}: default value of field {name!r} is not supported")
+            # (IDL has no field defaults: kept aside for the message class; an array's or a
+            # message's default is refused rather than silently dropped)
+            if arr or defaults is None:
+                raise InterfaceError(
+                    f"{struct}: default value of field {name!r} is not supported")
+            defaults.setdefault(struct, {})[name] = _default_value(
+                idl, match["value"], f"{struct}.{name}")
         if not arr:
             members.append(f"{idl} {name};")
         elif arr == "[]":
@@ -179,13 +205,14 @@ def _half_to_idl(text: str, pkg: str, struct: str) -> str:
     return " ".join(out)
 
 
-def srv_to_idl(text: str, pkg: str, name: str) -> str:
-    """IDL text for the ``Name_Request``/``Name_Response`` structs of a ``.srv`` definition."""
+def srv_to_idl(text: str, pkg: str, name: str, defaults: FieldDefaults | None = None) -> str:
+    """IDL text for the ``Name_Request``/``Name_Response`` structs of a ``.srv`` definition
+    (scalar fields' default values go to ``defaults``, when given, by struct name)."""
     halves = re.split(r"^\s*---\s*$", text, flags=re.MULTILINE)
     if len(halves) != 2:
         raise InterfaceError(f"{pkg}/srv/{name}: expected exactly one '---' separator")
     body = " ".join(
-        _half_to_idl(half, pkg, f"{name}_{suffix}")
+        _half_to_idl(half, pkg, f"{name}_{suffix}", defaults)
         for half, suffix in zip(halves, ("Request", "Response"))
     )
     return f"module {pkg} {{ module srv {{ {body} }}; }};\n"
@@ -204,14 +231,15 @@ action_msgs/GoalInfo[] goals_canceling
 """
 
 
-def action_to_idl(text: str, pkg: str, name: str) -> str:
+def action_to_idl(text: str, pkg: str, name: str, defaults: FieldDefaults | None = None
+                  ) -> str:
     """IDL text for an ``.action`` definition: ``Name_Goal``, ``Name_Result``,
     ``Name_Feedback`` and the structs rosidl derives from them (``Name_SendGoal_Request`` /
     ``_Response``, ``Name_GetResult_Request`` / ``_Response``, ``Name_FeedbackMessage``)."""
     parts = re.split(r"^\s*---\s*$", text, flags=re.MULTILINE)
     if len(parts) != 3:
         raise InterfaceError(f"{pkg}/action/{name}: expected exactly two '---' separators")
-    body = [_half_to_idl(part, pkg, f"{name}_{suffix}")
+    body = [_half_to_idl(part, pkg, f"{name}_{suffix}", defaults)
             for part, suffix in zip(parts, ("Goal", "Result", "Feedback"))]
     uuid, own = "unique_identifier_msgs::msg::UUID", f"{pkg}::action::{name}"
     body += [
@@ -334,37 +362,45 @@ class Interfaces:
         self.root = root
         self.typestore = get_typestore(Stores.ROS2_HUMBLE)
         defs: dict[str, Any] = {}
+        #: scalar fields' default values (``uint64 steps 1``), by ROS type name
+        self.field_defaults: dict[str, dict[str, Any]] = {}
         self.msg_names: list[str] = []
         self.srv_names: list[str] = []
-        for path in sorted((root / "msg").glob("*.msg")):
-            ros_name = f"{PACKAGE}/msg/{path.stem}"
-            try:
-                defs.update(get_types_from_msg(path.read_text(), ros_name))
-            except Exception as exc:  # rosbags raises its own error types
-                raise InterfaceError(f"{path.name}: {exc}") from exc
-            self.msg_names.append(ros_name)
-        for path in sorted((root / "srv").glob("*.srv")):
-            try:
-                defs.update(get_types_from_idl(srv_to_idl(path.read_text(), PACKAGE, path.stem)))
-            except InterfaceError:
-                raise
-            except Exception as exc:
-                raise InterfaceError(f"{path.name}: {exc}") from exc
-            self.srv_names.append(f"{PACKAGE}/srv/{path.stem}")
         self.action_names: list[str] = []
-        action_paths = sorted((root / "action").glob("*.action"))
-        if action_paths:
-            defs.update(get_types_from_idl(srv_to_idl(CANCEL_GOAL_SRV, "action_msgs",
-                                                      "CancelGoal")))
-        for path in action_paths:
-            try:
-                defs.update(get_types_from_idl(action_to_idl(path.read_text(), PACKAGE,
-                                                             path.stem)))
-            except InterfaceError:
-                raise
-            except Exception as exc:
-                raise InterfaceError(f"{path.name}: {exc}") from exc
-            self.action_names.append(f"{PACKAGE}/action/{path.stem}")
+        # the project's package, then the standard ones vendored beside it (vendor/<package>/)
+        folders = [(PACKAGE, root)]
+        vendor = root / "vendor"
+        if vendor.is_dir():
+            folders += [(p.name, p) for p in sorted(vendor.iterdir()) if (p / "msg").is_dir()]
+        cancel_goal = False
+        for pkg, folder in folders:
+            for path in sorted((folder / "msg").glob("*.msg")):
+                ros_name = f"{pkg}/msg/{path.stem}"
+                try:
+                    defs.update(get_types_from_msg(path.read_text(), ros_name))
+                except Exception as exc:  # rosbags raises its own error types
+                    raise InterfaceError(f"{path.name}: {exc}") from exc
+                self.msg_names.append(ros_name)
+            for kind, suffix, convert in (("srv", "srv", srv_to_idl),
+                                          ("action", "action", action_to_idl)):
+                paths = sorted((folder / kind).glob(f"*.{suffix}"))
+                if kind == "action" and paths and not cancel_goal:
+                    defs.update(get_types_from_idl(srv_to_idl(CANCEL_GOAL_SRV, "action_msgs",
+                                                              "CancelGoal")))
+                    cancel_goal = True
+                for path in paths:
+                    found: FieldDefaults = {}
+                    try:
+                        defs.update(get_types_from_idl(convert(path.read_text(), pkg, path.stem,
+                                                               found)))
+                    except InterfaceError:
+                        raise
+                    except Exception as exc:
+                        raise InterfaceError(f"{path.name}: {exc}") from exc
+                    for struct, values in found.items():
+                        self.field_defaults[f"{pkg}/{kind}/{struct}"] = values
+                    (self.srv_names if kind == "srv" else self.action_names).append(
+                        f"{pkg}/{kind}/{path.stem}")
         self.typestore.register(defs)
         self._classes: dict[str, type] = {}
         self.services: dict[str, ServiceType] = {}
@@ -386,8 +422,11 @@ class Interfaces:
         consts, fields = self.typestore.fielddefs[ros_name]
         annotations: dict[str, Any] = {}
         defaults: dict[str, Any] = {}
+        given = self.field_defaults.get(ros_name, {})
         for fname, desc in fields:
             annotations[fname], defaults[fname] = self._field(desc)
+            if fname in given:
+                defaults[fname] = given[fname]
         pkg, kind, short = ros_name.split("/")
         if kind == "msg" or short.endswith("_FeedbackMessage"):  # (a topic's type)
             typename = f"{pkg}::{kind}::dds_::{short}_"

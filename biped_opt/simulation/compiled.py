@@ -595,6 +595,13 @@ class CompiledSystem:
             samples = self._no_samples
             cfg = (self._maneuver_cfgs[code] if options is self._options[code]
                    else self._cfg(options, 0.0))
+        return self._run(maneuver, code, s, u, options, cfg, samples if sample_dt else None,
+                         _FROM_S, self._initial_modes[code])
+
+    def _run(self, maneuver: str, code: int, s: float, u: Array, options: SimulatorOptions,
+             cfg: Array, samples: Array | None, y0: Array, mode0: int) -> Trajectory:
+        """One kernel call (from s, or from (y0, mode0) when y0 is a state) as a Trajectory."""
+        m = self.module
         events = np.empty((options.max_events + 1, m.EVENT_WIDTH))
         y_out = np.empty(m.NSTATE)
         if isinstance(m, _AheadModule):
@@ -603,12 +610,49 @@ class CompiledSystem:
             kernel, sv = self.shared_kernel()
             run = kernel.simulate_maneuver
         status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej, outcome = run(
-            self.prepared, sv, code, s, u, cfg, samples, events, y_out, _FROM_S, 0)
+            self.prepared, sv, code, s, u, cfg, self._no_samples if samples is None else samples,
+            events, y_out, y0, mode0)
         return Trajectory.from_kernel(
             self._name, maneuver, s, tuple(u.tolist()[: self._ninputs]), status, t_f, outcome,
-            y_out, mode_f, self._initial_modes[code], n_ev, events,
-            samples[: min(n_s, len(samples))] if sample_dt else None, nfev, nsteps, nrej,
+            y_out, mode_f, mode0 if y0.size else self._initial_modes[code], n_ev, events,
+            None if samples is None else samples[: min(n_s, len(samples))], nfev, nsteps, nrej,
             self._constraints, (options.max_events, options.t_end))
+
+    def advance(self, maneuver: str, y: npt.ArrayLike, mode: int, inputs: Any, span: float, *,
+                sample_dt: float | None = None) -> Trajectory:
+        """Integrate for ``span`` of time from the state ``y`` in contact mode ``mode`` (a step
+        of a live simulator), with the events located as :meth:`simulate` locates them and
+        ``maneuver``'s guards and event budget. One kernel call: it ends at ``span`` (status
+        HORIZON: the step is done), at the maneuver's terminal event (status OK, ``t_final``
+        < ``span``: continue from ``y_final`` and ``mode_final`` for the rest), or with a
+        failure status. Times in the result are from the state given (t = 0)."""
+        code = self.code(maneuver)
+        m = self.module
+        y0 = np.array(y, dtype=np.float64).ravel()
+        if y0.size != m.NSTATE or not np.all(np.isfinite(y0)):
+            raise InvalidInputError(f"{self._where}: the state must be {m.NSTATE} finite "
+                                    f"numbers, got {y0.size}")
+        span = float(span)
+        if not (math.isfinite(span) and span > 0):
+            raise InvalidInputError(f"span must be a positive number, got {span!r}")
+        options = dataclasses.replace(self._options[code], t_end=span)
+        u = self.input_vector(inputs)
+        if sample_dt:
+            dt = float(sample_dt)
+            samples = np.zeros((int(span / dt) + 4 * (options.max_events + 2), m.SAMPLE_WIDTH))
+        else:
+            dt, samples = 0.0, None
+        return self._run(maneuver, code, 0.0, u, options,
+                         kernel_config(options, dt, touched_down=True), samples, y0, int(mode))
+
+    def initial_state(self, maneuver: str, s: float) -> tuple[Array, int]:
+        """``maneuver``'s initial state at s and its initial contact mode (the first sample of
+        :meth:`simulate`, which the kernel records before its first step)."""
+        tr = self.simulate(maneuver, s, options=dataclasses.replace(
+            self._options[self.code(maneuver)], t_end=1e-9), sample_dt=1.0)
+        assert tr.samples is not None and tr.samples[0, 0] == 0.0
+        n = self.module.NSTATE
+        return tr.samples[0, 1:1 + n].copy(), int(tr.samples[0, 1 + n])
 
     def simulate_batch(self, maneuver: str, s: npt.ArrayLike, inputs: npt.ArrayLike | None = None,
                        *, options: SimulatorOptions = DEFAULT_OPTIONS) -> BatchResult:

@@ -20,6 +20,7 @@ from cyclonedds._clayer import ddspy_write
 from biped_opt import ros
 from biped_opt.nodes.graph import Graph
 from biped_opt.nodes.recorder import SweepRequest
+from biped_opt.nodes.sim_control import SERVICES
 from biped_opt.paper.biped import simulate
 from biped_opt.paper.problems import get_problem
 from biped_opt.paper.solve import optimal_policy
@@ -326,8 +327,11 @@ def test_simulator_in_a_subprocess_exits_cleanly_on_sigterm(domain_id):
                 executor.spin_once(timeout_sec=0.1)
             assert modes, "the simulator never published its contact mode"
         _stop(proc, signal.SIGTERM,
-              "ready: serving /biped/simulate; publishing /biped/state, /biped/contact_mode, "
-              "/clock, /tf, /biped/markers, /robot_description")
+              "ready: serving /biped/simulate, "
+              + ", ".join(f"/simulator/{name}" for name in SERVICES)
+              + ", /simulator/simulate_steps (action); publishing /biped/state, "
+              "/biped/contact_mode, /clock, /tf, /biped/markers, /robot_description, "
+              "/diagnostics, /biped/command (subscribed)")
     finally:
         proc.kill()
 

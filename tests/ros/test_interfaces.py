@@ -228,3 +228,37 @@ def test_find_msg_defs_honours_environment(tmp_path, monkeypatch):
     monkeypatch.setattr("biped_opt.ros.interfaces._candidates", lambda: [tmp_path / "missing"])
     with pytest.raises(InterfaceError, match="BIPED_OPT_MSG_DEFS"):
         find_msg_defs()
+
+
+def test_the_vendored_standard_keeps_its_names_constants_and_defaults(ifc):
+    """simulation_interfaces, vendored as published: rmw_cyclonedds' type names, the
+    constants of its definitions, rclpy's field defaults (``uint64 steps 1``), and the same
+    CDR bytes as rosbags makes from the same definition."""
+    root = find_msg_defs() / "vendor" / "simulation_interfaces"
+    assert (root / "LICENSE").read_text().lstrip().startswith("Apache License")
+    step = ifc.services["simulation_interfaces/srv/StepSimulation"]
+    assert step.RequestWire.__idl_typename__ == \
+        "simulation_interfaces::srv::dds_::StepSimulation_Request_"
+    assert step.Request().steps == 1  # (the definition's default, as rclpy gives it)
+    result = ifc.message_class("simulation_interfaces/msg/Result")
+    assert (result.RESULT_FEATURE_UNSUPPORTED, result.RESULT_OK, result.RESULT_NOT_FOUND,
+            result.RESULT_INCORRECT_STATE, result.RESULT_OPERATION_FAILED) == (0, 1, 2, 3, 4)
+    spawn = ifc.services["simulation_interfaces/srv/SpawnEntity"]
+    assert (spawn.Response.NAME_NOT_UNIQUE, spawn.Response.INVALID_POSE) == (101, 109)
+    assert "simulation_interfaces/action/SimulateSteps" in ifc.actions
+    # the project's own namespaces keep only the project's types
+    from biped_opt import ros
+
+    assert not hasattr(ros.srvs, "StepSimulation") and ros.sim_srvs.StepSimulation is step
+    # bytes: a state message with every kind of field, against rosbags' serializer
+    typename = "simulation_interfaces/msg/EntityState"
+    cls = ifc.message_class(typename)
+    msg = cls()
+    msg.header.stamp.sec, msg.header.frame_id = 7, "world"
+    msg.pose.position.z, msg.twist.angular.y = 1.25, -0.5
+    ours = bytes(msg.serialize(use_version_2=False))
+    theirs_cls = ifc.typestore.types[typename]
+    store = ifc.typestore
+    theirs = store.serialize_cdr(store.deserialize_cdr(ours, typename), typename)
+    assert ours == bytes(theirs) and isinstance(store.deserialize_cdr(ours, typename),
+                                                theirs_cls)
