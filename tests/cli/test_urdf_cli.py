@@ -149,3 +149,40 @@ def test_the_optimum_of_a_urdf_is_no_worse_than_a_brute_force_grid(hopper, sampl
     # (the cost is smooth near the optimum and simulated to ~1e-14: 1e-12 is noise only)
     assert result.value <= best + 1e-12, (result.value, best)
     assert abs(result.outcome) < 1e-3  # (the roll rate at the nadir, unforced -0.268 rad/s)
+
+
+@pytest.mark.parametrize(("view", "drawn"), [("auto", "3d"), ("xz", "xz")])
+def test_animate_a_urdf_in_3d_or_in_the_x_z_plane(hopper, capsys, tmp_path, view, drawn):
+    """The hopper's feet stand side by side (y = +-0.1): ``auto`` draws it in 3-D; ``xz``
+    asks for the plane (10 frames a second of 160 x 120 pixels: a short test)."""
+    out = tmp_path / "hop.gif"
+    status, text, err = _run(["animate", "--system", str(HOPPER), "--maneuver", "drop",
+                              "--s", "0.05", "--view", view, "--fps", "10", "--width", "160",
+                              "--height", "120", "-o", str(out)], capsys)
+    assert status == 0, err
+    assert f"view {drawn}" in text and out.stat().st_size > 0
+
+
+def test_a_study_on_a_urdf(hopper, capsys, tmp_path):
+    """``biped-opt study`` over the hopper's posture gain kp (a parameter the importer declares):
+    each row's s is a point where plain simulations at that kp change their sequence of
+    contact modes within +-1e-6 (the grazing landings of the nonsmooth test)."""
+    import csv
+
+    from biped_opt.simulation.compiled import compiled_with
+
+    study = tmp_path / "hop.yaml"
+    study.write_text(f"system: {HOPPER}\nmaneuver: drop\ngrid: {{kp: [5, 10]}}\n"
+                     "s_range: [0.02, 0.1]\nnum: 9\n")
+    table = tmp_path / "hop.csv"
+    status, out, err = _run(["study", str(study), "--out", str(table), "--no-progress"], capsys)
+    assert status == 0, err
+    rows = list(csv.DictReader(table.open()))
+    assert {r["kp"] for r in rows} == {"5.0", "10.0"} and "2 parameter points" in out
+    found = [r for r in rows if r["kind"] != "none"]
+    assert found
+    for r in found:
+        system = compiled_with(str(HOPPER), {"kp": float(r["kp"])})
+        s = float(r["s"])
+        assert r["cause"].startswith("mode sequence changes")
+        assert system.simulate("drop", s - 1e-6).modes != system.simulate("drop", s + 1e-6).modes
