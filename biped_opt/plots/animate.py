@@ -207,38 +207,62 @@ class Drawn:
         return float(x.min()), float(x.max()), float(z.min()), float(z.max())
 
 
-def drawn(scene: Scene, state: SceneState, mode: npt.ArrayLike, lam: npt.ArrayLike) -> Drawn:
-    """What is drawn of ``scene`` in ``state`` (n frames) with contact modes ``mode`` (n,)
-    (bit j: constraint j active) and contact forces ``lam`` (n, constraints)."""
+def _contact_forces(scene: Scene, mode: npt.ArrayLike, lam: npt.ArrayLike
+                    ) -> tuple[npt.NDArray[np.bool_], Array]:
+    """Whether each of the scene's contact points is active (n, C) in the modes (n,), and its
+    force (n, C) from the constraints' ``lam`` (n, constraints); 0 while free."""
     mode = np.asarray(mode, dtype=np.int64)
     lam = np.atleast_2d(np.asarray(lam, dtype=np.float64))
-    n = state.positions.shape[0]
+    active = np.zeros((mode.size, len(scene.contacts)), dtype=bool)
+    force = np.zeros(active.shape)
+    for i, j in enumerate(scene.contacts):
+        active[:, i] = (mode >> j) & 1 == 1
+        force[:, i] = np.where(active[:, i], lam[:, j] if j < lam.shape[1] else 0.0, 0.0)
+    return active, force
+
+
+def _shapes(scene: Scene, state: SceneState) -> tuple[
+        dict[str, tuple[Array, Array, Array]], dict[str, tuple[Array, Array]],
+        dict[str, tuple[Array, Array]]]:
+    """The scene's shapes in 3-D at every sample: boxes as their frame's origin (n, 3),
+    rotation (n, 3, 3) and edges (n, 3); spheres as centre (n, 3) and radius (n,); lines as
+    points (n, P, 3) and width (n,)."""
     rot = rotation_matrices(state.quaternions)  # (n, F, 3, 3)
     where = {name: k for k, name in enumerate(scene.frames)}
-    boxes: dict[str, Array] = {}
+    boxes: dict[str, tuple[Array, Array, Array]] = {}
     circles: dict[str, tuple[Array, Array]] = {}
     lines: dict[str, tuple[Array, Array]] = {}
     for s in scene.shapes:
         size = state.sizes[s.name]
         if s.kind == "line":
-            lines[s.name] = (state.points[s.name][:, :, [0, 2]], size[:, 0])
+            lines[s.name] = (state.points[s.name], size[:, 0])
             continue
         k = where[s.frame]
-        origin = state.positions[:, k, :][:, [0, 2]]
         if s.kind == "sphere":
-            circles[s.name] = (origin, size[:, 0])
-            continue
+            circles[s.name] = (state.positions[:, k, :], size[:, 0])
+        else:
+            boxes[s.name] = (state.positions[:, k, :], rot[:, k], size)
+    return boxes, circles, lines
+
+
+def drawn(scene: Scene, state: SceneState, mode: npt.ArrayLike, lam: npt.ArrayLike) -> Drawn:
+    """What is drawn of ``scene`` in ``state`` (n frames) with contact modes ``mode`` (n,)
+    (bit j: constraint j active) and contact forces ``lam`` (n, constraints)."""
+    active, force = _contact_forces(scene, mode, lam)
+    posed, circles3, lines3 = _shapes(scene, state)
+    circles = {name: (c[:, [0, 2]], r) for name, (c, r) in circles3.items()}
+    lines = {name: (pts[:, :, [0, 2]], w) for name, (pts, w) in lines3.items()}
+    boxes: dict[str, Array] = {}
+    for name, (origin3, rot, size) in posed.items():
+        origin = origin3[:, [0, 2]]
         # the frame's x and z axes in the world's x-z plane, scaled to half the box's edges
-        ex = rot[:, k, :, 0][:, [0, 2]] * (size[:, 0:1] / 2)
-        ez = rot[:, k, :, 2][:, [0, 2]] * (size[:, 2:3] / 2)
-        boxes[s.name] = np.stack([origin - ex - ez, origin + ex - ez, origin + ex + ez,
-                                  origin - ex + ez], axis=1)
+        ex = rot[:, :, 0][:, [0, 2]] * (size[:, 0:1] / 2)
+        ez = rot[:, :, 2][:, [0, 2]] * (size[:, 2:3] / 2)
+        boxes[name] = np.stack([origin - ex - ez, origin + ex - ez, origin + ex + ez,
+                                origin - ex + ez], axis=1)
     contacts = state.contacts[:, :, [0, 2]]
-    active = np.zeros((n, len(scene.contacts)), dtype=bool)
     arrows = np.repeat(contacts[:, :, None, :], 2, axis=2)
-    for i, j in enumerate(scene.contacts):
-        active[:, i] = (mode >> j) & 1 == 1
-        force = np.where(active[:, i], lam[:, j] if j < lam.shape[1] else 0.0, 0.0)
+    for i in range(len(scene.contacts)):
         normal = state.normals[:, i][:, [0, 2]]
         unit = normal / np.maximum(np.hypot(normal[:, 0], normal[:, 1]), 1e-300)[:, None]
         # the force pushes on the body from the ground's side: the arrow ends where it leaves
@@ -246,7 +270,7 @@ def drawn(scene: Scene, state: SceneState, mode: npt.ArrayLike, lam: npt.ArrayLi
         gap = _clearance(contacts[:, i], -unit, boxes, circles, lines) + ARROW_GAP
         end = contacts[:, i] - gap[:, None] * unit
         arrows[:, i, 1, :] = np.where(active[:, i, None], end, contacts[:, i])
-        arrows[:, i, 0, :] = arrows[:, i, 1, :] - FORCE_SCALE * force[:, None] * normal
+        arrows[:, i, 0, :] = arrows[:, i, 1, :] - FORCE_SCALE * force[:, i, None] * normal
     return Drawn(boxes, circles, lines, contacts, active, arrows)
 
 
@@ -296,32 +320,12 @@ def drawn_3d(scene: Scene, state: SceneState, mode: npt.ArrayLike, lam: npt.Arra
              ) -> Drawn3d:
     """What is drawn of ``scene`` in 3-D in ``state`` (n frames) with contact modes ``mode``
     (n,) and contact forces ``lam`` (n, constraints); see :class:`Drawn3d`."""
-    mode = np.asarray(mode, dtype=np.int64)
-    lam = np.atleast_2d(np.asarray(lam, dtype=np.float64))
-    n = state.positions.shape[0]
-    rot = rotation_matrices(state.quaternions)  # (n, F, 3, 3)
-    where = {name: k for k, name in enumerate(scene.frames)}
-    boxes: dict[str, Array] = {}
-    circles: dict[str, tuple[Array, Array]] = {}
-    lines: dict[str, tuple[Array, Array]] = {}
-    for s in scene.shapes:
-        size = state.sizes[s.name]
-        if s.kind == "line":
-            lines[s.name] = (state.points[s.name], size[:, 0])
-            continue
-        k = where[s.frame]
-        origin = state.positions[:, k, :]
-        if s.kind == "sphere":
-            circles[s.name] = (origin, size[:, 0])
-            continue
-        half = BOX_SIGNS[None, :, :] * (size[:, None, :] / 2)  # (n, 8, 3) in the frame
-        boxes[s.name] = origin[:, None, :] + np.einsum("nij,nkj->nki", rot[:, k], half)
+    active, force = _contact_forces(scene, mode, lam)
+    posed, circles, lines = _shapes(scene, state)
+    boxes = {name: origin[:, None, :] + np.einsum(
+                 "nij,nkj->nki", rot, BOX_SIGNS[None, :, :] * (size[:, None, :] / 2))
+             for name, (origin, rot, size) in posed.items()}
     contacts = state.contacts
-    active = np.zeros((n, len(scene.contacts)), dtype=bool)
-    force = np.zeros((n, len(scene.contacts)))
-    for i, j in enumerate(scene.contacts):
-        active[:, i] = (mode >> j) & 1 == 1
-        force[:, i] = np.where(active[:, i], lam[:, j] if j < lam.shape[1] else 0.0, 0.0)
     # the bodies' extent (not the forces'): what the arrows are scaled to
     body = Drawn3d(boxes, circles, lines, contacts, active,
                    np.repeat(contacts[:, :, None, :], 2, axis=2), FORCE_SCALE).bounds()
