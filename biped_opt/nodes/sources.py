@@ -6,8 +6,8 @@ A system or problem file is Python (or names a Python file) that the node runs, 
 plain name (letters, digits, ``_``; at most :data:`MAX_NAME` characters): ``walker3`` is a
 library system, ``hopper`` is ``<dir>/hopper.py`` or else ``<dir>/hopper.urdf`` (a robot's URDF,
 imported with the importer's defaults: floating base, the collision spheres and boxes at the
-tree's ends as contacts; a system file beside it that calls ``System.from_urdf`` gives other
-options) in the first configured directory that has one.
+tree's ends as contacts; a request carries no options) in the first configured directory that
+has one.
 A problem name is one the system declares, else ``<dir>/<name>.yaml`` (``.yml``, ``.py``). A
 problem file's ``system`` key is read the same way (a name; or ``x.py``, a file beside it).
 
