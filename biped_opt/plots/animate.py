@@ -316,10 +316,12 @@ def _nice_below(value: float) -> float:
     return max(m * power for m in (1.0, 2.0, 5.0) if m * power <= value * (1 + 1e-12))
 
 
-def drawn_3d(scene: Scene, state: SceneState, mode: npt.ArrayLike, lam: npt.ArrayLike
-             ) -> Drawn3d:
+def drawn_3d(scene: Scene, state: SceneState, mode: npt.ArrayLike, lam: npt.ArrayLike,
+             force_scale: float | None = None) -> Drawn3d:
     """What is drawn of ``scene`` in 3-D in ``state`` (n frames) with contact modes ``mode``
-    (n,) and contact forces ``lam`` (n, constraints); see :class:`Drawn3d`."""
+    (n,) and contact forces ``lam`` (n, constraints); see :class:`Drawn3d`. ``force_scale``:
+    the arrows' (default: :data:`FORCE_SCALE`, or less where the forces would reach further
+    than half the bodies' extent)."""
     active, force = _contact_forces(scene, mode, lam)
     posed, circles, lines = _shapes(scene, state)
     boxes = {name: origin[:, None, :] + np.einsum(
@@ -331,8 +333,8 @@ def drawn_3d(scene: Scene, state: SceneState, mode: npt.ArrayLike, lam: npt.Arra
                    np.repeat(contacts[:, :, None, :], 2, axis=2), FORCE_SCALE).bounds()
     extent = float(np.max(body[:, 1] - body[:, 0]))
     largest = float(np.max(np.abs(force), initial=0.0))
-    scale = FORCE_SCALE
-    if largest > 0 and FORCE_SCALE * largest > 0.5 * extent > 0:
+    scale = FORCE_SCALE if force_scale is None else float(force_scale)
+    if force_scale is None and largest > 0 and FORCE_SCALE * largest > 0.5 * extent > 0:
         scale = _nice_below(0.5 * extent / largest)
     arrows = np.repeat(contacts[:, :, None, :], 2, axis=2)
     arrows[:, :, 0, :] = contacts - scale * force[:, :, None] * state.normals
@@ -628,6 +630,11 @@ class Animation:
         make = drawn if view == "xz" else drawn_3d
         self._drawn: list[tuple[Any, npt.NDArray[np.int64]]] = [
             (make(p.scene, st, m, lam), m) for p, (st, m, lam) in zip(self.panels, states)]
+        if view == "3d" and len({d.force_scale for d, _m in self._drawn}) > 1:
+            # (panels that compare share one scale of force: the smallest)
+            scale = min(d.force_scale for d, _m in self._drawn)
+            self._drawn = [(drawn_3d(p.scene, st, m, lam, scale), m)
+                           for p, (st, m, lam) in zip(self.panels, states)]
         self._flashes = [self._flash(i) for i in range(len(self.panels))]
         self.dpi = DPI * _zoom(width, height)
         self.figure = plt.figure(figsize=(width * len(panels) / self.dpi, height / self.dpi),
@@ -785,10 +792,10 @@ class Animation:
             [[(x0, y0, 0.0), (x1, y0, 0.0), (x1, y1, 0.0), (x0, y1, 0.0)]],
             facecolors=[(*GROUND_COLOR[:3], 0.45)], edgecolors=["0.35"], linewidths=0.8))
         forces = bool(np.any(d.arrows[:, :, 0] != d.arrows[:, :, 1]))
-        ax.text2D(0.0, 0.0, "ground, z = 0"
+        ax.text2D(0.0, 1.0, "ground, z = 0"
                   + (f"; arrows: contact force,\n{d.force_scale:g} {p.units.length} per unit"
                      if forces else ""), transform=ax.transAxes, fontsize=FONT - 2,
-                  color="0.3", va="bottom", ha="left")
+                  color="0.3", va="top", ha="left")
         shapes = {s.name: s for s in p.scene.shapes}
         artists: dict[str, Any] = {"boxes": {}, "circles": {}, "lines": {}, "arrows": []}
         for name, corners in d.boxes.items():

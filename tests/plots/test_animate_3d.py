@@ -103,3 +103,31 @@ def test_a_planar_scene_keeps_the_x_z_view():
     assert not planar(None, SceneState(beside, quaternions(rpy), {}, {}, contacts, contacts))
     # (the rotation matrices of the quaternions used above: y kept by a pitch)
     assert np.allclose(rotation_matrices(quaternions(rpy))[..., 1, 1], 1.0, atol=1e-15)
+
+
+def test_panels_side_by_side_share_one_scale_of_force():
+    """Alone, the hopper's drop at s = 0.03 would draw its forces at 0.02 length units per
+    unit and at s = 0.07 (a harder landing) at 0.002; side by side both use 0.002, and the
+    arrows are that scale times the force along the normal."""
+    from pathlib import Path
+
+    hopper = compiled_with(str(Path(__file__).resolve().parents[1] / "systems" / "urdf"
+                               / "hopper.urdf"))
+    runs = [panel(hopper, "drop", s, fps=10) for s in (0.03, 0.07)]
+    alone = []
+    for run in runs:
+        movie = Animation([run], fps=10, hold=0, min_frames=0, view="3d")
+        alone.append(movie._drawn[0][0].force_scale)
+        movie.close()
+    assert alone[0] != alone[1]
+    movie = Animation(runs, fps=10, hold=0, min_frames=0, view="3d")
+    try:
+        for run, (d, mode) in zip(runs, movie._drawn):
+            assert d.force_scale == min(alone)
+            _state, _m, lam = run.state_at(movie.times)
+            for c, j in enumerate(run.scene.contacts):
+                on = (mode >> j) & 1 == 1
+                length = d.arrows[:, c, 1, 2] - d.arrows[:, c, 0, 2]  # (normal +z)
+                assert np.abs(length - np.where(on, min(alone) * lam[:, j], 0.0)).max() < EXACT
+    finally:
+        movie.close()
