@@ -217,7 +217,8 @@ def measure(name: str, *, cases: int, rounds: int, reference_cases: int) -> dict
         cold = _process_seconds([sys.executable, "-c", _COLD, name], env)
         _wait_for_ahead_of_time(Path(cache) / "systems")
         cached = min(_process_seconds([sys.executable, "-m", "biped_opt.cli.main", "simulate",
-                                       "--system", name, "--maneuver", "drop", "--s", "0.01"],
+                                       "--system", name, "--large", "--maneuver", "drop",
+                                       "--s", "0.01"],
                                       env) for _ in range(2))
         before = os.environ.get("BIPED_OPT_CACHE")
         os.environ["BIPED_OPT_CACHE"] = cache

@@ -462,20 +462,24 @@ def analyse_switches(
         h_min = max(H_MIN, 64.0 * (hi - lo))
         h = max(h, h_min)
         failed = (_failure(ev(lo)), _failure(ev(hi)))
+        sides = {}
+        if not any(failed):
+            # (a failed run still has numbers: a side whose samples meet one is a failing
+            # side, not a limit; a failed region can be a sliver inside the bracket's sides)
+            seen: list[str | None] = [None, None]
+            for q in quantities:
+                sides[q] = (_one_sided_converged(_watched(ev, q, seen, 0), x, -1, h, h_min),
+                            _one_sided_converged(_watched(ev, q, seen, 1), x, +1, h, h_min))
+            sl = ev(x - h / 16)
+            sr = ev(x + h / 16)
+            failed = (seen[0] or _failure(sl), seen[1] or _failure(sr))
         if any(failed):
             points.append(_failure_point(ev, x, lo, hi, h, h_min, failed, quantities))
             continue
-        sides = {}
-        for q in quantities:
-            f = (lambda name: (lambda th: ev(th).values[name]))(q)
-            sides[q] = (_one_sided_converged(f, x, -1, h, h_min),
-                        _one_sided_converged(f, x, +1, h, h_min))
         policy_jumps = any(
             abs(sides[q][1].limit - sides[q][0].limit) > JUMP_TOL["policy"]
             for q in quantities if q.startswith("policy:")
         )
-        sl = ev(x - h / 16)
-        sr = ev(x + h / 16)
         why = cause(sl, sr, optimal, policy_jumps)
         for q in quantities:
             left, right = sides[q]
@@ -504,6 +508,17 @@ def analyse_switches(
     return points
 
 
+def _watched(ev: Evaluator, q: str, seen: list[str | None], k: int) -> Callable[[float], float]:
+    """Quantity ``q`` of ``ev`` at s, noting in ``seen[k]`` the status of the first failed
+    sample it is asked for."""
+    def f(th: float) -> float:
+        sample = ev(th)
+        if seen[k] is None:
+            seen[k] = _failure(sample)
+        return sample.values[q]
+    return f
+
+
 def _failure(sample: Sample) -> str | None:
     """The status of a failed sample (branch ``FAILED:<status>``), None for a working one."""
     return sample.branch[len(FAILED):] if sample.branch.startswith(FAILED) else None
@@ -515,15 +530,17 @@ def _failure_point(ev: Evaluator, x: float, lo: float, hi: float, h: float, h_mi
     """The boundary of a failed region at x (bracket [lo, hi]): the first quantity's limits
     and slopes on the working side, NaN on a failing one."""
     q = quantities[0]
-
-    def f(th: float) -> float:
-        return ev(th).values[q]
-
     nan = OneSided(side=0, limit=math.nan, derivative=math.nan, derivative_error=math.nan,
                    second_derivative=math.nan)
-    left, right = (nan if failed[k] else _one_sided_converged(f, x, side, h, h_min)
-                   for k, side in ((0, -1), (1, 1)))
-    where = [f"{side}: {failed[k]}" for k, side in ((0, "left"), (1, "right")) if failed[k]]
+    seen = list(failed)
+    sides = []
+    for k, side in ((0, -1), (1, 1)):
+        # (a working side whose samples meet a failed run fails too)
+        one = nan if seen[k] else _one_sided_converged(_watched(ev, q, seen, k), x, side, h,
+                                                        h_min)
+        sides.append(nan if seen[k] else one)
+    left, right = sides
+    where = [f"{side}: {seen[k]}" for k, side in ((0, "left"), (1, "right")) if seen[k]]
     family, _, comp = q.partition(":")
     return NonsmoothPoint(
         theta0=x, quantity=family, input=comp or None, kind="failure",
@@ -531,5 +548,5 @@ def _failure_point(ev: Evaluator, x: float, lo: float, hi: float, h: float, h_mi
         cause=f"failure boundary ({'; '.join(where)}): no outcome on the failing side",
         limits=(left.limit, right.limit), derivatives=(left.derivative, right.derivative),
         second_derivatives=(left.second_derivative, right.second_derivative),
-        at=math.nan if _failure(ev(x)) else f(x), bracket=(lo, hi),
+        at=math.nan if _failure(ev(x)) else ev(x).values[q], bracket=(lo, hi),
         labels=(ev(lo).branch, ev(hi).branch))

@@ -30,11 +30,13 @@ MAX_PIXELS = 1920
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "animate", help="draw a maneuver of any system as a GIF (or MP4), or two side by side",
-        description="Draws the system's scene (SYSTEMS.md Sec. 6) in the x-z plane at a fixed "
-                    "frame rate in simulated time: shapes, the ground, contact points (red when "
-                    "active) and forces. With --side-by-side the same maneuver at s - delta and "
-                    "s + delta, titled with each run's order of contacts and outcome. The biped "
-                    "runs at the paper's fixed inputs unless --input says otherwise.")
+        description=("Draws the system's scene (SYSTEMS.md Sec. 6) in the x-z plane, or in 3-D "
+                     "where its bodies lie or move out of one (a robot from its URDF; --view), "
+                     "at a fixed frame rate in simulated time: shapes, the ground, contact "
+                     "points (red when active) and forces. With --side-by-side the same "
+                     "maneuver at s - delta and s + delta, titled with each run's order of "
+                     "contacts and outcome. The biped runs at the paper's fixed inputs unless "
+                     "--input says otherwise."))
     p.add_argument("--system", default="biped", metavar="NAME|FILE.py",
                    help="a library system (biped, walkerN[_coupled|_decoupled], rocking_bar) or "
                         "a system file (default biped)")
@@ -60,6 +62,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="a panel's width in pixels, even (default 320)")
     p.add_argument("--height", type=int_in_range("--height", 32, MAX_PIXELS), default=240,
                    help="a panel's height in pixels, even (default 240)")
+    p.add_argument("--view", choices=("auto", "xz", "3d"), default="auto",
+                   help="the x-z plane, or 3-D (matplotlib's mplot3d); auto: 3-D when the "
+                        "system's bodies lie or move out of one x-z plane (default)")
     p.add_argument("-o", "--output", required=True,
                    type=path_arg(output_file, "--output", overwrite=True),
                    help="the file to write: .gif, or .mp4 where ffmpeg is installed")
@@ -95,12 +100,13 @@ def run(args: argparse.Namespace) -> int:
     if args.side_by_side:
         delta = 0.02 if args.delta is None else args.delta
         movie = side_by_side(compiled, args.maneuver, output, s0=args.s, delta=delta,
-                             inputs=inputs, fps=args.fps, speed=args.speed, size=size)
+                             inputs=inputs, fps=args.fps, speed=args.speed, size=size,
+                             view=args.view)
     else:
         movie = animate(compiled, args.maneuver, args.s, output, inputs=inputs, fps=args.fps,
-                        speed=args.speed, size=size)
+                        speed=args.speed, size=size, view=args.view)
     for p in movie.panels:
         print(p.title.replace("\n", "  "))
     print(f"{output}: {movie.frames} frames at {args.fps} fps, {movie.size[0]} x "
-          f"{movie.size[1]} pixels ({time.perf_counter() - start:.1f} s)")
+          f"{movie.size[1]} pixels, view {movie.view} ({time.perf_counter() - start:.1f} s)")
     return 0

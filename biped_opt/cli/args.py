@@ -547,7 +547,8 @@ def add_large_argument(p: Any) -> None:
 
     p.add_argument("--large", action="store_true",
                    help=f"compile a system beyond {MAX_LEGS} constraints or {MAX_COORDINATES} "
-                        "coordinates (the nodes' limits; such a compile takes minutes or more)")
+                        "coordinates (the nodes' limits; such a compile takes from tens of "
+                        "seconds, solo12 and g1, to minutes)")
 
 
 def check_size(args: argparse.Namespace, flag: str, spec: Any) -> None:
@@ -584,7 +585,8 @@ def check_size(args: argparse.Namespace, flag: str, spec: Any) -> None:
         raise InvalidInputError(
             f"{flag}: {name} has {legs} constraints and {coordinates} coordinates; the command "
             f"line compiles at most {MAX_LEGS} and {MAX_COORDINATES}, as the nodes do (larger "
-            "systems take minutes or more to compile): add --large to compile it anyway")
+            "systems take longer to compile: solo12 and g1 tens of seconds, others minutes): add "
+            "--large to compile it anyway")
 
 
 def check_s(compiled: CompiledSystem, maneuver: str, flag: str, value: float | None) -> None:

@@ -12,7 +12,11 @@ the wrong piece. The method:
    move the outcome and sits at its cheapest value, the bound point nearest 0;
 2. **bracket globally**: the acting decisions' box is sampled on a uniform grid (65 points for
    one decision, 17 per axis for two, fewer beyond) in one parallel ``simulate_batch`` call;
-   every grid point that is no worse than its axis neighbours is a candidate (the best 8);
+   every grid point that is no worse than its axis neighbours is a candidate (the best 8).
+   A grid of more than :data:`MAX_BRACKET` points (a robot's twelve joint efforts: 5^12) is
+   replaced by a scrambled Sobol sample of that many points (seeded: the same every run);
+   the candidates are then the problem's default inputs and the sample's best 3 points (a
+   joint refinement in many dimensions costs thousands of simulations);
 3. **refine each candidate** with SciPy: one decision - ``minimize_scalar(method="bounded")``
    inside the run of grid points with the same mode sequence (extended to the located switch),
    then a Newton polish and a Karush-Kuhn-Tucker test at a near bound
@@ -54,6 +58,13 @@ Array = npt.NDArray[np.float64]
 GRID_AXIS = {1: 65, 2: 17, 3: 9, 4: 6}
 #: candidates refined per s (the grid's best local minima)
 MAX_CANDIDATES = 8
+#: the most points of the bracketing stage (a power of 2, the Sobol sample's size beyond it;
+#: the grid of four decisions, 6^4 = 1296 points, stays a grid)
+MAX_BRACKET = 2048
+#: candidates refined after a Sobol sample: the default inputs and the sample's best points
+SAMPLE_CANDIDATES = 4
+#: seed of the Sobol sample that replaces a grid of more than MAX_BRACKET points
+SAMPLE_SEED = 0
 #: central-difference step of the joint (L-BFGS-B) refinement, relative to each bound interval
 GRAD_STEP = 1e-6
 
@@ -340,22 +351,37 @@ def _acting(problem: Problem, compiled: CompiledSystem, modes: Sequence[int]) ->
 
 
 def _grid_rows(problem: Problem, acting: list[str], base: Array, names: tuple[str, ...],
-               points: int | None) -> tuple[Array, list[Array]]:
+               points: int | None) -> tuple[Array, list[Array] | None]:
+    """The bracketing stage's input rows and the grid's axes (None: a Sobol sample, the grid
+    having more than :data:`MAX_BRACKET` points)."""
     per_axis = points or GRID_AXIS.get(len(acting), 5)
+    bounds = np.array([problem.bound(d) for d in acting], dtype=np.float64).reshape(-1, 2)
+    cols = [names.index(d) for d in acting]
+    if per_axis ** len(acting) > MAX_BRACKET:
+        from scipy.stats import qmc
+
+        unit = qmc.Sobol(d=len(acting), scramble=True, seed=SAMPLE_SEED).random_base2(
+            int(math.log2(MAX_BRACKET)))
+        rows = np.tile(base, (unit.shape[0], 1))
+        rows[:, cols] = bounds[:, 0] + unit * (bounds[:, 1] - bounds[:, 0])
+        return rows, None
     axes = []
-    for d in acting:
-        lo, hi = problem.bound(d)
+    for lo, hi in bounds:
         axis = np.linspace(lo, hi, per_axis)
         axis[0], axis[-1] = lo, hi
         axes.append(axis)
     rows = np.tile(base, (per_axis ** len(acting), 1))
-    for col, values in zip(acting, zip(*itertools.product(*axes))):
-        rows[:, names.index(col)] = values
+    for col, values in zip(cols, zip(*itertools.product(*axes))):
+        rows[:, col] = values
     return rows, axes
 
 
-def _grid_minima(costs: Array, shape: tuple[int, ...]) -> list[int]:
-    """Flat indices of grid points no worse than their axis neighbours, best first."""
+def _grid_minima(costs: Array, shape: tuple[int, ...] | None) -> list[int]:
+    """Flat indices of grid points no worse than their axis neighbours, best first (``shape``
+    None: a sample's points, its best ones)."""
+    if shape is None:
+        found = np.flatnonzero(np.isfinite(costs))
+        return [int(k) for k in found[np.argsort(costs[found], kind="stable")]][:MAX_CANDIDATES]
     grid = costs.reshape(shape)
     keep = np.isfinite(grid)
     for axis in range(grid.ndim):
@@ -438,8 +464,13 @@ def _search(problem: Problem, run: _Runner, acting: list[str], base: Array,
     rows, axes = _grid_rows(problem, acting, base, names, grid_points)
     costs, labels = run.batch(rows)
     found = []
-    for k in _grid_minima(costs, tuple(a.size for a in axes)):
-        if len(acting) == 1:
+    if axes is None:  # (a sample: the default inputs are a candidate too)
+        rows = np.vstack([base, rows])
+        best = [1 + k for k in _grid_minima(costs, None)[:SAMPLE_CANDIDATES - 1]]
+    else:
+        best = _grid_minima(costs, tuple(a.size for a in axes))
+    for k in best if axes is not None else [0, *best]:
+        if axes is not None and len(acting) == 1:
             d = acting[0]
             value, c = _refine_one(problem, run, d, base, names, axes[0], costs, labels, k,
                                    xatol)
@@ -455,7 +486,8 @@ def optimal_policy(problem: Problem, s: float, *, grid_points: int | None = None
                    xatol: float = XATOL) -> OptimalResult:
     """The optimal policy and value of ``problem`` at s (see the module docstring).
 
-    ``grid_points`` overrides the bracketing grid's points per axis.
+    ``grid_points`` overrides the bracketing grid's points per axis (a grid of more than
+    :data:`MAX_BRACKET` points is a Sobol sample of that many).
     """
     if not isinstance(problem, Problem):
         raise InvalidInputError(f"problem must be a Problem, got {problem!r}")

@@ -87,7 +87,7 @@ from biped_opt.nodes.refusals import answers, refuse
 from biped_opt.nodes.run import announce_ready, run_node, warm_up_kernels
 from biped_opt.nodes.simulator import BIPED
 from biped_opt.nodes.sources import (
-    PROBLEM_SUFFIXES,
+    FILE_SUFFIXES,
     Names,
     check_name,
     declare_request_limits,
@@ -147,7 +147,7 @@ class OptimiserNode(ros.Node):
             warm_up_kernels(self)
         systems = string_list_parameter(self, "systems")
         files = [Path(s).expanduser().resolve() for s in systems
-                 if Path(s).suffix in PROBLEM_SUFFIXES]
+                 if Path(s).suffix in FILE_SUFFIXES]
         if files:  # (the operator's files: their directories join system_paths)
             folders = tuple(dict.fromkeys([*self._sources.system_paths,
                                            *(f.parent for f in files)]))

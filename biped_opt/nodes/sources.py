@@ -4,7 +4,10 @@ the operator configured for the node (parameter ``system_paths``); never a path.
 A system or problem file is Python (or names a Python file) that the node runs, so a request
 (an ``OptimalPolicy`` request, a study work item, a ``/biped/study`` goal) names one only as a
 plain name (letters, digits, ``_``; at most :data:`MAX_NAME` characters): ``walker3`` is a
-library system, ``hopper`` is ``<dir>/hopper.py`` in the first configured directory that has it.
+library system, ``hopper`` is ``<dir>/hopper.py`` or else ``<dir>/hopper.urdf`` (a robot's URDF,
+imported with the importer's defaults: floating base, the collision spheres and boxes at the
+tree's ends as contacts; a request carries no options) in the first configured directory that
+has one.
 A problem name is one the system declares, else ``<dir>/<name>.yaml`` (``.yml``, ``.py``). A
 problem file's ``system`` key is read the same way (a name; or ``x.py``, a file beside it).
 
@@ -28,15 +31,19 @@ if TYPE_CHECKING:
     from biped_opt.studies.study import StudyLimits
     from biped_opt.systems.description import System
 
-__all__ = ["MAX_NAME", "PROBLEM_SUFFIXES", "Names", "SystemLimits", "Sources", "check_name",
-           "name_of", "directories", "declare_request_limits", "request_study",
-           "check_maneuver_of", "check_problem_on"]
+__all__ = ["MAX_NAME", "PROBLEM_SUFFIXES", "SYSTEM_SUFFIXES", "FILE_SUFFIXES", "Names",
+           "SystemLimits", "Sources", "check_name", "name_of", "directories",
+           "declare_request_limits", "request_study", "check_maneuver_of", "check_problem_on"]
 
 #: longest system, problem or worker name a request may give
 MAX_NAME = 64
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 #: suffixes of problem files, in the order they are looked for
 PROBLEM_SUFFIXES = (".yaml", ".yml", ".py")
+#: suffixes of system files, in the order they are looked for in a directory of system_paths
+SYSTEM_SUFFIXES = (".py", ".urdf")
+#: suffixes of any file a name stands for (its stem)
+FILE_SUFFIXES = (*PROBLEM_SUFFIXES, ".urdf")
 #: defaults of the node parameters max_legs and max_coordinates
 MAX_LEGS, MAX_COORDINATES = 6, 16
 #: defaults of a node's limits on a study (parameters max_points, max_num, max_values) and on
@@ -81,7 +88,7 @@ def request_study(text: str, max_chars: int, *, yaml_too: bool = False) -> Any:
 
 def name_of(source: str) -> str:
     """The name a request gives for a library name or a system/problem file (its stem)."""
-    return Path(source).stem if Path(source).suffix in PROBLEM_SUFFIXES else source
+    return Path(source).stem if Path(source).suffix in FILE_SUFFIXES else source
 
 
 def _in_library(name: str) -> bool:
@@ -93,8 +100,10 @@ def _in_library(name: str) -> bool:
 
 
 def _beside(text: str) -> bool:
-    """Whether a problem file's ``system`` names a file beside it (``x.py``, x a plain name)."""
-    return text.endswith(".py") and _NAME.fullmatch(text[:-3]) is not None
+    """Whether a problem file's ``system`` names a file beside it (``x.py`` or ``x.urdf``, x
+    a plain name)."""
+    path = Path(text)
+    return path.suffix in SYSTEM_SUFFIXES and _NAME.fullmatch(text[:-len(path.suffix)]) is not None
 
 
 def _inside(field: str, folder: Path, path: Path) -> Path:
@@ -205,7 +214,8 @@ class Sources:
 
     def system(self, field: str, text: str) -> str:
         """What :func:`biped_opt.control.problems.describe` loads for the system name ``text``:
-        the library name itself or the absolute path of ``<dir>/<name>.py``."""
+        the library name itself or the absolute path of ``<dir>/<name>.py`` (else
+        ``<dir>/<name>.urdf``)."""
         from biped_opt.systems.files import LIBRARY_PATTERNS
         from biped_opt.systems.library import LIBRARY
 
@@ -214,10 +224,11 @@ class Sources:
             self.limits.check_library(field, name)
             return name
         for folder in self.system_paths:
-            path = folder / f"{name}.py"
-            if path.is_file():
-                return str(_inside(field, folder, path))
-        where = (f"nor {name}.py in the node's system_paths" if self.system_paths
+            for suffix in SYSTEM_SUFFIXES:
+                path = folder / f"{name}{suffix}"
+                if path.is_file():
+                    return str(_inside(field, folder, path))
+        where = (f"nor {name}.py or {name}.urdf in the node's system_paths" if self.system_paths
                  else "and this node has no system_paths")
         raise InvalidInputError(
             f"{field}: unknown system {quoted(name)}: not a library system "
@@ -254,9 +265,11 @@ class Sources:
 
         names = Names(source=source if system else "", problem=problem,
                       maneuver=maneuver or "",
-                      checked=Path(source).suffix != ".py" and source not in BY_NAME)
+                      checked=Path(source).suffix not in SYSTEM_SUFFIXES
+                      and source not in BY_NAME)
         if not names.checked:
-            # a file's description runs its code, and a library system built only when named
+            # a file's description runs its code (a URDF's import builds a tree of bodies:
+            # seconds for a humanoid), and a library system built only when named
             # takes seconds to describe: either waits for the compiler, never the service
             return names
         described = self.describe("system", source)
@@ -366,7 +379,7 @@ class Sources:
             if text and not (_in_library(text) or _beside(text)):
                 raise InvalidInputError(
                     f"problem: {path.name}: system: a study's problem file names a library "
-                    f"system or a file beside it (x.py), got {quoted(text)}")
+                    f"system or a file beside it (x.py, x.urdf), got {quoted(text)}")
             self.limits.check_library(f"problem: {path.name}: system", text)
         return source, str(path)
 

@@ -1,4 +1,4 @@
-"""A maneuver as a moving picture: any system's scene in the x-z plane, drawn per frame.
+"""A maneuver as a moving picture: any system's scene in the x-z plane or in 3-D, drawn per frame.
 
 The scene is the one the simulator publishes as markers (:mod:`biped_opt.record.scene`, ROS.md
 Sec. 6), drawn with matplotlib instead of a ROS tool, so an animation and a live view agree:
@@ -34,6 +34,15 @@ time (just after the event at a held frame). :func:`side_by_side` puts the same 
 s0 - delta and s0 + delta into two panels of one animation on one clock: on either side of a
 simultaneous event (s0 = 0: the biped's touchdown and liftoff, the rocking bar's drop) the
 order of the contacts flips, and with it the outcome (SYSTEMS.md Sec. 2 and [1]_).
+
+A system whose bodies lie or move out of one x-z plane (a robot from its URDF: legs side by
+side, a base that rolls) is drawn in 3-D instead (``view="3d"``; ``"auto"``, the default, chooses
+by :func:`planar`): matplotlib's mplot3d axes at one scale in x, y and z, the ground as the
+plane z = 0, boxes as their six faces, spheres as round markers, lines, the contact points
+(red while active) and the forces as segments ending at the contact point, from below the
+ground. Forces that would reach further than half the bodies' extent are drawn at a smaller
+scale of 1, 2 or 5 times a power of 10, which the ground's label gives. Holds, slowed stretches
+and titles are those of the x-z view.
 
 GIFs are written with matplotlib's Pillow writer, MP4 with its FFmpeg writer where ffmpeg is
 installed; the suffix chooses. The file appears complete or not at all (written under a
@@ -76,9 +85,10 @@ from biped_opt.simulation.compiled import CompiledSystem  # noqa: E402
 from biped_opt.simulation.scene import Scene, SceneState  # noqa: E402
 from biped_opt.simulation.trajectory import Trajectory, constraint_names  # noqa: E402
 
-__all__ = ["Animation", "Clock", "Drawn", "Panel", "animate", "check_output", "default_inputs",
-           "drawn", "frame_clock", "frame_times", "panel", "rotation_matrices", "side_by_side",
-           "SUFFIXES", "contact_order", "HOLD_FRAMES", "MIN_MODE_FRAMES"]
+__all__ = ["Animation", "Clock", "Drawn", "Drawn3d", "Panel", "drawn_3d", "planar", "VIEWS",
+           "animate", "check_output", "default_inputs", "drawn", "frame_clock", "frame_times",
+           "panel", "rotation_matrices", "side_by_side", "SUFFIXES", "contact_order",
+           "HOLD_FRAMES", "MIN_MODE_FRAMES"]
 
 Array = npt.NDArray[np.float64]
 
@@ -104,6 +114,10 @@ FONT = 7
 FLASH_SIZE = 6.0
 #: the ring round a contact point at a held liftoff
 LIFTOFF_COLOR = (0.25, 0.25, 0.25, 1.0)
+#: the views of an animation: the x-z plane, 3-D, or chosen by :func:`planar`
+VIEWS = ("auto", "xz", "3d")
+#: the 3-D view's elevation and azimuth [deg] (matplotlib's view_init)
+VIEW_3D = (18.0, -58.0)
 #: the axes' margins in a panel, in pixels: left (ticks and "z"), right, bottom (ticks and
 #: the units), top (the three lines of the title)
 MARGINS = (30, 6, 26, 40)
@@ -193,38 +207,62 @@ class Drawn:
         return float(x.min()), float(x.max()), float(z.min()), float(z.max())
 
 
-def drawn(scene: Scene, state: SceneState, mode: npt.ArrayLike, lam: npt.ArrayLike) -> Drawn:
-    """What is drawn of ``scene`` in ``state`` (n frames) with contact modes ``mode`` (n,)
-    (bit j: constraint j active) and contact forces ``lam`` (n, constraints)."""
+def _contact_forces(scene: Scene, mode: npt.ArrayLike, lam: npt.ArrayLike
+                    ) -> tuple[npt.NDArray[np.bool_], Array]:
+    """Whether each of the scene's contact points is active (n, C) in the modes (n,), and its
+    force (n, C) from the constraints' ``lam`` (n, constraints); 0 while free."""
     mode = np.asarray(mode, dtype=np.int64)
     lam = np.atleast_2d(np.asarray(lam, dtype=np.float64))
-    n = state.positions.shape[0]
+    active = np.zeros((mode.size, len(scene.contacts)), dtype=bool)
+    force = np.zeros(active.shape)
+    for i, j in enumerate(scene.contacts):
+        active[:, i] = (mode >> j) & 1 == 1
+        force[:, i] = np.where(active[:, i], lam[:, j] if j < lam.shape[1] else 0.0, 0.0)
+    return active, force
+
+
+def _shapes(scene: Scene, state: SceneState) -> tuple[
+        dict[str, tuple[Array, Array, Array]], dict[str, tuple[Array, Array]],
+        dict[str, tuple[Array, Array]]]:
+    """The scene's shapes in 3-D at every sample: boxes as their frame's origin (n, 3),
+    rotation (n, 3, 3) and edges (n, 3); spheres as centre (n, 3) and radius (n,); lines as
+    points (n, P, 3) and width (n,)."""
     rot = rotation_matrices(state.quaternions)  # (n, F, 3, 3)
     where = {name: k for k, name in enumerate(scene.frames)}
-    boxes: dict[str, Array] = {}
+    boxes: dict[str, tuple[Array, Array, Array]] = {}
     circles: dict[str, tuple[Array, Array]] = {}
     lines: dict[str, tuple[Array, Array]] = {}
     for s in scene.shapes:
         size = state.sizes[s.name]
         if s.kind == "line":
-            lines[s.name] = (state.points[s.name][:, :, [0, 2]], size[:, 0])
+            lines[s.name] = (state.points[s.name], size[:, 0])
             continue
         k = where[s.frame]
-        origin = state.positions[:, k, :][:, [0, 2]]
         if s.kind == "sphere":
-            circles[s.name] = (origin, size[:, 0])
-            continue
+            circles[s.name] = (state.positions[:, k, :], size[:, 0])
+        else:
+            boxes[s.name] = (state.positions[:, k, :], rot[:, k], size)
+    return boxes, circles, lines
+
+
+def drawn(scene: Scene, state: SceneState, mode: npt.ArrayLike, lam: npt.ArrayLike) -> Drawn:
+    """What is drawn of ``scene`` in ``state`` (n frames) with contact modes ``mode`` (n,)
+    (bit j: constraint j active) and contact forces ``lam`` (n, constraints)."""
+    active, force = _contact_forces(scene, mode, lam)
+    posed, circles3, lines3 = _shapes(scene, state)
+    circles = {name: (c[:, [0, 2]], r) for name, (c, r) in circles3.items()}
+    lines = {name: (pts[:, :, [0, 2]], w) for name, (pts, w) in lines3.items()}
+    boxes: dict[str, Array] = {}
+    for name, (origin3, rot, size) in posed.items():
+        origin = origin3[:, [0, 2]]
         # the frame's x and z axes in the world's x-z plane, scaled to half the box's edges
-        ex = rot[:, k, :, 0][:, [0, 2]] * (size[:, 0:1] / 2)
-        ez = rot[:, k, :, 2][:, [0, 2]] * (size[:, 2:3] / 2)
-        boxes[s.name] = np.stack([origin - ex - ez, origin + ex - ez, origin + ex + ez,
-                                  origin - ex + ez], axis=1)
+        ex = rot[:, :, 0][:, [0, 2]] * (size[:, 0:1] / 2)
+        ez = rot[:, :, 2][:, [0, 2]] * (size[:, 2:3] / 2)
+        boxes[name] = np.stack([origin - ex - ez, origin + ex - ez, origin + ex + ez,
+                                origin - ex + ez], axis=1)
     contacts = state.contacts[:, :, [0, 2]]
-    active = np.zeros((n, len(scene.contacts)), dtype=bool)
     arrows = np.repeat(contacts[:, :, None, :], 2, axis=2)
-    for i, j in enumerate(scene.contacts):
-        active[:, i] = (mode >> j) & 1 == 1
-        force = np.where(active[:, i], lam[:, j] if j < lam.shape[1] else 0.0, 0.0)
+    for i in range(len(scene.contacts)):
         normal = state.normals[:, i][:, [0, 2]]
         unit = normal / np.maximum(np.hypot(normal[:, 0], normal[:, 1]), 1e-300)[:, None]
         # the force pushes on the body from the ground's side: the arrow ends where it leaves
@@ -232,8 +270,91 @@ def drawn(scene: Scene, state: SceneState, mode: npt.ArrayLike, lam: npt.ArrayLi
         gap = _clearance(contacts[:, i], -unit, boxes, circles, lines) + ARROW_GAP
         end = contacts[:, i] - gap[:, None] * unit
         arrows[:, i, 1, :] = np.where(active[:, i, None], end, contacts[:, i])
-        arrows[:, i, 0, :] = arrows[:, i, 1, :] - FORCE_SCALE * force[:, None] * normal
+        arrows[:, i, 0, :] = arrows[:, i, 1, :] - FORCE_SCALE * force[:, i, None] * normal
     return Drawn(boxes, circles, lines, contacts, active, arrows)
+
+
+@dataclass(frozen=True)
+class Drawn3d:
+    """The drawn artists' coordinates in 3-D at n frames: ``boxes`` (n, 8, 3) corners (local
+    signs (x, y, z) in the order of :data:`BOX_SIGNS`), ``circles`` (n, 3) sphere centres with
+    their radii (n,), ``lines`` (n, P, 3) points with their widths (n,), ``contacts`` (n, C, 3),
+    ``active`` (n, C), ``arrows`` (n, C, 2, 3): each force's segment, from its tail below the
+    ground to the contact point (start = end while its constraint is free), drawn at
+    ``force_scale`` lengths per unit of force."""
+
+    boxes: dict[str, Array]
+    circles: dict[str, tuple[Array, Array]]
+    lines: dict[str, tuple[Array, Array]]
+    contacts: Array
+    active: npt.NDArray[np.bool_]
+    arrows: Array
+    force_scale: float
+
+    def bounds(self) -> Array:
+        """(3, 2): the least and greatest x, y, z of everything drawn at any frame (and of the
+        origin, on the ground)."""
+        points = [np.zeros((1, 3)), self.contacts.reshape(-1, 3), self.arrows.reshape(-1, 3)]
+        points += [c.reshape(-1, 3) for c in self.boxes.values()]
+        for centre, radius in self.circles.values():
+            points += [centre - radius[:, None], centre + radius[:, None]]
+        points += [pts.reshape(-1, 3) for pts, _w in self.lines.values()]
+        allp = np.concatenate(points)
+        return np.stack([allp.min(axis=0), allp.max(axis=0)], axis=1)
+
+
+#: a box's corners as signs of its half edges along its frame's x, y, z
+BOX_SIGNS = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
+                      [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=np.float64)
+#: a box's six faces as indices into its corners
+BOX_FACES = ((0, 1, 2, 3), (4, 5, 6, 7), (0, 1, 5, 4), (2, 3, 7, 6), (1, 2, 6, 5), (0, 3, 7, 4))
+
+
+def _nice_below(value: float) -> float:
+    """The largest 1, 2 or 5 times a power of 10 that is at most ``value`` (> 0)."""
+    power = 10.0 ** math.floor(math.log10(value))
+    return max(m * power for m in (1.0, 2.0, 5.0) if m * power <= value * (1 + 1e-12))
+
+
+def drawn_3d(scene: Scene, state: SceneState, mode: npt.ArrayLike, lam: npt.ArrayLike,
+             force_scale: float | None = None) -> Drawn3d:
+    """What is drawn of ``scene`` in 3-D in ``state`` (n frames) with contact modes ``mode``
+    (n,) and contact forces ``lam`` (n, constraints); see :class:`Drawn3d`. ``force_scale``:
+    the arrows' (default: :data:`FORCE_SCALE`, or less where the forces would reach further
+    than half the bodies' extent)."""
+    active, force = _contact_forces(scene, mode, lam)
+    posed, circles, lines = _shapes(scene, state)
+    boxes = {name: origin[:, None, :] + np.einsum(
+                 "nij,nkj->nki", rot, BOX_SIGNS[None, :, :] * (size[:, None, :] / 2))
+             for name, (origin, rot, size) in posed.items()}
+    contacts = state.contacts
+    # the bodies' extent (not the forces'): what the arrows are scaled to
+    body = Drawn3d(boxes, circles, lines, contacts, active,
+                   np.repeat(contacts[:, :, None, :], 2, axis=2), FORCE_SCALE).bounds()
+    extent = float(np.max(body[:, 1] - body[:, 0]))
+    largest = float(np.max(np.abs(force), initial=0.0))
+    scale = FORCE_SCALE if force_scale is None else float(force_scale)
+    if force_scale is None and largest > 0 and FORCE_SCALE * largest > 0.5 * extent > 0:
+        scale = _nice_below(0.5 * extent / largest)
+    arrows = np.repeat(contacts[:, :, None, :], 2, axis=2)
+    arrows[:, :, 0, :] = contacts - scale * force[:, :, None] * state.normals
+    return Drawn3d(boxes, circles, lines, contacts, active, arrows, scale)
+
+
+def planar(scene: Scene, state: SceneState, tol: float = 1e-9) -> bool:
+    """Whether everything of ``scene`` stays in one plane y = const at every sample of
+    ``state``: the frames' origins, the lines' points and the contact points share one y and
+    every frame turns about y only (then the x-z view shows it all)."""
+    ys = [state.positions[..., 1].ravel(), state.contacts[..., 1].ravel()]
+    ys += [pts[..., 1].ravel() for pts in state.points.values()]
+    y = np.concatenate(ys)
+    if y.size and float(np.ptp(y)) > tol:
+        return False
+    rot = rotation_matrices(state.quaternions)
+    # a rotation about y alone keeps y: its (1, 1) entry is 1, and (0, 1), (2, 1), (1, 0),
+    # (1, 2) are 0
+    return bool(np.all(np.abs(rot[..., 1, 1] - 1.0) <= tol)) if rot.size else True
+
 
 
 def _clearance(point: Array, direction: Array, boxes: dict[str, Array],
@@ -426,6 +547,12 @@ class Panel:
 
     def at(self, times: Array) -> tuple[Drawn, npt.NDArray[np.int64]]:
         """What is drawn at ``times`` (past the run's end: its last state) and the mode."""
+        state, mode, lam = self.state_at(times)
+        return drawn(self.scene, state, mode, lam), mode
+
+    def state_at(self, times: Array) -> tuple[SceneState, npt.NDArray[np.int64], Array]:
+        """The scene's state at ``times`` (past the run's end: its last state), the contact
+        mode and the contact forces there."""
         tr = self.trajectory
         samples = tr.samples
         assert samples is not None
@@ -446,8 +573,7 @@ class Panel:
         frac = np.where(span > 0, (times - t[before]) / np.where(span > 0, span, 1.0), 0.0)
         same = (rows[after, 1 + 2 * d] == rows[before, 1 + 2 * d])[:, None]
         lam = np.where(same, lam + frac[:, None] * (rows[after, 2 + 2 * d:] - lam), lam)
-        state = self.scene.evaluate(q, np.asarray(self.parameters))
-        return drawn(self.scene, state, mode, lam), mode
+        return self.scene.evaluate(q, np.asarray(self.parameters)), mode, lam
 
 
 def panel(compiled: CompiledSystem, maneuver: str, s: float,
@@ -475,13 +601,15 @@ class Animation:
     """Panels drawn side by side on one :func:`frame_clock` (a shorter run holds its last
     state): every ``speed / fps`` of simulated time, slowed where a mode lasts fewer than
     ``min_frames`` frames, each contact event held for ``hold`` frames. :meth:`draw` poses
-    frame k, :meth:`save` writes all."""
+    frame k, :meth:`save` writes all. ``view``: ``xz``, ``3d`` or ``auto`` (3-D unless every
+    panel's scene stays in one x-z plane, :func:`planar`); :attr:`view` is the one drawn."""
 
     def __init__(self, panels: Sequence[Panel], *, fps: int = 30, speed: float = 1.0,
                  size: tuple[int, int] = PANEL_SIZE, hold: int = HOLD_FRAMES,
-                 min_frames: int = MIN_MODE_FRAMES) -> None:
+                 min_frames: int = MIN_MODE_FRAMES, view: str = "auto") -> None:
         if not panels:
             raise InvalidInputError("an animation needs at least one run")
+        _check_view(view)
         _check_rate(fps, speed)
         _check_frames(hold, min_frames)
         width, height = (int(v) for v in size)
@@ -494,7 +622,19 @@ class Animation:
                                  [p.trajectory.t_final for p in self.panels], fps, speed,
                                  hold=hold, min_frames=min_frames)
         self.times = self.clock.times
-        self._drawn = [p.at(self.times) for p in self.panels]
+        states = [p.state_at(self.times) for p in self.panels]
+        if view == "auto":
+            view = "xz" if all(planar(p.scene, st) for p, (st, _m, _l) in
+                               zip(self.panels, states)) else "3d"
+        self.view = view
+        make = drawn if view == "xz" else drawn_3d
+        self._drawn: list[tuple[Any, npt.NDArray[np.int64]]] = [
+            (make(p.scene, st, m, lam), m) for p, (st, m, lam) in zip(self.panels, states)]
+        if view == "3d" and len({d.force_scale for d, _m in self._drawn}) > 1:
+            # (panels that compare share one scale of force: the smallest)
+            scale = min(d.force_scale for d, _m in self._drawn)
+            self._drawn = [(drawn_3d(p.scene, st, m, lam, scale), m)
+                           for p, (st, m, lam) in zip(self.panels, states)]
         self._flashes = [self._flash(i) for i in range(len(self.panels))]
         self.dpi = DPI * _zoom(width, height)
         self.figure = plt.figure(figsize=(width * len(panels) / self.dpi, height / self.dpi),
@@ -504,14 +644,20 @@ class Animation:
         self.axes = []
         for k in range(len(panels)):
             left, bottom, w, h = self._box
-            self.axes.append(self.figure.add_axes(((k + left) / len(panels), bottom,
-                                                   w / len(panels), h)))
+            self.axes.append(self.figure.add_axes(
+                ((k + left) / len(panels), bottom, w / len(panels), h),
+                **({"projection": "3d"} if view == "3d" else {})))
         shortest = float(np.min(self.clock.pace[self.clock.pace > 0], initial=1.0))
         digits = max(2, int(math.ceil(-math.log10(shortest * self.speed / self.fps))) + 1)
         self._t_format = f"t = {{:.{digits}f}}"
-        limits = self._limits()
-        self._artists = [self._setup(ax, p, d, limits)
-                         for ax, p, (d, _m) in zip(self.axes, self.panels, self._drawn)]
+        if view == "3d":
+            box = self._limits_3d()
+            self._artists = [self._setup_3d(ax, p, d, box)
+                             for ax, p, (d, _m) in zip(self.axes, self.panels, self._drawn)]
+        else:
+            limits = self._limits()
+            self._artists = [self._setup(ax, p, d, limits)
+                             for ax, p, (d, _m) in zip(self.axes, self.panels, self._drawn)]
 
     @property
     def frames(self) -> int:
@@ -620,9 +766,95 @@ class Animation:
             pace = f" (x{rate:.2g})" if abs(rate - 1) > 1e-9 else ""
         return f"{clock}{pace}  mode {{{names}}}"
 
+    def _limits_3d(self) -> Array:
+        """(3, 2): one box for every panel, all that is drawn, padded (the axes draw it at one
+        scale in x, y and z)."""
+        bounds = np.stack([d.bounds() for d, _m in self._drawn])
+        box = np.stack([bounds[:, :, 0].min(axis=0), bounds[:, :, 1].max(axis=0)], axis=1)
+        pad = 0.08 * max(float(np.max(box[:, 1] - box[:, 0])), 1e-3)
+        return box + np.array([-pad, pad])
+
+    def _setup_3d(self, ax: Any, p: Panel, d: Drawn3d, box: Array) -> dict[str, Any]:
+        from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+        (x0, x1), (y0, y1), (z0, z1) = box
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y0, y1)
+        ax.set_zlim(z0, z1)
+        ax.set_box_aspect((x1 - x0, y1 - y0, z1 - z0))  # (one scale in x, y and z)
+        ax.view_init(*VIEW_3D)
+        for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+            axis.set_major_locator(MaxNLocator(4))
+        ax.tick_params(labelsize=FONT - 2, pad=0)
+        for name, label in (("x", ax.set_xlabel), ("y", ax.set_ylabel), ("z", ax.set_zlabel)):
+            label(name, fontsize=FONT - 1, labelpad=-8)
+        ax.add_collection3d(Poly3DCollection(
+            [[(x0, y0, 0.0), (x1, y0, 0.0), (x1, y1, 0.0), (x0, y1, 0.0)]],
+            facecolors=[(*GROUND_COLOR[:3], 0.45)], edgecolors=["0.35"], linewidths=0.8))
+        forces = bool(np.any(d.arrows[:, :, 0] != d.arrows[:, :, 1]))
+        ax.text2D(0.0, 1.0, "ground, z = 0"
+                  + (f"; arrows: contact force,\n{d.force_scale:g} {p.units.length} per unit"
+                     if forces else ""), transform=ax.transAxes, fontsize=FONT - 2,
+                  color="0.3", va="top", ha="left")
+        shapes = {s.name: s for s in p.scene.shapes}
+        artists: dict[str, Any] = {"boxes": {}, "circles": {}, "lines": {}, "arrows": []}
+        for name, corners in d.boxes.items():
+            poly = Poly3DCollection([corners[0][list(f)] for f in BOX_FACES],
+                                    facecolors=[shapes[name].color], edgecolors=["0.2"],
+                                    linewidths=0.3)
+            artists["boxes"][name] = ax.add_collection3d(poly)
+        for name, (centre, _radius) in d.circles.items():
+            artists["circles"][name] = ax.scatter(*centre[0][:, None], s=16,
+                                                  color=[shapes[name].color],
+                                                  depthshade=False)
+        for name, (points, _width) in d.lines.items():
+            (line,) = ax.plot(*points[0].T, color=shapes[name].color, linewidth=1.5)
+            artists["lines"][name] = line
+        if d.contacts.shape[1]:
+            artists["contacts"] = ax.scatter(*d.contacts[0].T, s=12, depthshade=False,
+                                             edgecolors="none")
+            artists["flash"] = ax.scatter(*np.zeros((3, 0)), s=12 * FLASH_SIZE,
+                                          facecolors="none", linewidths=1.2,
+                                          depthshade=False)
+            for _ in range(d.contacts.shape[1]):
+                (seg,) = ax.plot([], [], [], color=ARROW_COLOR[:3], linewidth=1.5)
+                artists["arrows"].append(seg)
+        return artists
+
+    def _draw_3d(self, k: int, i: int, d: Drawn3d, art: dict[str, Any]) -> None:
+        """Pose panel i's 3-D artists at frame ``k``."""
+        held = int(self.clock.held[k])
+        for name, poly in art["boxes"].items():
+            poly.set_verts([d.boxes[name][k][list(f)] for f in BOX_FACES])
+        for name, dots in art["circles"].items():
+            dots._offsets3d = tuple(d.circles[name][0][k][:, None])
+        for name, line in art["lines"].items():
+            line.set_data_3d(*d.lines[name][0][k].T)
+        if "contacts" in art:
+            entered, left, _words = self._flashes[i].get(held, ([], [], ""))
+            art["contacts"]._offsets3d = tuple(d.contacts[k].T)
+            art["contacts"].set_facecolor([ACTIVE_COLOR if on or c in entered else FREE_COLOR
+                                           for c, on in enumerate(d.active[k])])
+            rings = entered + left
+            art["flash"]._offsets3d = tuple(d.contacts[k][rings].T if rings
+                                            else np.zeros((3, 0)))
+            art["flash"].set_edgecolor([ACTIVE_COLOR] * len(entered)
+                                       + [LIFTOFF_COLOR] * len(left))
+            for c, seg in enumerate(art["arrows"]):
+                start, end = d.arrows[k, c]
+                shown = bool(d.active[k, c]) and float(np.linalg.norm(end - start)) > 1e-9
+                seg.set_visible(shown)
+                seg.set_data_3d(*np.stack([start, end]).T)
+
     def draw(self, k: int) -> None:
         """Pose every artist at frame ``k`` and write the titles."""
         held = int(self.clock.held[k])
+        if self.view == "3d":
+            for i, (ax, p, (d, _mode), art) in enumerate(zip(
+                    self.axes, self.panels, self._drawn, self._artists)):
+                self._draw_3d(k, i, d, art)
+                ax.set_title(f"{p.title}\n{self.caption(k, i)}", fontsize=FONT, loc="left")
+            return
         for i, (ax, p, (d, _mode), art) in enumerate(zip(self.axes, self.panels, self._drawn,
                                                           self._artists)):
             for name, patch in art["boxes"].items():
@@ -687,10 +919,15 @@ def _check_frames(hold: int, min_frames: int) -> None:
             raise InvalidInputError(f"{name} must be an integer from 0 to 100, got {value!r}")
 
 
+def _check_view(view: str) -> None:
+    if view not in VIEWS:
+        raise InvalidInputError(f"view must be one of {', '.join(VIEWS)}, got {view!r}")
+
+
 def _write(panels: Sequence[Panel], out: Path, fps: int, speed: float,
-           size: tuple[int, int], hold: int, min_frames: int) -> Animation:
+           size: tuple[int, int], hold: int, min_frames: int, view: str) -> Animation:
     movie = Animation(panels, fps=fps, speed=speed, size=size, hold=hold,
-                      min_frames=min_frames)
+                      min_frames=min_frames, view=view)
     try:
         movie.save(out)
     finally:
@@ -701,30 +938,34 @@ def _write(panels: Sequence[Panel], out: Path, fps: int, speed: float,
 def animate(system: CompiledSystem | str, maneuver: str, s: float, out: Path, *,
             inputs: Mapping[str, float] | None = None, fps: int = 30, speed: float = 1.0,
             size: tuple[int, int] = PANEL_SIZE, hold: int = HOLD_FRAMES,
-            min_frames: int = MIN_MODE_FRAMES) -> Animation:
+            min_frames: int = MIN_MODE_FRAMES, view: str = "auto") -> Animation:
     """Write ``maneuver`` of ``system`` (compiled, a library name or a system file) at s to
-    ``out`` (.gif, or .mp4 with ffmpeg); returns the (closed) animation: its frames, times
-    and panels. Every argument is checked before anything is simulated or written."""
+    ``out`` (.gif, or .mp4 with ffmpeg) in ``view`` (:data:`VIEWS`); returns the (closed)
+    animation: its frames, times and panels. Every argument is checked before anything is
+    simulated or written."""
     out = Path(out)
     check_output(out)
+    _check_view(view)
     _check_rate(fps, speed)
     _check_frames(hold, min_frames)
     _check_s("s", s)
     compiled = system if isinstance(system, CompiledSystem) else CompiledSystem(system)
     compiled.code(maneuver)
     return _write([panel(compiled, maneuver, s, inputs, fps=fps, speed=speed)], out, fps,
-                  speed, size, hold, min_frames)
+                  speed, size, hold, min_frames, view)
 
 
 def side_by_side(system: CompiledSystem | str, maneuver: str, out: Path, *, s0: float = 0.0,
                  delta: float = 0.02, inputs: Mapping[str, float] | None = None, fps: int = 30,
                  speed: float = 1.0, size: tuple[int, int] = PANEL_SIZE,
-                 hold: int = HOLD_FRAMES, min_frames: int = MIN_MODE_FRAMES) -> Animation:
+                 hold: int = HOLD_FRAMES, min_frames: int = MIN_MODE_FRAMES,
+                 view: str = "auto") -> Animation:
     """Write ``maneuver`` at s0 - delta (left panel) and s0 + delta (right panel) into one
     animation (see the module docstring; s0 = 0 is the simultaneous event of the biped's
     touchdown and liftoff and of the rocking bar's drop)."""
     out = Path(out)
     check_output(out)
+    _check_view(view)
     _check_rate(fps, speed)
     _check_frames(hold, min_frames)
     _check_s("s0", s0)
@@ -734,7 +975,7 @@ def side_by_side(system: CompiledSystem | str, maneuver: str, out: Path, *, s0: 
     compiled.code(maneuver)
     panels = [panel(compiled, maneuver, s0 + sign * delta, inputs, fps=fps, speed=speed)
               for sign in (-1, 1)]
-    return _write(panels, out, fps, speed, size, hold, min_frames)
+    return _write(panels, out, fps, speed, size, hold, min_frames, view)
 
 
 def _check_s(name: str, value: float) -> None:

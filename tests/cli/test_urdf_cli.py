@@ -79,3 +79,110 @@ def test_options_in_the_file_argument(capsys):
     status, _out, err = _run(["simulate", "--system", f"{HOPPER}:mass=3", "--maneuver", "drop",
                               "--s", "0"], capsys)
     assert status != 0 and "unknown option mass" in err
+
+
+def test_nonsmooth_points_of_a_urdf_are_where_plain_simulations_change_branch(hopper, capsys):
+    """``nonsmooth`` on the hopper's drop finds where its sequence of contact modes changes
+    (a foot lifting off and landing again or not); each located s is checked against a bracket
+    found by plain simulations alone: SciPy's bisection on the sign of "the run's mode sequence
+    is the one at the bracket's left end" (to 1e-13), in a window of +-1e-4 about it (the two
+    points are 1.2e-3 apart, in one cell of the grid)."""
+    from scipy.optimize import bisect
+
+    status, out, err = _run(["nonsmooth", "--system", str(HOPPER), "--maneuver", "drop",
+                             "--num", "21", "--s-min", "0.02", "--s-max", "0.1", "--json"],
+                            capsys)
+    assert status == 0, err
+    points = json.loads(out)
+    assert len(points) == 2 and all(p["cause"].startswith("mode sequence changes")
+                                    for p in points), points
+    for p in points:
+        s_tool = p["s"] if "s" in p else p["theta0"]
+        lo, hi = s_tool - 1e-4, s_tool + 1e-4
+        left = tuple(hopper.simulate("drop", lo).modes)
+
+        def side(s, left=left):
+            return 1.0 if tuple(hopper.simulate("drop", s).modes) == left else -1.0
+
+        assert side(hi) == -1.0
+        root = bisect(side, lo, hi, xtol=1e-13)
+        # the change is a grazing contact (a foot touching the ground with zero speed), where
+        # the event's time moves like sqrt(s - s*): the tool's location is good to ~1e-8
+        # (measured 3e-8), not to the 1e-12 of a transversal one
+        assert abs(s_tool - root) < 1e-7, (s_tool, root)
+
+
+def _grid_minimum(compiled, problem, s, num):
+    """The least cost of ``problem`` at s over a num x num grid of its two decisions, by
+    plain batch simulation (no solver)."""
+    import numpy as np
+
+    names = list(problem.decision_names)
+    (lo0, hi0), (lo1, hi1) = problem.bound(names[0]), problem.bound(names[1])
+    a, b = np.meshgrid(np.linspace(lo0, hi0, num), np.linspace(lo1, hi1, num))
+    rows = np.tile(problem.inputs(), (a.size, 1))
+    cols = list(problem.decision_columns)
+    rows[:, cols[0]], rows[:, cols[1]] = a.ravel(), b.ravel()
+    batch = compiled.simulate_batch(problem.maneuver, np.full(a.size, s), rows)
+    ok = batch.status == 0
+    return float(np.min(problem.cost(batch.outcome[ok], batch.y_final[ok], rows[ok])))
+
+
+@pytest.mark.parametrize("sampled", [False, True])
+def test_the_optimum_of_a_urdf_is_no_worse_than_a_brute_force_grid(hopper, sampled,
+                                                                   monkeypatch):
+    """The hopper's problem ``drop`` (its two hip efforts, within the URDF's 4 N m) at s = 0.05:
+    the solver's value is no more than the least of a 61 x 61 grid of plain simulations (one
+    run every 0.13 N m), and its outcome meets the target. ``sampled``: the bracketing stage
+    is the Sobol sample a robot's many efforts get (forced here by a smaller limit on the
+    grid: 17 x 17 > 64), which must find it too."""
+    from biped_opt.control import solve
+    from biped_opt.control.problems import get_problem
+
+    if sampled:
+        monkeypatch.setattr(solve, "MAX_BRACKET", 64)
+    problem = get_problem(str(HOPPER), "drop")
+    result = solve.optimal_policy(problem, 0.05)
+    assert result.success
+    assert all(-4.0 <= v <= 4.0 for v in result.policy.values())
+    best = _grid_minimum(hopper, problem, 0.05, 61)
+    # (the cost is smooth near the optimum and simulated to ~1e-14: 1e-12 is noise only)
+    assert result.value <= best + 1e-12, (result.value, best)
+    assert abs(result.outcome) < 1e-3  # (the roll rate at the nadir, unforced -0.268 rad/s)
+
+
+@pytest.mark.parametrize(("view", "drawn"), [("auto", "3d"), ("xz", "xz")])
+def test_animate_a_urdf_in_3d_or_in_the_x_z_plane(hopper, capsys, tmp_path, view, drawn):
+    """The hopper's feet stand side by side (y = +-0.1): ``auto`` draws it in 3-D; ``xz``
+    asks for the plane (10 frames a second of 160 x 120 pixels: a short test)."""
+    out = tmp_path / "hop.gif"
+    status, text, err = _run(["animate", "--system", str(HOPPER), "--maneuver", "drop",
+                              "--s", "0.05", "--view", view, "--fps", "10", "--width", "160",
+                              "--height", "120", "-o", str(out)], capsys)
+    assert status == 0, err
+    assert f"view {drawn}" in text and out.stat().st_size > 0
+
+
+def test_a_study_on_a_urdf(hopper, capsys, tmp_path):
+    """``biped-opt study`` over the hopper's posture gain kp (a parameter the importer declares):
+    each row's s is a point where plain simulations at that kp change their sequence of
+    contact modes within +-1e-6 (the grazing landings of the nonsmooth test)."""
+    import csv
+
+    from biped_opt.simulation.compiled import compiled_with
+
+    study = tmp_path / "hop.yaml"
+    study.write_text(f"system: {HOPPER}\nmaneuver: drop\ngrid: {{kp: [5, 10]}}\n"
+                     "s_range: [0.02, 0.1]\nnum: 9\n")
+    table = tmp_path / "hop.csv"
+    status, out, err = _run(["study", str(study), "--out", str(table), "--no-progress"], capsys)
+    assert status == 0, err
+    rows = list(csv.DictReader(table.open()))
+    assert {r["kp"] for r in rows} == {"5.0", "10.0"} and "2 parameter points" in out
+    found = [r for r in rows if r["kind"] != "none"]
+    assert found
+    for r in found:
+        system = compiled_with(str(HOPPER), {"kp": float(r["kp"])})
+        s = float(r["s"])
+        assert r["cause"].startswith("mode sequence changes")
+        assert system.simulate("drop", s - 1e-6).modes != system.simulate("drop", s + 1e-6).modes

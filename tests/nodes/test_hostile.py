@@ -529,7 +529,7 @@ def test_links_out_of_system_paths_are_refused_and_no_reply_names_a_path(outside
         messages.append(reply.message)
         reply = _reply(policy.call_async(ros.srvs.OptimalPolicy.Request(
             maneuver="drop", theta0=0.1, system="no_such")))
-        assert "nor no_such.py in the node's system_paths" in reply.message
+        assert "nor no_such.py or no_such.urdf in the node's system_paths" in reply.message
         messages.append(reply.message)
         spec = {"system": "linked", "maneuver": "drop", "grid": {"gamma": [0.5]}, "num": 5}
         result = _goal(peer.node, spec, "t.csv")

@@ -5,7 +5,9 @@ recorded to MCAP and read back by mcap-ros2-support."""
 from __future__ import annotations
 
 import math
+import shutil
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -44,6 +46,8 @@ CASES = {
 
 #: a problem file on the bar's maneuver, served by name from the optimiser's system_paths
 OTHER = "system: rocking_bar\nmaneuver: drop\ndecisions: {u_th: [-0.5, 0.5]}\n"
+#: a robot's URDF, served by its stem from the optimiser's system_paths
+HOPPER = Path(__file__).resolve().parents[1] / "systems" / "urdf" / "hopper.urdf"
 
 
 @pytest.fixture(scope="module")
@@ -53,6 +57,7 @@ def graph(tmp_path_factory):
     and recorder serve the rocking bar."""
     problems = tmp_path_factory.mktemp("problems")
     (problems / "other.yaml").write_text(OTHER)
+    shutil.copy(HOPPER, problems / "hopper.urdf")
     g = Graph(domain_id=unique_domain_id(), overrides={
         "simulator": {"autostart": False, "system": "rocking_bar"},
         "optimiser": {"systems": sorted(CASES), "system_paths": [str(problems)]},
@@ -60,6 +65,7 @@ def graph(tmp_path_factory):
     probe = ros.Node("probe", context=g.context)
     g.executor.add_node(probe)
     g.probe = probe
+    g.problems = problems
     yield g
     g.executor.remove_node(probe)
     probe.destroy_node()
@@ -174,6 +180,27 @@ def test_bad_requests_are_refused_and_the_node_keeps_serving(graph):
     assert good.success and list(good.decision_names) == ["u_th"]
     good = _policy(graph.probe, maneuver="drop", theta0=0.1, system="rocking_bar")
     assert good.success
+
+
+def test_a_urdf_of_system_paths_is_served_by_its_stem(graph):
+    """``hopper`` names ``hopper.urdf`` of system_paths: the node imports it (in its compile
+    process) with the importer's defaults and answers its declared problem ``drop`` (the hips'
+    efforts within the URDF's effort limits) as the solver does on the same file in this
+    process. A suffix, a path or options are no name."""
+    reply = _policy_when_compiled(graph.probe, system="hopper", maneuver="drop", theta0=0.05)
+    core = optimal_policy(get_problem(str(graph.problems / "hopper.urdf"), "drop"), 0.05)
+    assert reply.success and core.success, reply.message
+    assert list(reply.decision_names) == ["left_hip_effort", "right_hip_effort"]
+    np.testing.assert_allclose(reply.policy, core.x, rtol=0, atol=TOL)
+    assert abs(reply.value - core.value) <= TOL
+    assert list(reply.contact_modes) == list(core.modes)
+    assert all(-4.0 <= u <= 4.0 for u in reply.policy)  # (the URDF's effort="4")
+    for system in ("hopper.urdf", "hopper.urdf:base=fixed", str(graph.problems / "hopper")):
+        reply = _policy(graph.probe, system=system, maneuver="drop", theta0=0.05)
+        assert not reply.success and "is not a system name" in reply.message, reply.message
+    # (a file's maneuver is checked where its description is built: the compile process)
+    reply = _policy_when_compiled(graph.probe, system="hopper", maneuver="hop", theta0=0.05)
+    assert not reply.success and "hopper has no maneuver 'hop'" in reply.message, reply.message
 
 
 def test_paths_are_refused_with_the_default_parameters(domain_id, tmp_path):

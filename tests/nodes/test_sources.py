@@ -116,3 +116,30 @@ def test_sizes_by_name_are_the_descriptions(name):
 
     system = load_system(name)
     assert library_size(name) == (len(system.constraints), len(system.q))
+
+
+def test_a_urdf_of_system_paths_is_named_by_its_stem(tmp_path):
+    """``<dir>/<name>.urdf`` is found like ``<dir>/<name>.py`` (a .py file first in the same
+    directory; the first directory that has either), and like a file waits for the compiler:
+    its import is not done on the serving thread."""
+    first, second = tmp_path / "a", tmp_path / "b"
+    first.mkdir()
+    second.mkdir()
+    (second / "robot.urdf").write_text("<robot name='r'/>")
+    sources = Sources((first, second))
+    assert sources.system("system", "robot") == str(second / "robot.urdf")
+    names = sources.check_request("robot", "", "drop")
+    assert (names.source, names.checked) == (str(second / "robot.urdf"), False)
+    (first / "robot.urdf").write_text("<robot name='r'/>")
+    assert sources.system("system", "robot") == str(first / "robot.urdf")
+    (first / "robot.py").write_text("")
+    assert sources.system("system", "robot") == str(first / "robot.py")
+    with pytest.raises(InvalidInputError, match=r"nor other.py or other.urdf in the node's "):
+        sources.system("system", "other")
+    with pytest.raises(InvalidInputError, match=r"'robot.urdf' is not a system name"):
+        sources.system("system", "robot.urdf")
+    outside = tmp_path / "elsewhere.urdf"
+    outside.write_text("<robot name='r'/>")
+    (second / "linked.urdf").symlink_to(outside)
+    with pytest.raises(InvalidInputError, match=r"a link to a file outside its directory"):
+        sources.system("system", "linked")

@@ -131,3 +131,40 @@ def test_wire_names_and_types_are_rcl_actions(graph):
     assert writers["rq/biped/study/_action/send_goalRequest"].type_name == \
         "biped_opt_interfaces::action::dds_::Study_SendGoal_Request_"
     reader.__del__()
+
+
+def test_a_study_of_a_urdf_named_by_its_stem(tmp_path):
+    """A goal naming ``hopper``: the coordinator and the optimiser find ``hopper.urdf`` in their
+    system_paths (the optimiser's through its ``systems`` parameter, which names the file and
+    adds its directory) and write the table a local run of the same file writes."""
+    import shutil
+    from pathlib import Path
+
+    robots = tmp_path / "robots"
+    robots.mkdir()
+    urdf = robots / "hopper.urdf"
+    shutil.copy(Path(__file__).resolve().parents[1] / "systems" / "urdf" / "hopper.urdf", urdf)
+    spec = {"system": "hopper", "maneuver": "drop", "grid": {"kp": [5.0, 10.0]},
+            "s_range": [0.02, 0.1], "num": 9}
+    local = local_rows({**spec, "system": str(urdf)}, tmp_path)
+    domain = unique_domain_id()
+    hosts = [optimiser(domain, "h1", systems=[str(urdf)]),
+             coordinator(domain, output_dir=str(tmp_path), system_paths=[str(robots)])]
+    client = Host(lambda c: ros.Node("study_client", context=c), domain)
+    hosts.append(client)
+    action = ros.ActionClient(client.node, ros.actions.Study, "/biped/study",
+                              callback_group=ros.ReentrantCallbackGroup())
+    try:
+        assert action.wait_for_server(timeout_sec=10)
+        handle = _send(action, spec, "hop.csv", [])
+        assert handle.accepted
+        done = handle.get_result_async()
+        assert done.wait(300)
+        reply = done.result()
+        assert reply.status == GoalStatus.SUCCEEDED, reply.result.message
+        assert reply.result.points == 2
+        assert_same_table(tmp_path / "hop.csv", local)
+    finally:
+        action.destroy()
+        for host in reversed(hosts):
+            host.close()
