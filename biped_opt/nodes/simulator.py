@@ -67,7 +67,7 @@ from biped_opt.nodes.refusals import refuse
 from biped_opt.nodes.run import announce_ready, run_node, warm_up_kernels
 from biped_opt.nodes.sim_control import COMMAND_TOPIC, PLAYING, SERVICES, Entity, SimControl
 from biped_opt.paper.biped import compiled_biped, simulate
-from biped_opt.record.scene import SCENE_TOPICS, SceneMessages
+from biped_opt.record.scene import DELETEALL, MARKERS_TOPIC, SCENE_TOPICS, SceneMessages
 from biped_opt.ros.interfaces import load_interfaces
 
 __all__ = ["SimulatorNode", "main", "CONTACT_MODE_QOS", "SYSTEM_INFO_QOS", "BIPED"]
@@ -393,10 +393,24 @@ class SimulatorNode(ros.Node):
 
     def entity_changed(self, entity: Entity | None) -> None:
         """A new entity in the live world (spawned, or the served system back): its
-        description and looks."""
+        description and looks; none (deleted): the viewers' markers cleared."""
         if entity is not None and entity.scene is not None:
             self.scene_publisher("/robot_description").publish(ros.from_cdr(
                 self._scene_pubs["/robot_description"][1], entity.scene.robot_description()))
+        elif entity is None and self.get_parameter("scene").value is True:
+            self._clear_markers()
+
+    def _clear_markers(self) -> None:
+        """One DELETEALL marker at the current time (ROS.md Sec. 6): an empty world shows
+        nothing of the entity deleted from it."""
+        cls = ros.message_type(SCENE_TOPICS[MARKERS_TOPIC][0])
+        marker = ros.message_type("visualization_msgs/msg/Marker")()  # type: ignore[misc]
+        marker.action = DELETEALL
+        marker.header.frame_id = "world"
+        marker.header.stamp = convert.stamp(self.clock_ns)
+        markers = cls()  # type: ignore[misc]
+        markers.markers = [marker]
+        self.scene_publisher(MARKERS_TOPIC).publish(markers)
 
     def show_live(self, entity: Entity, rows: Any, events: list[tuple[float, int]],
                   start_ns: int, fast: bool = False) -> None:

@@ -618,7 +618,18 @@ def test_spawn_and_delete_one_entity_at_a_time(world):
     assert second.result.result == OPERATION_FAILED and "delete 'biped'" in \
         second.result.error_message
     assert client.call(_sim("delete_entity"), DELETE, entity="nobody").result.result == NOT_FOUND
-    assert client.call(_sim("delete_entity"), DELETE, entity="biped").result.result == OK
+    with _test_node(graph, "viewer") as node:
+        arrays: list = []
+        node.create_subscription(ros.message_type("visualization_msgs/msg/MarkerArray"),
+                                 "/biped/markers", arrays.append, ros.QoSProfile(
+                                     depth=100, reliability=ros.ReliabilityPolicy.RELIABLE))
+        time.sleep(0.3)  # (matched before the delete)
+        assert client.call(_sim("delete_entity"), DELETE, entity="biped").result.result == OK
+        deadline = time.monotonic() + 5.0
+        while not arrays and time.monotonic() < deadline:
+            time.sleep(0.02)
+    # the empty world's viewers drop the deleted entity's markers: one DELETEALL (action 3)
+    assert [[m.action for m in a.markers] for a in arrays] == [[3]]
     assert client.call(_sim("get_entities"), GET_ENTITIES).entities == []
     refusals = [({"entity_resource": Resource()}, NO_RESOURCE),
                 ({"entity_resource": Resource(uri="file:///etc/passwd")}, UNSUPPORTED_FORMAT),
