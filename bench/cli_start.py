@@ -1,0 +1,103 @@
+"""Where each command's time goes: its whole process against its own computation.
+
+For every command that computes, at a trivial size and from a cached system, this prints:
+
+- **whole**: the wall time of ``python -m biped_opt.cli.main ARGS`` as a user runs it (median
+  of ``--runs`` processes, after one that warms the caches);
+- **compute**: the same command called a second time inside one process (``main(ARGS)``, after
+  a first call that pays the imports and the loading of compiled code), i.e. the work itself;
+- **start-up**: whole - compute, what the process pays before and around the work.
+
+and last the 2001-point touchdown sweep, whole process, against the independent SciPy reference
+(``bench/solve_ivp_reference.py``, ``solve_ivp`` DOP853 per trajectory) timed in the same run on
+a sample of the same angles and scaled to 2001: the ratio a user of the command line sees.
+
+    python -m bench.cli_start [--runs 3] [--reference-sample 41]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+COMMANDS: dict[str, list[str]] = {
+    "simulate": ["simulate", "--maneuver", "touchdown", "--theta0", "0.01"],
+    "sweep": ["sweep", "--maneuver", "touchdown", "--theta0-min", "-0.1",
+              "--theta0-max", "0.1", "--num", "11", "--no-progress"],
+    "optimise": ["optimise", "--maneuver", "touchdown", "--theta0", "0.05"],
+    "nonsmooth": ["nonsmooth", "--maneuver", "touchdown"],
+    "simulate --system": ["simulate", "--system", "rocking_bar", "--maneuver", "drop",
+                          "--s", "0.1"],
+}
+SWEEP_2001 = ["sweep", "--maneuver", "touchdown", "--theta0-min", "-0.25", "--theta0-max",
+              "0.25", "--num", "2001", "--no-progress"]
+
+#: run inside one process: the command twice, the second timed (the first pays start-up)
+_TWICE = """
+import contextlib, io, sys, time
+from biped_opt.cli.main import main
+argv = sys.argv[1:]
+for k in range(2):
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        start = time.perf_counter()
+        main(argv)
+        took = time.perf_counter() - start
+print(took)
+"""
+
+
+def whole(argv: list[str], runs: int) -> float:
+    """Median wall time of ``runs`` processes of the command (one more first, not counted)."""
+    times = []
+    for k in range(runs + 1):
+        start = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "biped_opt.cli.main", *argv], check=True,
+                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        if k:
+            times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def compute(argv: list[str]) -> float:
+    out = subprocess.run([sys.executable, "-c", _TWICE, *argv], check=True,
+                         capture_output=True, text=True).stdout
+    return float(out.strip().splitlines()[-1])
+
+
+def reference_per_trajectory(sample: int) -> float:
+    """SciPy's time per touchdown trajectory at the paper's fixed inputs, on ``sample`` of the
+    sweep's angles (spread over its range, 0 included)."""
+    from bench.solve_ivp_reference import simulate
+
+    angles = np.linspace(-0.25, 0.25, sample)
+    start = time.perf_counter()
+    for th0 in angles:
+        simulate("touchdown", float(th0), (2.0, 0.5, 0.0))
+    return (time.perf_counter() - start) / sample
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--runs", type=int, default=3, help="processes per command (median)")
+    ap.add_argument("--reference-sample", type=int, default=41,
+                    help="angles the SciPy reference is timed on")
+    args = ap.parse_args(argv)
+    print(f"{'command':20s} {'whole [s]':>10s} {'compute [s]':>12s} {'start-up [s]':>13s}")
+    for name, command in COMMANDS.items():
+        w, c = whole(command, args.runs), compute(command)
+        print(f"{name:20s} {w:10.3f} {c:12.4f} {w - c:13.3f}", flush=True)
+    w = whole(SWEEP_2001, args.runs)
+    ref = reference_per_trajectory(args.reference_sample)
+    print(f"\n2001-point touchdown sweep: whole process {w:.3f} s; SciPy reference "
+          f"{ref * 1e3:.2f} ms per trajectory, {2001 * ref:.1f} s for 2001; "
+          f"ratio {2001 * ref / w:.1f}x (the issue's goal: >= 20x)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
