@@ -1,9 +1,12 @@
-"""solo12 (a library robot from its URDF, SYSTEMS.md Sec. 3c) against Pinocchio: Eq. (1)'s terms
-at random states, the compiled field and impact map in every contact mode, and whole drops
-against SciPy's DOP853 on Pinocchio's dynamics (tests/systems/urdf_checks.py has the
-tolerances and why). The compiled robot is shared by this module's tests (one worker)."""
+"""The library robots on point feet, solo12 (four) and bolt (two), from their URDFs (SYSTEMS.md
+Sec. 3c) against Pinocchio: Eq. (1)'s terms at random states, the compiled field and impact map
+in every contact mode, and whole drops against SciPy's DOP853 on Pinocchio's dynamics
+(tests/systems/urdf_checks.py has the tolerances and why); and README's solo12 example. Each
+compiled robot is shared by this module's tests (one worker)."""
 
 from __future__ import annotations
+
+import functools
 
 import pytest
 
@@ -15,43 +18,49 @@ from biped_opt.systems.files import load_system  # noqa: E402
 from biped_opt.systems.library.robots import ROBOT_FILES  # noqa: E402
 from tests.systems import urdf_checks as checks  # noqa: E402
 
-NAME = "solo12"
-#: the feet, read by hand from the URDF: the origins of the *_FOOT links
-CONTACTS = [(f"{leg}_FOOT", (0.0, 0.0, 0.0), 0.0) for leg in ("FL", "FR", "HL", "HR")]
+#: robot -> its feet, read by hand from the URDF: the origins of the *_FOOT links
+FEET = {"solo12": ("FL", "FR", "HL", "HR"), "bolt": ("FL", "FR")}
 
 
-@pytest.fixture(scope="module")
-def reference():
-    return checks.reference_for(load_system(NAME), ROBOT_FILES[NAME], CONTACTS)
+@functools.cache
+def _compiled(name: str) -> CompiledSystem:
+    return CompiledSystem(name)
 
 
-@pytest.fixture(scope="module")
-def compiled():
-    return CompiledSystem(NAME)
+@functools.cache
+def _reference(name: str) -> checks.PinocchioRobot:
+    contacts = [(f"{leg}_FOOT", (0.0, 0.0, 0.0), 0.0) for leg in FEET[name]]
+    return checks.reference_for(load_system(name), ROBOT_FILES[name], contacts)
 
 
-def test_eq1_terms_are_pinocchio_s(reference):
-    worst = checks.check_eq1_terms(load_system(NAME), reference)
+@pytest.fixture(params=list(FEET))
+def robot(request):
+    return request.param
+
+
+def test_eq1_terms_are_pinocchio_s(robot):
+    worst = checks.check_eq1_terms(load_system(robot), _reference(robot))
     assert max(worst.values()) < checks.TOL, worst
 
 
-def test_field_and_impacts_in_every_mode_are_pinocchio_s(compiled, reference):
-    worst = checks.check_generated_code(compiled, reference, range(16))
+def test_field_and_impacts_in_every_mode_are_pinocchio_s(robot):
+    modes = range(1 << len(FEET[robot]))
+    worst = checks.check_generated_code(_compiled(robot), _reference(robot), modes)
     assert max(worst.values()) < checks.TOL, worst
 
 
 @pytest.mark.parametrize("s", [0.05, -0.03, 0.0])
-def test_drops_are_the_reference_s(compiled, reference, s):
+def test_drops_are_the_reference_s(robot, s):
     """Tilted, the feet land one by one; level, all together in one impact."""
-    times, states, events = checks.check_drop(compiled, reference, s)
+    times, states, events = checks.check_drop(_compiled(robot), _reference(robot), s)
     if s == 0:
-        assert events[0][0] == frozenset(range(4))
+        assert events[0][0] == frozenset(range(len(FEET[robot])))
     else:
         assert len(events) >= 2 and all(len(entered) == 1 for entered, _l, _a in events)
     assert times < checks.DROP_TOL and states < checks.DROP_TOL, (times, states)
 
 
-def test_the_readme_example_runs_and_is_the_library_s_solo12(compiled, tmp_path, capsys):
+def test_the_readme_example_runs_and_is_the_library_s_solo12(tmp_path, capsys):
     """README "Your robot from URDF": its ten lines, as written there, build the library's
     solo12 (the same generated module, loaded from this module's compile) and print the drop's
     status, outcome and landings."""
@@ -67,6 +76,6 @@ def test_the_readme_example_runs_and_is_the_library_s_solo12(compiled, tmp_path,
     path.write_text(block)
     runpy.run_path(str(path), run_name="__main__")
     out = capsys.readouterr().out
-    run = compiled.simulate("drop", 0.05)
+    run = _compiled("solo12").simulate("drop", 0.05)
     assert out.strip() == f"OK {run.outcome} {[(e.t, e.mask_after) for e in run.contact_events]}"
     assert run.contact_events[0].mask_entered == 0b0010  # (FR_FOOT)
