@@ -55,7 +55,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from bench.scaling import _process_seconds, _wait_for_ahead_of_time  # noqa: E402
+from bench.scaling import _process_seconds, _time, _wait_for_ahead_of_time  # noqa: E402
 
 _COLD = """
 import sys, time
@@ -281,10 +281,6 @@ def measure(name: str, *, cases: int, rounds: int, reference_cases: int) -> dict
             "scipy_nfev": float(np.mean(ref_nfev)),
             "speedup": float(np.median(np.array(ref_times) / np.array(own_times))),
             "max_abs_error": float(max(errors))}
-
-
-def _time(v: float) -> str:
-    return f"{v * 1e6:.1f} us" if v < 1e-3 else f"{v * 1e3:.2f} ms" if v < 1 else f"{v:.1f} s"
 
 
 def table(rows: list[dict[str, Any]]) -> str:
