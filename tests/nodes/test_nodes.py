@@ -48,6 +48,21 @@ def probe(graph):
     node.destroy_node()
 
 
+@contextlib.contextmanager
+def serving_simulator(domain_id, **parameters):
+    """The graph in-process with the simulator's ``parameters`` (and autostart off), and a
+    probe node of the test's own on its executor; everything closed on leaving."""
+    with Graph(domain_id=domain_id,
+               overrides={"simulator": {"autostart": False, **parameters}}) as g:
+        node = ros.Node("probe", context=g.context)
+        g.executor.add_node(node)
+        try:
+            yield g, node
+        finally:
+            g.executor.remove_node(node)
+            node.destroy_node()
+
+
 def call(node, srv, name, timeout=30.0, **fields):
     client = node.create_client(srv, name)
     assert client.wait_for_service(timeout_sec=10.0)

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import json
 import re
-import threading
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -241,23 +240,12 @@ def test_every_path_gives_one_number_per_message_of_a_live_simulator(layout, dom
     """A simulator in-process on DDS plays one run; every topic a panel names is one it
     publishes, and every path gives one number in each message that arrives."""
     from biped_opt import ros
-    from biped_opt.nodes.simulator import SimulatorNode
-    from tests.nodes.test_nodes import call
+    from tests.nodes.test_nodes import call, serving_simulator
 
     topics = {parse_path(p)[0] for p in _paths(layout)}
     (scene,) = _panels(layout, "3D").values()
-    context = ros.Context()
-    ros.init(args=[], context=context, domain_id=domain_id)
-    sim = SimulatorNode(context=context,
-                        parameter_overrides=[ros.Parameter("autostart", value=False)])
-    probe = ros.Node("probe", context=context)
-    executor = ros.MultiThreadedExecutor(num_threads=3, context=context)
-    for node in (sim, probe):
-        executor.add_node(node)
-    thread = threading.Thread(target=executor.spin, daemon=True)
-    thread.start()
     got: dict[str, list[Any]] = defaultdict(list)
-    try:
+    with serving_simulator(domain_id) as (_graph, probe):
         offered = dict(probe.get_topic_names_and_types())
         # (the simulator's publishers exist once it is constructed: nothing to wait for on
         # the backend's own graph cache beyond discovery)
@@ -281,12 +269,6 @@ def test_every_path_gives_one_number_per_message_of_a_live_simulator(layout, dom
         deadline = time.monotonic() + 10.0
         while not all(got[t] for t in topics) and time.monotonic() < deadline:
             time.sleep(0.05)
-    finally:
-        executor.shutdown(timeout_sec=10.0)
-        thread.join(10.0)
-        for node in (probe, sim):
-            node.destroy_node()
-        ros.try_shutdown(context=context)
     for path in _paths(layout):
         topic, parts = parse_path(path)
         assert got[topic], f"{path}: no message on {topic} from a live simulator"

@@ -288,38 +288,27 @@ def test_a_simulator_serving_a_urdf_robot_publishes_its_tree(domain_id):
     robot's URDF, every /tf message one transform world -> base_link, every /joint_states
     message the joints at the state the reply carries for that stamp, and the first marker
     array starts with a DELETEALL."""
-    import threading
     import time
 
     from biped_opt import ros
-    from biped_opt.nodes.simulator import SimulatorNode
     from biped_opt.simulation.compiled import CompiledSystem
-    from tests.nodes.test_nodes import call
+    from tests.nodes.test_nodes import call, serving_simulator
 
     compiled = CompiledSystem("bolt")
-    context = ros.Context()
-    ros.init(args=[], context=context, domain_id=domain_id)
-    sim = SimulatorNode(context=context, parameter_overrides=[
-        ros.Parameter("autostart", value=False), ros.Parameter("system", value="bolt")])
-    probe = ros.Node("probe", context=context)
-    executor = ros.MultiThreadedExecutor(num_threads=3, context=context)
-    for node in (sim, probe):
-        executor.add_node(node)
-    thread = threading.Thread(target=executor.spin, daemon=True)
-    thread.start()
     got: dict[str, list] = {"/tf": [], JOINT_STATES_TOPIC: [], MARKERS_TOPIC: [],
                             "/robot_description": []}
-    reliable = ros.ReliabilityPolicy.RELIABLE
-    for topic, typename, durability in (
-            ("/tf", "tf2_msgs/msg/TFMessage", ros.DurabilityPolicy.VOLATILE),
-            (JOINT_STATES_TOPIC, "sensor_msgs/msg/JointState", ros.DurabilityPolicy.VOLATILE),
-            (MARKERS_TOPIC, "visualization_msgs/msg/MarkerArray", ros.DurabilityPolicy.VOLATILE),
-            ("/robot_description", "std_msgs/msg/String",
-             ros.DurabilityPolicy.TRANSIENT_LOCAL)):
-        probe.create_subscription(ros.message_type(typename), topic, got[topic].append,
-                                  ros.QoSProfile(depth=1000, reliability=reliable,
-                                                 durability=durability))
-    try:
+    with serving_simulator(domain_id, system="bolt") as (_graph, probe):
+        reliable = ros.ReliabilityPolicy.RELIABLE
+        for topic, typename, durability in (
+                ("/tf", "tf2_msgs/msg/TFMessage", ros.DurabilityPolicy.VOLATILE),
+                (JOINT_STATES_TOPIC, "sensor_msgs/msg/JointState", ros.DurabilityPolicy.VOLATILE),
+                (MARKERS_TOPIC, "visualization_msgs/msg/MarkerArray",
+                 ros.DurabilityPolicy.VOLATILE),
+                ("/robot_description", "std_msgs/msg/String",
+                 ros.DurabilityPolicy.TRANSIENT_LOCAL)):
+            probe.create_subscription(ros.message_type(typename), topic, got[topic].append,
+                                      ros.QoSProfile(depth=1000, reliability=reliable,
+                                                     durability=durability))
         time.sleep(0.5)  # discovery
         reply = call(probe, ros.srvs.Simulate, "/biped/simulate", maneuver="drop", theta0=0.05,
                      inputs=[0.0] * len(compiled.inputs), real_time_factor=4.0)
@@ -329,12 +318,6 @@ def test_a_simulator_serving_a_urdf_robot_publishes_its_tree(domain_id):
                 got["/robot_description"] and got[JOINT_STATES_TOPIC] and
                 got[JOINT_STATES_TOPIC][-1].header.stamp == reply.system_states[-1].header.stamp):
             time.sleep(0.05)
-    finally:
-        executor.shutdown(timeout_sec=10.0)
-        thread.join(10.0)
-        for node in (probe, sim):
-            node.destroy_node()
-        ros.try_shutdown(context=context)
     scene = compiled.scene
     assert got["/robot_description"][0].data == scene.urdf([], np.zeros((1, 12)))
     states = {(s.header.stamp.sec, s.header.stamp.nanosec): s for s in reply.system_states}
