@@ -39,6 +39,7 @@ start-up, or one spawned later) with a state ``(y, contact mode)`` at the simula
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import math
 import re
@@ -449,7 +450,15 @@ class SimControl:
         result = action.Result()
         steps = int(handle.request.steps)
         done = 0
-        with self._stepping:
+        # (goals accepted together past goal_callback's check: the later ones end at once
+        # instead of holding an executor thread each until the first is done)
+        if not self._stepping.acquire(blocking=False):
+            result.result.result = self.msgs.Result.RESULT_OPERATION_FAILED
+            result.result.error_message = "busy: another SimulateSteps goal is running; retry"
+            handle.abort()
+            return result
+        with contextlib.ExitStack() as held:
+            held.callback(self._stepping.release)
             try:
                 while True:
                     with self.lock:

@@ -738,6 +738,29 @@ def test_simulate_steps_action_gives_feedback_after_each_step(world):
         assert len(got) >= 10 and got[-1] == (20, 0)
         assert all(c + r == 20 for c, r in got) and all(np.diff([c for c, _ in got]) > 0)
         assert graph.simulator.sim_ns == 20 * 1_000_000
+        # two goals at once: one runs, the other is rejected or ends at once ("busy"), never
+        # waiting on an executor thread for the first
+        first = action.send_goal_async(action_t.Goal(steps=300))
+        second = action.send_goal_async(action_t.Goal(steps=300))
+        deadline = time.monotonic() + 30
+        while not (first.done() and second.done()):
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        outcomes = []
+        for sent in (first, second):
+            if not sent.result().accepted:
+                outcomes.append("rejected")
+                continue
+            result = sent.result().get_result_async()
+            while not result.done():
+                assert time.monotonic() < deadline
+                time.sleep(0.01)
+            r = result.result().result.result
+            outcomes.append("ok" if r.result == OK else r.error_message)
+            if r.result != OK:
+                assert r.error_message.startswith("busy: another SimulateSteps goal"), r
+        assert sorted(o == "ok" for o in outcomes) == [False, True], outcomes
+        assert graph.simulator.sim_ns == 320 * 1_000_000
 
 
 @pytest.fixture()
