@@ -616,12 +616,20 @@ class SimControl:
             if not text.lstrip("\ufeff \t\r\n").startswith("<"):
                 raise Refused(codes.UNSUPPORTED_FORMAT,
                               "resource_string: a URDF text (XML) is the one format taken")
-            from biped_opt.systems.urdf import parse_urdf
+            from biped_opt.systems.urdf import MOVING, parse_urdf
 
             try:
-                parse_urdf(text, source="resource_string")
+                robot = parse_urdf(text, source="resource_string")
             except BipedOptError as exc:
                 raise Refused(codes.RESOURCE_PARSE_ERROR, str(exc)) from None
+            # (at least one coordinate per moving joint that follows none: a robot beyond
+            # max_coordinates is refused here, before a compile process spends time on it)
+            joints = sum(j.kind in MOVING and j.mimic is None for j in robot.joints)
+            limit = self.sources.limits.max_coordinates
+            if joints > limit:
+                raise Refused(failed, f"resource_string: {joints} moving joints, more than "
+                                      f"the {limit} coordinates a system may have here "
+                                      "(max_coordinates)")
             digest = hashlib.sha256(text.encode()).hexdigest()
             try:
                 compiled = self.compiler.get(("urdf", digest), f"the URDF robot {digest[:12]}",

@@ -669,6 +669,18 @@ def test_spawn_and_delete_one_entity_at_a_time(world):
     for fields, code in refusals:
         reply = _spawn(client, **fields)
         assert reply.result.result == code and reply.result.error_message, (fields, reply)
+    # a chain of 17 hinges: more coordinates than the node's 16, refused before any compile
+    links = "".join(f'<link name="l{k}"><inertial><mass value="1"/><inertia ixx="1" ixy="0" '
+                    f'ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>' for k in range(18))
+    joints = "".join(f'<joint name="j{k}" type="revolute"><parent link="l{k}"/><child '
+                     f'link="l{k + 1}"/><axis xyz="0 1 0"/><limit effort="1" lower="-1" '
+                     f'upper="1" velocity="1"/></joint>' for k in range(17))
+    chain = f'<robot name="chain">{links}{joints}</robot>'
+    reply = client.call(_sim("spawn_entity"), SPAWN,
+                        entity_resource=Resource(resource_string=chain))
+    assert reply.result.result == OPERATION_FAILED
+    assert "17 moving joints" in reply.result.error_message and \
+        "max_coordinates" in reply.result.error_message, reply.result.error_message
     assert _set_state(client, PAUSED).result == OK
     pose = PoseStamped(pose=Pose(position=Point(x=0.25, z=2.0)))
     spawned = _spawn(client, entity_resource=Resource(uri="rocking_bar"), initial_pose=pose)
