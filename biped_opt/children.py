@@ -100,9 +100,12 @@ def running_in_background(since: int = 0) -> list[str]:
 
 
 def limit_background(on_expiry: Any = None) -> None:
-    """In a background build: end this process once the time its starter allowed
-    (:data:`BACKGROUND_LIMIT_S`) has passed (a daemon thread; nothing when not limited),
-    after calling ``on_expiry()`` (a lock file to remove)."""
+    """In a background build: move to a directory of this process's own (the starter's, its
+    working directory so far, is removed when the starter exits, which a build outlives, and
+    a compiler that looks up its working directory then fails), and end this process once the
+    time its starter allowed (:data:`BACKGROUND_LIMIT_S`) has passed (a daemon thread;
+    nothing when not limited), after calling ``on_expiry()`` (a lock file to remove)."""
+    os.chdir(private_directory())
     text = os.environ.get(_LIMIT_ENV, "")
     try:
         limit = float(text)

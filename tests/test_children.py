@@ -7,6 +7,7 @@ import json
 import os
 import subprocess
 import sys
+import textwrap
 import time
 from pathlib import Path
 
@@ -75,3 +76,21 @@ def test_a_command_says_in_one_line_what_it_leaves_running(monkeypatch, capsys):
     assert err == ("note: 2 background builds for later runs still going at low priority, "
                    "ending within 15 min: the compile of hop_1; the ahead-of-time kernel of "
                    "hop_1\n")
+
+
+def test_a_background_build_outlives_the_directory_it_started_in(tmp_path):
+    # a build started by a short command runs on after it, in a directory the command removes
+    # when it exits; a compiler that looks up its working directory then failed (every build
+    # started from a cached start did)
+    code = textwrap.dedent("""
+        import os, shutil, tempfile
+        gone = tempfile.mkdtemp()
+        os.chdir(gone)
+        shutil.rmtree(gone)
+        from biped_opt import children
+        children.limit_background()
+        print(os.path.isdir(os.getcwd()))
+    """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, timeout=120, cwd=tmp_path).stdout.strip()
+    assert out == "True"
