@@ -20,7 +20,9 @@ setup(
     version="0.1.0",
     packages=find_packages(include=[package_name, f"{package_name}.*"]),
     # (the library's robots: their URDFs, licences and sources, SYSTEMS.md Sec. 3c)
-    package_data={package_name: ["py.typed", "systems/library/robots/*/*"]},
+    package_data={package_name: ["py.typed", "systems/library/robots/*/*",
+                                # (the C runtime a kernel library is linked with)
+                                "codegen/native_runtime.c"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{package_name}"]),
         (f"share/{package_name}", ["package.xml"]),

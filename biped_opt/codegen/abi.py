@@ -34,7 +34,8 @@ from collections.abc import Sequence
 __all__ = ["FUNCTIONS", "NFUNC", "INDEX", "SV_NSTATE", "SV_NCON", "SV_NMAN", "SV_WORKSPACE",
            "SV_DEPENDENT", "SV_GUARDS", "MANEUVER_WIDTH", "CFG_T_END", "CFG_MAX_EVENTS",
            "CFG_RTOL", "CFG_ATOL",
-           "CFG_H_MAX", "CFG_SAMPLE_DT", "CFG_TOUCHED_DOWN", "CFG_SIZE", "ENTRY_SIGNATURES",
+           "CFG_H_MAX", "CFG_SAMPLE_DT", "CFG_TOUCHED_DOWN", "CFG_SIZE", "ENTRIES", "MODULE_CALLS",
+           "ENTRY_SIGNATURES",
            "digest",
            "system_table", "cfunc_source", "direct_binding", "binding_names"]
 
@@ -88,18 +89,47 @@ CFG_TOUCHED_DOWN = 6
 CFG_SIZE = 7
 
 
-#: the types the kernel's entry points are called with (biped_opt.simulation.compiled,
-#: biped_opt.control.derivatives): what ``make venv`` compiles them for
-#: (biped_opt.codegen.kernel.compile_all), and what the kernel compiled ahead of time exports
-#: ``simulate_maneuver`` with (biped_opt.codegen.aot)
-ENTRY_SIGNATURES = {
-    "simulate_maneuver": "Tuple((i8, f8, i8, i8, i8, i8, i8, i8, f8))(f8[::1], i8[::1], i8, f8, "
-                         "f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], i8)",
-    "simulate_batch_kernel": "void(f8[::1], i8[::1], i8, f8[::1], f8[:, ::1], f8[::1], "
-                             "f8[:, :, ::1], f8[:, ::1], f8[::1], f8[:, ::1], i8, i8)",
-    "variational_field": "i8(f8[::1], i8[::1], i8, f8[::1], f8[::1], f8[:, ::1], f8, f8[::1], "
-                         "f8[::1], f8[::1], f8[::1])",
+#: the kernel's entry points and the types they are called with (biped_opt.simulation.compiled,
+#: biped_opt.control.derivatives): name -> (argument kinds, result kinds). Kinds as in
+#: :data:`FUNCTIONS`, and ``I`` a C-contiguous int64 vector, ``T`` a C-contiguous float64 array
+#: of three dimensions; a result of several kinds is a tuple. What ``make venv`` compiles them
+#: for (biped_opt.codegen.kernel.compile_all), and what the kernel compiled ahead of time
+#: exports (biped_opt.codegen.aot, biped_opt.codegen.native)
+ENTRIES: dict[str, tuple[str, str]] = {
+    # (status, t_f, mode_f, events, samples, nfev, steps, rejected, outcome) from
+    # (p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
+    "simulate_maneuver": ("AIifAAFFAAi", "ifiiiiiif"),
+    # (p, sv, code, ss, us, cfg, events, y_out, outcome, info, start, stop)
+    "simulate_batch_kernel": ("AIiAFATFAFii", "v"),
+    # field evaluations from (p, sv, mode, w, u, du, step, steps, weights, out, lam)
+    "variational_field": ("AIiAAFfAAAA", "i"),
 }
+
+#: the generated module's functions that Python calls one by one (the derivatives and the
+#: contact checks: biped_opt.control.derivatives, biped_opt.simulation.contacts), kinds as in
+#: :data:`FUNCTIONS`: a kernel library exports them too (biped_opt.codegen.native), so that those
+#: paths start without Numba as well
+MODULE_CALLS: dict[str, tuple[str, str]] = {
+    **{name: FUNCTIONS[name] for name in ("_field_at", "apply_impact", "constraint_rates",
+                                          "guard_value", "initial_state", "outcome_value",
+                                          "reaction")},
+    "constraint_value": ("iAAi", "f"),
+    "terminal_value": ("iAAAi", "f"),
+}
+
+_SIGNATURE_TYPE = {"A": "f8[::1]", "I": "i8[::1]", "F": "f8[:, ::1]", "T": "f8[:, :, ::1]",
+                   "i": "i8", "f": "f8", "v": "void"}
+
+
+def _signature(kinds: str, result: str) -> str:
+    """A Numba signature from the kinds of :data:`ENTRIES`."""
+    out = [_SIGNATURE_TYPE[k] for k in result]
+    ret = f"Tuple(({', '.join(out)}))" if len(out) > 1 else out[0]
+    return f"{ret}({', '.join(_SIGNATURE_TYPE[k] for k in kinds)})"
+
+
+#: the entry points' Numba signatures (from :data:`ENTRIES`)
+ENTRY_SIGNATURES = {name: _signature(*kinds) for name, kinds in ENTRIES.items()}
 
 
 def digest() -> str:

@@ -1,28 +1,37 @@
 """The kernel of a generated module compiled ahead of time, for starts without Numba.
 
-A cached start of a system (``biped-opt simulate --system NAME``) needs one call of the kernel,
-``simulate_maneuver``. Through Numba that call first sets up Numba's compiler and target
-(importing Numba and SciPy, ~1 s) only to load machine code from its cache. :func:`build` compiles
-the kernel's source (:mod:`biped_opt.codegen.kernel`, below its marker) together with the
-system's generated module, its calls of the system's functions bound directly
-(:func:`biped_opt.codegen.abi.direct_binding`) instead of through addresses, with
-``numba.pycc`` into a CPython extension beside the module (``<name>_aot_<kernel key><suffix>``:
-a new kernel source is a new file); a later start imports that extension (a few milliseconds)
-and NumPy, and nothing of Numba.
+A cached start of a system needs a few calls of the kernel: ``simulate_maneuver`` (one
+trajectory: ``simulate``, the optimiser's tries), ``simulate_batch_kernel`` (sweeps) and
+``variational_field`` (the derivatives). Through Numba each first sets up Numba's compiler
+and target (importing Numba, ~1 s with its load path) only to load machine code from its
+cache. Here the kernel's source (:mod:`biped_opt.codegen.kernel`, below its marker) is compiled
+together with the system's generated module, its calls of the system's functions bound
+directly (:func:`biped_opt.codegen.abi.direct_binding`) instead of through addresses, into a
+file beside the module that a later start loads in milliseconds, with NumPy and nothing of
+Numba. Two kinds, tried in this order:
 
-It is the same source compiled for the same arithmetic: no fast-math in either, so the
-extension and the shared kernel give bit-identical trajectories (``tests/codegen/test_aot.py``
-checks it, at coincident events too).
-The extension targets the generic x86-64/AArch64 CPU, so a cache shared between machines stays
-safe to load. ``numba.pycc`` is marked "pending deprecation" since Numba 0.57 with no replacement
-yet; Numba is pinned, and without it (or without a C compiler) every start simply loads through
-Numba. Everything else of a system (batches, the variational equations, the derivatives)
-keeps using the Numba-compiled module.
+1. ``native``: a plain shared library ``<name>_kernel_<key>.so`` of every entry point, made of
+   llvmlite object code and a small C runtime (:mod:`biped_opt.codegen.native`), called through
+   ctypes (which releases the interpreter lock: batches run in parallel threads);
+2. ``extension``: a CPython extension ``<name>_aot_<key><suffix>`` of ``simulate_maneuver``
+   made by ``numba.pycc``, which Numba has marked "pending deprecation" since 0.57 with no
+   replacement. It is built only where the first cannot be; its start serves ``simulate``,
+   and the rest loads through Numba.
+
+Without either (no C compiler: both link with the platform's), every start loads through Numba,
+as before. The key in the names hashes the kernel's source, its table, and the code that builds
+them: a file built from another kernel is never loaded.
+
+It is the same source compiled for the same arithmetic: no fast-math in any compile, so both
+kinds and the shared kernel give bit-identical trajectories (``tests/codegen/test_aot.py``,
+``tests/codegen/test_native.py`` check it, at coincident events too). Both target the generic
+CPU of the machine's architecture, so a cache shared between machines stays safe to load.
 
 :func:`start` runs the build in a detached process: after a cold compile, and from a cached start
-that finds no extension (a cache from before, or a build that was interrupted). A lock file keeps
-it to one build per module. ``BIPED_OPT_AOT=0`` turns it off; then every start loads through
-Numba, as before. Run as ``python -m biped_opt.codegen.aot PATH MODULE_NAME NAME``.
+that finds neither kind (a cache from before, or a build that was interrupted). A lock file keeps
+it to one build per module. ``BIPED_OPT_AOT`` chooses: ``0`` none (every start loads through
+Numba), ``native`` or ``extension`` only that kind, anything else both in the order above.
+Run as ``python -m biped_opt.codegen.aot PATH MODULE_NAME NAME``.
 """
 
 from __future__ import annotations
@@ -31,7 +40,6 @@ import hashlib
 import importlib.machinery
 import importlib.util
 import os
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -39,23 +47,37 @@ import time
 import warnings
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 from biped_opt import children
+from biped_opt.codegen import native
 from biped_opt.codegen.abi import ENTRY_SIGNATURES
 
-__all__ = ["SIGNATURE", "enabled", "extension_path", "load", "build", "build_once", "start",
-           "wait_built", "load_module", "main"]
+__all__ = ["KINDS", "EXPORTED", "SIGNATURE", "kinds", "enabled", "native_path", "extension_path",
+           "built", "load", "build", "build_once", "start", "wait_built", "load_module",
+           "kernel_source", "main"]
 
-#: the exported function, and its types: (status, t_f, mode_f, events, samples, nfev, steps,
-#: rejected, outcome) from (p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
+#: the kinds of kernel compiled ahead of time, in the order they are tried (module docstring)
+KINDS = ("native", "extension")
+#: the function the extension exports, and its types: (status, t_f, mode_f, events, samples,
+#: nfev, steps, rejected, outcome) from (p, sv, code, s, u, cfg, samples, events, y_out, y0,
+#: mode0)
 EXPORTED = "simulate_maneuver"
 SIGNATURE = ENTRY_SIGNATURES[EXPORTED]
 #: a lock older than this belongs to a build that died [s]
 STALE_LOCK_S = 1800.0
 
 
+def kinds() -> tuple[str, ...]:
+    """The kinds ``BIPED_OPT_AOT`` allows, in order (none when it is 0)."""
+    value = os.environ.get("BIPED_OPT_AOT", "1").strip()
+    if value == "0":
+        return ()
+    return (value,) if value in KINDS else KINDS
+
+
 def enabled() -> bool:
-    return os.environ.get("BIPED_OPT_AOT", "1") != "0"
+    return bool(kinds())
 
 
 _KERNEL = Path(__file__).with_name("kernel.py")
@@ -63,13 +85,20 @@ _KEY: list[str] = []
 
 
 def kernel_key() -> str:
-    """A hash of the kernel's source and of the table it calls through (part of an extension's
-    name: an extension built from another kernel is never loaded)."""
+    """A hash of the kernel's source, the table it calls through and the code that compiles
+    it ahead (part of a file's name: one built from another kernel is never loaded)."""
     if not _KEY:
-        digest = hashlib.sha256(_KERNEL.read_bytes())
-        digest.update(_KERNEL.with_name("abi.py").read_bytes())
+        digest = hashlib.sha256()
+        for path in (_KERNEL, _KERNEL.with_name("abi.py"), _KERNEL.with_name("native.py"),
+                     native.RUNTIME):
+            digest.update(path.read_bytes())
         _KEY.append(digest.hexdigest()[:12])
     return _KEY[0]
+
+
+def native_path(folder: Path, name: str) -> Path:
+    """Where the kernel library of the generated module ``name`` lives."""
+    return folder / f"{name}_kernel_{kernel_key()}.so"
 
 
 def extension_path(folder: Path, name: str) -> Path:
@@ -77,11 +106,15 @@ def extension_path(folder: Path, name: str) -> Path:
     return folder / f"{name}_aot_{kernel_key()}{importlib.machinery.EXTENSION_SUFFIXES[0]}"
 
 
-def load(folder: Path, name: str) -> ModuleType | None:
-    """The extension of module ``name``, or None when it is not there (or does not load)."""
-    path = extension_path(folder, name)
-    if not enabled() or not path.is_file():
-        return None
+_PATHS = {"native": native_path, "extension": extension_path}
+
+
+def built(folder: Path, name: str) -> bool:
+    """Whether a kernel of an allowed kind is there for module ``name``."""
+    return any(_PATHS[kind](folder, name).is_file() for kind in kinds())
+
+
+def _load_extension(path: Path) -> ModuleType | None:
     module_name = path.name.split(".")[0]
     if module_name in sys.modules:
         return sys.modules[module_name]
@@ -97,6 +130,27 @@ def load(folder: Path, name: str) -> ModuleType | None:
         return None
     sys.modules[module_name] = module
     return module
+
+
+_LOADED: dict[Path, Any] = {}
+
+
+def load(folder: Path, name: str) -> Any | None:
+    """The kernel of module ``name`` compiled ahead, of the first allowed kind that is there and
+    loads: an object with the entry points it has (all of
+    :data:`biped_opt.codegen.abi.ENTRIES` for a library, :data:`EXPORTED` for an extension),
+    called as the shared kernel's; None when there is none."""
+    for kind in kinds():
+        path = _PATHS[kind](folder, name)
+        if path in _LOADED:
+            return _LOADED[path]
+        if not path.is_file():
+            continue
+        kernel = native.load(path) if kind == "native" else _load_extension(path)
+        if kernel is not None:
+            _LOADED[path] = kernel
+            return kernel
+    return None
 
 
 #: what the kernel's source needs besides the system's module: the table's layout and the
@@ -118,32 +172,49 @@ def kernel_source(module_text: str) -> str:
     return "\n\n".join([module_text.rstrip(), _KERNEL_IMPORTS, direct_binding(), body])
 
 
-def build(path: Path, name: str) -> Path:
-    """Compile the kernel with the generated module at ``path`` (:func:`kernel_source`) into the
-    extension of ``name`` beside it: built in a temporary directory, then renamed into place."""
+def _build_extension(module: ModuleType, target: Path, work: Path) -> None:
     with warnings.catch_warnings():  # (pycc is "pending deprecation": see the module doc)
         warnings.simplefilter("ignore")
         from numba.pycc import CC
 
+    cc = CC(target.name.split(".")[0])
+    cc.output_dir = str(work)
+    cc.verbose = False
+    cc.export(EXPORTED, SIGNATURE)(getattr(module, EXPORTED).py_func)
+    cc.compile()
+    os.replace(work / target.name, target)
+
+
+def build(path: Path, name: str) -> Path:
+    """Compile the kernel with the generated module at ``path`` (:func:`kernel_source`) into a
+    file beside it, of the first allowed kind that builds: built in a temporary directory, then
+    renamed into place. Raises the last kind's error when none builds."""
     folder = path.parent
-    target = extension_path(folder, name)
-    with tempfile.TemporaryDirectory(dir=folder, prefix=f".{name}_aot.") as work:
-        source = Path(work) / f"{name}_with_kernel.py"
-        source.write_text(kernel_source(path.read_text()))
-        module = load_module(source, f"biped_opt_ahead_{name}")
-        cc = CC(target.name.split(".")[0])
-        cc.output_dir = work
-        cc.verbose = False
-        cc.export(EXPORTED, SIGNATURE)(getattr(module, EXPORTED).py_func)
-        cc.compile()
-        made = Path(work) / target.name
-        os.replace(made, target)
-    return target
+    allowed = kinds() or KINDS
+    for k, kind in enumerate(allowed):
+        target = _PATHS[kind](folder, name)
+        try:
+            with tempfile.TemporaryDirectory(dir=folder, prefix=f".{name}_aot.") as work:
+                source = Path(work) / f"{name}_with_kernel.py"
+                text = kernel_source(path.read_text())
+                if kind == "native":
+                    text += "\n\n" + native.wrapper_source()
+                source.write_text(text)
+                module = load_module(source, f"biped_opt_ahead_{name}_{kind}")
+                if kind == "native":
+                    native.build(target, module)
+                else:
+                    _build_extension(module, target, Path(work))
+            return target
+        except (OSError, ImportError, subprocess.SubprocessError, RuntimeError):
+            if k == len(allowed) - 1:
+                raise
+    raise AssertionError("unreachable")
 
 
 def _compiler() -> bool:
-    """A C compiler to link the extension with (numba.pycc calls the platform's)."""
-    return shutil.which("cc") is not None or shutil.which("gcc") is not None
+    """A C compiler to link with (both kinds call the platform's)."""
+    return native.compiler() is not None
 
 
 def _lock(folder: Path, name: str) -> Path:
@@ -170,15 +241,15 @@ def _take_lock(lock: Path) -> bool:
 
 def _claim(folder: Path, name: str) -> Path | None:
     """The build lock of module ``name``, taken; None when builds are off, no C compiler is
-    there, the extension exists, or another build holds the lock."""
-    if not enabled() or not _compiler() or extension_path(folder, name).is_file():
+    there, a kernel is built, or another build holds the lock."""
+    if not enabled() or not _compiler() or built(folder, name):
         return None
     lock = _lock(folder, name)
     return lock if _take_lock(lock) else None
 
 
 def start(path: Path, module_name: str, name: str) -> subprocess.Popen | None:
-    """Build the extension of the module at ``path`` (imported as ``module_name``) in a detached
+    """Build the kernel of the module at ``path`` (imported as ``module_name``) in a detached
     process, unless :func:`_claim` says no."""
     lock = _claim(path.parent, name)
     if lock is None:
@@ -221,12 +292,12 @@ def build_once(path: Path, name: str, held: list[Path] | None = None) -> Path | 
 
 
 def wait_built(folder: Path, name: str, timeout: float) -> bool:
-    """Wait until the extension of ``name`` is there (True), no build of it is under way any
+    """Wait until a kernel of module ``name`` is there (True), no build of it is under way any
     more, or ``timeout`` [s] has passed (False)."""
     deadline = time.monotonic() + timeout
-    while not extension_path(folder, name).is_file():
+    while not built(folder, name):
         if not _lock(folder, name).exists() or time.monotonic() >= deadline:
-            return extension_path(folder, name).is_file()
+            return built(folder, name)
         time.sleep(0.2)
     return True
 

@@ -65,7 +65,7 @@ from biped_opt.codegen.abi import (
     SV_NSTATE,
     SV_WORKSPACE,
 )
-from biped_opt.codegen.status import EVENT_CONTACT, EVENT_TERMINAL, Status
+from biped_opt.codegen.status import EVENT_CONTACT, EVENT_TERMINAL, SEPARATION_TOL, Status
 
 #: the digest of the table (biped_opt.codegen.abi) this file's calls were written for: Numba's
 #: cache of this module is keyed on this file alone, so a change of the table must change it
@@ -211,8 +211,6 @@ SIMULTANEOUS_TOL = 1e-9
 REARM_TOL = 1e-10
 #: a constraint in the air more than this below its surface at an event is a violation
 VIOLATION_TOL = 1e-9
-#: a constraint separates after an impact when its velocity exceeds this
-SEPARATION_TOL = 1e-12
 
 # --- DOP853 step control ---
 _SAFETY = 0.9
@@ -785,11 +783,12 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
     d = n // 2
     workspace = sv[SV_WORKSPACE]
     # one allocation carved into views (a dozen small arrays cost more than a step)
-    buf = np.zeros(workspace + 13 * n + 6 * nlam + 3 * nguards + (2 * ncon + 1) * d)
+    # (the matrices apart: a reshaped view would call Numba's run-time reshape, which a
+    # kernel library loaded without Numba does not have, biped_opt.codegen.native)
+    buf = np.zeros(workspace + 6 * n + 6 * nlam + 3 * nguards)
     W = buf[:workspace]
     o = workspace
-    F = buf[o:o + 7 * n].reshape((7, n))
-    o += 7 * n
+    F = np.zeros((7, n))
     y = buf[o:o + n]
     f = buf[o + n:o + 2 * n]
     y_new = buf[o + 2 * n:o + 3 * n]
@@ -808,8 +807,8 @@ def simulate_maneuver(p, sv, code, s, u, cfg, samples, events, y_out, y0, mode0)
     gv_new = buf[o + nguards:o + 2 * nguards]
     probe = buf[o + 2 * nguards:o + 3 * nguards]
     o += 3 * nguards
-    Da = buf[o:o + ncon * d].reshape((ncon, d))  # the constraints' Jacobian, at events
-    Q = buf[o + ncon * d:o + (2 * ncon + 1) * d].reshape((ncon + 1, d))  # its rows, orthonormal
+    Da = np.zeros((ncon, d))  # the constraints' Jacobian, at events
+    Q = np.zeros((ncon + 1, d))  # its rows, orthonormal
     flags = np.zeros(2 * nguards, dtype=np.bool_)
     armed = flags[:nguards]
     flips = flags[nguards:]

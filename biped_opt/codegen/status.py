@@ -10,8 +10,12 @@ from __future__ import annotations
 
 import enum
 
-__all__ = ["EVENT_CONTACT", "EVENT_TERMINAL", "Status"]
+__all__ = ["EVENT_CONTACT", "EVENT_TERMINAL", "SEPARATION_TOL", "Status"]
 
+
+#: a constraint separates after an impact when its velocity exceeds this (the kernel's rule,
+#: which the derivatives follow: biped_opt.control.derivatives)
+SEPARATION_TOL = 1e-12
 
 #: kind of an event row: a contact event, or the terminal one (read by the compiled kernel)
 EVENT_CONTACT = 1

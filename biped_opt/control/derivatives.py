@@ -46,18 +46,20 @@ import math
 import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import numpy.typing as npt
-import sympy as sp
-from scipy.integrate import solve_ivp
 
+from biped_opt.codegen.status import SEPARATION_TOL
 from biped_opt.errors import InvalidInputError, SimulationError
 from biped_opt.simulation.compiled import CompiledSystem
 from biped_opt.simulation.contacts import DependentContactsError, rank, require_independent
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
 from biped_opt.simulation.trajectory import constraint_names
+
+if TYPE_CHECKING:  # (SymPy and SciPy's integrators load when a derivative is computed)
+    import sympy as sp
 
 __all__ = [
     "OutcomeGradient",
@@ -207,6 +209,8 @@ def _symbolic(compiled: CompiledSystem, maneuver: str) -> _Symbolic:
     key = (maneuver, tuple(sorted(compiled.parameters.items())))
     cache = _SYMBOLIC.setdefault(compiled, {})
     if key not in cache:
+        import sympy as sp
+
         derived = compiled.derived
         system = derived.system
         subs = {system.p[k]: v for k, v in compiled.parameters.items()}
@@ -278,8 +282,8 @@ class _Model:
         one compiled call.
         """
         out = np.empty_like(w)
-        kernel, sv = self.compiled.shared_kernel()
-        self.nfev += int(kernel.variational_field(
+        field, sv = self.compiled.kernel_entry("variational_field")
+        self.nfev += int(field(
             self.p, sv, mode, np.ascontiguousarray(w), self.u, self.du, _STEP, _STENCIL_STEPS,
             _STENCIL_WEIGHTS, out, self._lam))
         return out
@@ -357,8 +361,6 @@ class _Model:
         mode at once when gamma > 0), as a bit mask."""
         rates = np.empty(max(self.ncon, 1))
         self.mod.constraint_rates(self.p, np.ascontiguousarray(y_after), 0, rates)
-        from biped_opt.codegen.kernel import SEPARATION_TOL
-
         tol = float(SEPARATION_TOL)
         return sum(1 << j for j in range(self.ncon) if touchdown >> j & 1 and rates[j] > tol)
 
@@ -396,6 +398,8 @@ class _Branch:
 
         def rhs(_t: float, w: Array) -> Array:
             return mdl.variational_rhs(mode, w)
+
+        from scipy.integrate import solve_ivp
 
         sol = solve_ivp(rhs, (st.t, t1), w0, method="DOP853", rtol=self.vopts.rtol,
                         atol=self.vopts.atol, events=events)

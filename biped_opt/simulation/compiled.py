@@ -98,9 +98,10 @@ def _import(name: str, path: Path) -> ModuleType:
 
 
 #: the generated module's constants a start from the index needs before (or without) the
-#: module itself: array layouts, each maneuver's initial mode, the system's table
-_AHEAD_CONSTANTS = ("NSTATE", "NCON", "SAMPLE_WIDTH", "EVENT_WIDTH", "INITIAL_MODE",
-                    "SYSTEM_TABLE")
+#: module itself: array layouts, each maneuver's initial and final modes and when its terminal
+#: guard is armed, the system's table
+_AHEAD_CONSTANTS = ("NSTATE", "NCON", "NDOF", "SAMPLE_WIDTH", "EVENT_WIDTH", "INITIAL_MODE",
+                    "FINAL_MODE", "TERM_AFTER_TOUCHDOWN", "SYSTEM_TABLE")
 #: the y0 argument of the kernel that starts from the maneuver's own initial state at s
 _FROM_S = np.empty(0)
 
@@ -122,17 +123,22 @@ def _prepare_source(text: str) -> str:
 class _AheadModule:
     """A generated module seen through its ahead-of-time kernel (:mod:`biped_opt.codegen.aot`):
     the constants the index keeps, ``prepare_parameters`` read from the module's text, and
-    ``simulate_maneuver`` from the extension with the system vector it takes (``sv``: the
-    table, no addresses; see biped_opt.codegen.abi). Any other attribute imports the module
-    itself (and with it Numba) when first read."""
+    ``entries``, the kernel's entry points it has (biped_opt.codegen.abi.ENTRIES: all of them
+    from a kernel library, ``simulate_maneuver`` from an extension) with the system vector they
+    take (``sv``: the table, no addresses; see biped_opt.codegen.abi). Any other attribute
+    imports the module itself (and with it Numba) when first read."""
 
     def __init__(self, name: str, path: Path, constants: Mapping[str, Any],
-                 extension: ModuleType) -> None:
+                 kernel: Any) -> None:
         self._name, self._path = name, path
         for key, value in constants.items():
             setattr(self, key, np.array(value, dtype=np.int64) if isinstance(value, list)
                     else value)
-        self.simulate_maneuver = extension.simulate_maneuver
+        self.entries = {entry: getattr(kernel, entry) for entry in abi.ENTRIES
+                        if callable(getattr(kernel, entry, None))}
+        for call in abi.MODULE_CALLS:  # (a library has them: found directly)
+            if callable(getattr(kernel, call, None)):
+                setattr(self, call, getattr(kernel, call))
         self.sv = np.concatenate((np.zeros(abi.NFUNC, dtype=np.int64),
                                   np.asarray(constants["SYSTEM_TABLE"], dtype=np.int64)))
         namespace: dict[str, Any] = {"np": np, "math": math}
@@ -256,9 +262,9 @@ def _read_entry(entry: Path | None, *, ahead: bool = False
             if ahead and name not in _LOADED and "constants" in facts:
                 # (a module this process imported already is used as it is)
                 if name not in _AHEAD:
-                    extension = aot.load(cache_dir(), name)
-                    if extension is not None:
-                        _AHEAD[name] = _AheadModule(name, path, facts["constants"], extension)
+                    ahead_kernel = aot.load(cache_dir(), name)
+                    if ahead_kernel is not None:
+                        _AHEAD[name] = _AheadModule(name, path, facts["constants"], ahead_kernel)
                 if name in _AHEAD:
                     return facts, _AHEAD[name]
                 aot.start(path, _MODULE_PREFIX + name, name)
@@ -570,6 +576,16 @@ class CompiledSystem:
             self._shared = (kernel, sv)
         return self._shared
 
+    def kernel_entry(self, entry: str) -> tuple[Any, npt.NDArray[np.int64]]:
+        """An entry point of the kernel (biped_opt.codegen.abi.ENTRIES) and the system vector
+        to call it with: the one compiled ahead with this system's module when the start found
+        it (biped_opt.codegen.aot), else the shared kernel's (:meth:`shared_kernel`)."""
+        m = self.module
+        if isinstance(m, _AheadModule) and entry in m.entries:
+            return m.entries[entry], m.sv
+        kernel, sv = self.shared_kernel()
+        return getattr(kernel, entry), sv
+
     def simulate(self, maneuver: str, s: float, inputs: Any = None, *,
                  options: SimulatorOptions = DEFAULT_OPTIONS,
                  sample_dt: float | None = None) -> Trajectory:
@@ -604,11 +620,7 @@ class CompiledSystem:
         m = self.module
         events = np.empty((options.max_events + 1, m.EVENT_WIDTH))
         y_out = np.empty(m.NSTATE)
-        if isinstance(m, _AheadModule):
-            run, sv = m.simulate_maneuver, m.sv
-        else:
-            kernel, sv = self.shared_kernel()
-            run = kernel.simulate_maneuver
+        run, sv = self.kernel_entry("simulate_maneuver")
         status, t_f, mode_f, n_ev, n_s, nfev, nsteps, nrej, outcome = run(
             self.prepared, sv, code, s, u, cfg, self._no_samples if samples is None else samples,
             events, y_out, y0, mode0)
@@ -675,8 +687,8 @@ class CompiledSystem:
         y_out = np.zeros((ss.size, m.NSTATE))
         outcome = np.zeros(ss.size)
         info = np.zeros((ss.size, 8))
-        kernel, sv = self.shared_kernel()
-        run_batch(kernel.simulate_batch_kernel, ss.size,
+        batch, sv = self.kernel_entry("simulate_batch_kernel")
+        run_batch(batch, ss.size,
                   (self.prepared, sv, code, ss, us, self._cfg(options, 0.0), events, y_out, outcome,
                    info))
         return BatchResult.from_kernel(self._name, maneuver, ss, us, info, outcome, y_out, events,
