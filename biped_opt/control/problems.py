@@ -33,17 +33,19 @@ import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
-import sympy as sp
 
 from biped_opt.errors import InvalidParameterError, quoted
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
 from biped_opt.system_spec import FileSpec, parse_file_spec
-from biped_opt.systems.description import System
-from biped_opt.systems.files import load_system
+
+if TYPE_CHECKING:  # (SymPy and the descriptions load when a problem is made, not imported)
+    import sympy as sp
+
+    from biped_opt.systems.description import System
 
 __all__ = ["Problem", "load_problem", "get_problem", "describe", "input_modes", "KEYS"]
 
@@ -276,6 +278,9 @@ def describe(system: System | str) -> System:
     """:func:`load_system`, remembered per library name or file spec until a file it read (the
     system file or a module beside it) changes: building a description costs SymPy time that
     problems on the same system need not repeat."""
+    from biped_opt.systems.description import System
+    from biped_opt.systems.files import load_system
+
     if isinstance(system, System):
         return system
     text = str(system)

@@ -40,14 +40,12 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import minimize, minimize_scalar
 
 from biped_opt.control.problems import Problem, input_modes
 from biped_opt.errors import InvalidInputError
 from biped_opt.piecewise import locate_switch
 from biped_opt.simulation.compiled import CompiledSystem, compiled_with
-from biped_opt.simulation.trajectory import Status, Trajectory
-from biped_opt.systems.derive import mode_name
+from biped_opt.simulation.trajectory import Status, Trajectory, mode_name
 
 __all__ = ["Candidate", "OptimalResult", "SystemOptimalResult", "optimal_policy",
            "optimal_sweep", "compiled_for", "branch_of", "GRID_AXIS"]
@@ -181,6 +179,8 @@ def refine_minimum(
     best_u, best_c, nit = float(us[k]), float(costs[k]), 0
     step = POLISH_STEP * (hi_b - lo_b)
     if b > a:
+        from scipy.optimize import minimize_scalar  # (a third of a second: when used)
+
         res = minimize_scalar(lambda u: run(u)[0], bounds=(a, b), method="bounded",
                               options={"xatol": xatol})
         nit = int(res.nit)
@@ -437,6 +437,8 @@ def _refine_joint(problem: Problem, run: _Runner, acting: list[str], start: Arra
             up[i], down[i] = min(x[i] + h, hi), max(x[i] - h, lo)
             g[i] = (cost(up) - cost(down)) / (up[i] - down[i])
         return g
+
+    from scipy.optimize import minimize  # (a third of a second: when used)
 
     res = minimize(cost, start[cols], jac=grad, method="L-BFGS-B", bounds=bounds,
                    options={"ftol": 1e-15, "gtol": 1e-11, "maxiter": 200})

@@ -35,7 +35,7 @@ import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -45,7 +45,9 @@ from biped_opt.control.problems import get_problem as declared_problem
 from biped_opt.errors import InvalidInputError, InvalidParameterError
 from biped_opt.paper.biped import BIPED, INPUT_NAMES, BipedParams, Maneuver, parse_maneuver
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
-from biped_opt.systems.description import System
+
+if TYPE_CHECKING:
+    from biped_opt.systems.description import System
 
 __all__ = [
     "LIBRARY_NAMES",

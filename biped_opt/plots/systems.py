@@ -74,7 +74,7 @@ from biped_opt.paper.figures import (  # noqa: E402
 )
 from biped_opt.plots.figures import MODE_COLOURS, _finish  # noqa: E402
 from biped_opt.simulation.compiled import CompiledSystem  # noqa: E402
-from biped_opt.systems.derive import mode_name  # noqa: E402
+from biped_opt.simulation.trajectory import mode_name  # noqa: E402
 
 __all__ = [
     "Mark",

@@ -68,7 +68,7 @@ from biped_opt.record.reader import (
     recorded_system,
     undecodable_note,
 )
-from biped_opt.systems.derive import mode_name
+from biped_opt.simulation.trajectory import mode_name
 
 __all__ = [
     "ReportError",

@@ -16,6 +16,7 @@ values carry both the mask and the set of names.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -24,13 +25,21 @@ import numpy.typing as npt
 
 from biped_opt.codegen.status import EVENT_TERMINAL, Status
 
-__all__ = ["BatchResult", "Event", "Segment", "Status", "Trajectory", "constraint_names"]
+__all__ = ["BatchResult", "Event", "Segment", "Status", "Trajectory", "constraint_names",
+           "mode_name"]
 
 Array = npt.NDArray[np.float64]
 
 _STATUSES = tuple(Status)
 #: statuses whose run ends with a terminal event row after the contact events
 _TERMINAL_ROW = (Status.OK, Status.APEX_IN_CONTACT)
+
+
+def mode_name(mode: int, constraints: Sequence[str]) -> str:
+    """A contact mode (bit j: constraint j active) by its constraints' names joined with "+"
+    (``left+right``); the mode with none is ``air``."""
+    names = [c for j, c in enumerate(constraints) if mode >> j & 1]
+    return "+".join(names) if names else "air"
 
 
 def constraint_names(mask: int, names: tuple[str, ...]) -> tuple[str, ...]:

@@ -14,7 +14,7 @@ reference the compiled kernels are checked against, not the fast path.
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -26,7 +26,7 @@ from biped_opt.systems.description import ManeuverDescription, System, SystemDes
 from biped_opt.systems.mechanics import MechanicalSystem
 
 __all__ = ["DerivedSystem", "DerivedManeuver", "DerivedBody", "NumericSystem", "derive",
-           "mode_mask", "mode_name"]
+           "mode_mask"]
 
 Array = npt.NDArray[np.float64]
 
@@ -187,13 +187,6 @@ def mode_mask(system: System, names: frozenset[str] | set[str] | tuple[str, ...]
                 f"(constraints: {', '.join(order) or 'none'})")
         mask |= 1 << order.index(name)
     return mask
-
-
-def mode_name(mode: int, constraints: Sequence[str]) -> str:
-    """A contact mode (bit j: constraint j active) by its constraints' names joined with "+"
-    (``left+right``); the mode with none is ``air``."""
-    names = [c for j, c in enumerate(constraints) if mode >> j & 1]
-    return "+".join(names) if names else "air"
 
 
 def _normaliser(system: System) -> Callable[[Any], Any]:

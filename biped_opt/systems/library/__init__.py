@@ -7,13 +7,21 @@ from collections.abc import Callable
 from biped_opt.systems.description import System
 from biped_opt.systems.library.biped import biped
 from biped_opt.systems.library.chain import chain
-from biped_opt.systems.library.quadruped import quadruped
 from biped_opt.systems.library.robots import ROBOT_SIZES, ROBOTS
 from biped_opt.systems.library.rocking_bar import rocking_bar
 from biped_opt.systems.library.walker import walker
 
 __all__ = ["LIBRARY", "BY_NAME", "SIZES", "ROBOTS", "biped", "chain", "quadruped", "rocking_bar",
            "walker"]
+
+def quadruped() -> System:
+    """The quadruped (:mod:`biped_opt.systems.library.quadruped`), imported when first built:
+    its kinematics import ``sympy.physics`` (a tenth of a second), which a process that only
+    lists or loads other systems should not pay."""
+    from biped_opt.systems.library.quadruped import quadruped as build
+
+    return build()
+
 
 #: name -> factory of the library's systems (the walker with its defaults: n = 3, coupled; the
 #: chain with one link per leg)
