@@ -12,7 +12,12 @@ and last the 2001-point touchdown sweep, whole process, against the independent 
 (``bench/solve_ivp_reference.py``, ``solve_ivp`` DOP853 per trajectory) timed in the same run on
 a sample of the same angles and scaled to 2001: the ratio a user of the command line sees.
 
-    python -m bench.cli_start [--runs 3] [--reference-sample 41]
+The commands that read a file get one written first, into a temporary directory: a study of one
+parameter point, and a recording of an 11-point sweep (made through the nodes by ``biped-opt
+record``) for ``report``. ``gradients --quick`` is not trivial (tens of seconds per problem); it
+runs with ``--gradients`` only, once, and its start-up is then the one figure to read.
+
+    python -m bench.cli_start [--runs 3] [--reference-sample 41] [--gradients]
 """
 
 from __future__ import annotations
@@ -21,7 +26,9 @@ import argparse
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -34,6 +41,24 @@ COMMANDS: dict[str, list[str]] = {
     "simulate --system": ["simulate", "--system", "rocking_bar", "--maneuver", "drop",
                           "--s", "0.1"],
 }
+#: (name, arguments with {dir} for the temporary directory): commands that read a file the
+#: bench writes first (see :func:`_files`)
+FILE_COMMANDS: dict[str, list[str]] = {
+    "study (1 point)": ["study", "{dir}/one.yaml", "--out", "{dir}/one.csv", "--no-progress"],
+    "report": ["report", "--out", "{dir}/report", "{dir}/sweep.mcap"],
+    "pieces": ["pieces", "--legs", "2", "--rounds", "1", "--samples", "20", "--no-derivative"],
+}
+GRADIENTS = ["gradients", "--quick", "--problem", "touchdown"]
+#: one parameter point, the fixed-input tables and the optimal ones on small grids
+STUDY = """system: biped
+maneuver: touchdown
+inputs: {u1: 2.0, u2: 0.5}
+problem: touchdown
+grid: {k: [25]}
+s_range: [-0.05, 0.05]
+num: 21
+num_optimal: 5
+"""
 SWEEP_2001 = ["sweep", "--maneuver", "touchdown", "--theta0-min", "-0.25", "--theta0-max",
               "0.25", "--num", "2001", "--no-progress"]
 
@@ -81,16 +106,38 @@ def reference_per_trajectory(sample: int) -> float:
     return (time.perf_counter() - start) / sample
 
 
+def _files(folder: Path) -> None:
+    """The study file and the recording the file commands read (the recording through the
+    nodes, on this machine's DDS domain)."""
+    (folder / "one.yaml").write_text(STUDY)
+    subprocess.run([sys.executable, "-m", "biped_opt.cli.main", "record", "--maneuver",
+                    "touchdown", "--theta0-min", "-0.1", "--theta0-max", "0.1", "--num", "11",
+                    "--out", str(folder / "sweep.mcap")], check=True, stdout=subprocess.DEVNULL,
+                   stderr=subprocess.DEVNULL, timeout=600)
+
+
+def _row(name: str, command: list[str], runs: int) -> None:
+    w, c = whole(command, runs), compute(command)
+    print(f"{name:20s} {w:10.3f} {c:12.4f} {w - c:13.3f}", flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=3, help="processes per command (median)")
     ap.add_argument("--reference-sample", type=int, default=41,
                     help="angles the SciPy reference is timed on")
+    ap.add_argument("--gradients", action="store_true",
+                    help="also gradients --quick on one problem (tens of seconds)")
     args = ap.parse_args(argv)
     print(f"{'command':20s} {'whole [s]':>10s} {'compute [s]':>12s} {'start-up [s]':>13s}")
     for name, command in COMMANDS.items():
-        w, c = whole(command, args.runs), compute(command)
-        print(f"{name:20s} {w:10.3f} {c:12.4f} {w - c:13.3f}", flush=True)
+        _row(name, command, args.runs)
+    with tempfile.TemporaryDirectory() as work:
+        _files(Path(work))
+        for name, command in FILE_COMMANDS.items():
+            _row(name, [a.format(dir=work) for a in command], args.runs)
+    if args.gradients:
+        _row("gradients --quick", GRADIENTS, 1)
     w = whole(SWEEP_2001, args.runs)
     ref = reference_per_trajectory(args.reference_sample)
     print(f"\n2001-point touchdown sweep: whole process {w:.3f} s; SciPy reference "
