@@ -23,6 +23,7 @@ runs with ``--gradients`` only, once, and its start-up is then the one figure to
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import subprocess
 import sys
@@ -64,10 +65,12 @@ SWEEP_2001 = ["sweep", "--maneuver", "touchdown", "--theta0-min", "-0.25", "--th
 
 #: run inside one process: the command twice, the second timed (the first pays start-up)
 _TWICE = """
-import contextlib, io, sys, time
+import contextlib, io, os, pathlib, sys, time
 from biped_opt.cli.main import main
 argv = sys.argv[1:]
 for k in range(2):
+    for fresh in filter(None, os.environ.get("BENCH_FRESH", "").split(os.pathsep)):
+        pathlib.Path(fresh).unlink(missing_ok=True)
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
         start = time.perf_counter()
         main(argv)
@@ -76,10 +79,13 @@ print(took)
 """
 
 
-def whole(argv: list[str], runs: int) -> float:
-    """Median wall time of ``runs`` processes of the command (one more first, not counted)."""
+def whole(argv: list[str], runs: int, fresh: tuple[Path, ...] = ()) -> float:
+    """Median wall time of ``runs`` processes of the command (one more first, not counted);
+    the files ``fresh`` are removed before each (a study's table: else it is continued)."""
     times = []
     for k in range(runs + 1):
+        for path in fresh:
+            path.unlink(missing_ok=True)
         start = time.perf_counter()
         subprocess.run([sys.executable, "-m", "biped_opt.cli.main", *argv], check=True,
                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -88,9 +94,10 @@ def whole(argv: list[str], runs: int) -> float:
     return statistics.median(times)
 
 
-def compute(argv: list[str]) -> float:
+def compute(argv: list[str], fresh: tuple[Path, ...] = ()) -> float:
+    env = {**os.environ, "BENCH_FRESH": os.pathsep.join(map(str, fresh))}
     out = subprocess.run([sys.executable, "-c", _TWICE, *argv], check=True,
-                         capture_output=True, text=True).stdout
+                         capture_output=True, text=True, env=env).stdout
     return float(out.strip().splitlines()[-1])
 
 
@@ -116,8 +123,8 @@ def _files(folder: Path) -> None:
                    stderr=subprocess.DEVNULL, timeout=600)
 
 
-def _row(name: str, command: list[str], runs: int) -> None:
-    w, c = whole(command, runs), compute(command)
+def _row(name: str, command: list[str], runs: int, fresh: tuple[Path, ...] = ()) -> None:
+    w, c = whole(command, runs, fresh), compute(command, fresh)
     print(f"{name:20s} {w:10.3f} {c:12.4f} {w - c:13.3f}", flush=True)
 
 
@@ -135,7 +142,8 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as work:
         _files(Path(work))
         for name, command in FILE_COMMANDS.items():
-            _row(name, [a.format(dir=work) for a in command], args.runs)
+            fresh = (Path(work) / "one.csv",) if name.startswith("study") else ()
+            _row(name, [a.format(dir=work) for a in command], args.runs, fresh)
     if args.gradients:
         _row("gradients --quick", GRADIENTS, 1)
     w = whole(SWEEP_2001, args.runs)

@@ -68,7 +68,6 @@ from biped_opt.errors import InvalidInputError, SimulationError
 from biped_opt.piecewise import locate_switch, one_sided
 from biped_opt.simulation.compiled import CompiledSystem
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
-from biped_opt.systems.library.walker import walker
 
 __all__ = ["Round", "PieceCount", "LinearPiece", "offsets_walker", "simultaneous_rounds",
            "count_pieces", "derivative_pieces", "leg_inputs", "MAX_LEGS"]
@@ -176,7 +175,8 @@ def offsets_walker(n: int) -> CompiledSystem:
     with _LOCK:
         found = _SYSTEMS.get(n)
     if found is None:
-        found = CompiledSystem(walker(n, "coupled", offsets=True))
+        # (by its library name: a later process starts it from the cache's index, SymPy-free)
+        found = CompiledSystem(f"walker{n}_coupled_offsets")
         with _LOCK:
             _SYSTEMS[n] = found
     return found

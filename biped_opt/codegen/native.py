@@ -172,52 +172,71 @@ def _argument_types(kinds: str, result: str) -> list[Any]:
     return out
 
 
+def _address(a: np.ndarray) -> int:
+    """The address of an array's data: none for an empty one (nothing of it is read), through a
+    writable array's buffer (a third of the time of ``a.ctypes.data``, which a call of a dozen
+    arrays feels), else the slow way (a read-only array)."""
+    if not a.size:
+        return 0
+    if a.flags.writeable:
+        return ctypes.addressof(ctypes.c_byte.from_buffer(a))  # type: ignore[arg-type]
+    return int(a.ctypes.data)
+
+
+def _refuse(name: str, k: int, kind: str, a: Any) -> None:
+    dtype, ndim = _ARRAY_KINDS[kind]
+    raise TypeError(f"{name}: argument {k} must be a C-contiguous {ndim}-D {dtype} array, got "
+                    f"{getattr(a, 'dtype', type(a))!r}"
+                    + (f" of {a.ndim} dimensions" if isinstance(a, np.ndarray) else "")
+                    + ("" if not isinstance(a, np.ndarray) or a.flags.c_contiguous
+                       else " (not C-contiguous)"))
+
+
 def _caller(lib: ctypes.CDLL, name: str, errors: Callable[[], int]) -> Callable[..., Any]:
-    """A function that calls entry ``name`` of ``lib`` as the Numba entry point is called."""
+    """A function that calls entry ``name`` of ``lib`` as the Numba entry point is called:
+    written out for its arguments (a call of a single trajectory is ~10 us of work, and a loop
+    over a dozen arguments cost half as much again). Each array is checked (an address read
+    with the wrong layout reads astray) and passed as its address and shape; a scalar goes to
+    ctypes, which checks it (a float for an int64 is a TypeError)."""
     kinds, result = EXPORTS[name]
     fn = getattr(lib, symbol(name))
     fn.argtypes = _argument_types(kinds, result)
     fn.restype = None if len(result) > 1 or result == "v" else _C_SCALAR[result]
-    arrays = [(k, *_ARRAY_KINDS[kind]) for k, kind in enumerate(kinds) if kind in _ARRAY_KINDS]
-    scalars = [(k, int if kind == "i" else float) for k, kind in enumerate(kinds)
-               if kind not in _ARRAY_KINDS]
-    convert = [int if kind == "i" else float for kind in result] if len(result) > 1 else None
+    params = [f"a{k}" for k in range(len(kinds))]
+    body, passed = [], []
+    for k, kind in enumerate(kinds):
+        a = f"a{k}"
+        if kind not in _ARRAY_KINDS:
+            passed.append(a)
+            continue
+        ndim = _ARRAY_KINDS[kind][1]
+        body += [f"    if not (type({a}) is ndarray and ({a}.dtype is D{kind} or "
+                 f"{a}.dtype == D{kind}) and {a}.ndim == {ndim} and {a}.flags.c_contiguous):",
+                 f"        refuse(NAME, {k}, {kind!r}, {a})"]
+        passed += [f"address({a})", *(f"{a}.shape[{d}]" for d in range(ndim))]
+    if len(result) > 1:
+        body.append(f"    res = Vector{len(result)}()")
+        passed.append("res")
+    body += ["    before = errors()", f"    value = fn({', '.join(passed)})",
+             "    if errors() != before:", "        failed(NAME)"]
+    if len(result) > 1:
+        body.append("    return (" + ", ".join(f"{'int' if r == 'i' else 'float'}(res[{j}])"
+                                             for j, r in enumerate(result)) + ",)")
+    else:
+        body.append("    return value")
+    source = "\n".join([f"def {name}({', '.join(params)}):", *body])
+    namespace: dict[str, Any] = {
+        "ndarray": np.ndarray, "address": _address, "errors": errors, "fn": fn, "NAME": name,
+        "refuse": _refuse, "failed": _failed,
+        **{f"D{kind}": dtype for kind, (dtype, _n) in _ARRAY_KINDS.items()},
+        **({f"Vector{len(result)}": ctypes.c_double * len(result)} if len(result) > 1 else {})}
+    exec(compile(source, f"<biped_opt kernel library: {name}>", "exec"), namespace)
+    return namespace[name]
 
-    def call(*args: Any) -> Any:
-        if len(args) != len(kinds):
-            raise TypeError(f"{name} takes {len(kinds)} arguments, got {len(args)}")
-        flat: list[Any] = list(args)
-        for k, dtype, ndim in arrays:  # (an address read with the wrong layout reads astray)
-            a = args[k]
-            if not (type(a) is np.ndarray and a.dtype == dtype and a.ndim == ndim
-                    and a.flags.c_contiguous):
-                raise TypeError(f"{name}: argument {k} must be a C-contiguous {ndim}-D "
-                                f"{dtype} array, got {getattr(a, 'dtype', type(a))!r}")
-        for k, to in scalars:
-            flat[k] = to(args[k])
-        expanded: list[Any] = []
-        arrays_at = {k for k, _d, _n in arrays}
-        for k, value in enumerate(flat):
-            if k in arrays_at:
-                expanded.append(value.ctypes.data)
-                expanded.extend(value.shape)
-            else:
-                expanded.append(value)
-        res = None
-        if convert is not None:
-            res = np.empty(len(convert))
-            expanded.append(res.ctypes.data)
-        before = errors()
-        value = fn(*expanded)
-        if errors() != before:
-            raise NativeKernelError(f"{name}: the compiled kernel failed inside (an allocation "
-                                    "the machine could not give?); nothing it wrote is a result")
-        if res is not None and convert is not None:
-            return tuple(to(v) for to, v in zip(convert, res.tolist()))
-        return value
 
-    call.__name__ = name
-    return call
+def _failed(name: str) -> None:
+    raise NativeKernelError(f"{name}: the compiled kernel failed inside (an allocation the "
+                            "machine could not give?); nothing it wrote is a result")
 
 
 class NativeKernel:
@@ -227,10 +246,13 @@ class NativeKernel:
     def __init__(self, path: Path) -> None:
         self.path = path
         self._lib = ctypes.CDLL(str(path))
-        count = self._lib.biped_opt_native_errors
-        count.argtypes, count.restype = [], ctypes.c_long
+        count = ctypes.c_long.in_dll(self._lib, "biped_opt_native_error_count")
+
+        def errors() -> int:  # (read in place: cheaper than a call, twice per call)
+            return count.value
+
         for name in EXPORTS:
-            setattr(self, name, _caller(self._lib, name, count))
+            setattr(self, name, _caller(self._lib, name, errors))
 
 
 def load(path: Path) -> NativeKernel | None:

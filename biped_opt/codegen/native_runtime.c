@@ -41,12 +41,13 @@ extern void *PyExc_RuntimeError;
 extern void PyErr_SetString(void *type, const char *message);
 extern void *PyErr_Occurred(void);
 
-static atomic_long errors = 0;
+/* how many calls took the error path (read in place by the caller, before and after a call) */
+atomic_long biped_opt_native_error_count = 0;
 
-long biped_opt_native_errors(void) { return atomic_load(&errors); }
+long biped_opt_native_errors(void) { return atomic_load(&biped_opt_native_error_count); }
 
 static void count_error(void) {
-    atomic_fetch_add(&errors, 1);
+    atomic_fetch_add(&biped_opt_native_error_count, 1);
     if (PyErr_Occurred() == NULL)
         PyErr_SetString(PyExc_RuntimeError,
                         "biped_opt: the compiled kernel failed (see biped_opt_native_errors)");

@@ -30,12 +30,14 @@ from biped_opt.systems.library import BY_NAME, LIBRARY, ROBOTS, SIZES, chain, wa
 
 __all__ = ["load_system", "library_size", "WALKER", "CHAIN", "LIBRARY_PATTERNS"]
 
-#: library names of walkers with n legs and an input law: walker4, walker3_decoupled
-WALKER = re.compile(r"^walker(?P<n>[1-9][0-9]?)(?:_(?P<law>coupled|decoupled))?$")
+#: library names of walkers with n legs and an input law, and with the feet's offsets as
+#: parameters (the pieces study's variant): walker4, walker3_decoupled, walker2_coupled_offsets
+WALKER = re.compile(
+    r"^walker(?P<n>[1-9][0-9]?)(?:_(?P<law>coupled|decoupled))?(?P<offsets>_offsets)?$")
 #: library names of planar chains by their number of coordinates d = 3 + 2 segments: chain7
 CHAIN = re.compile(r"^chain(?P<d>5|7|9|11)$")
 #: the library's names beyond LIBRARY's, for messages
-LIBRARY_PATTERNS = ("walkerN[_coupled|_decoupled], chain5|7|9|11, quadruped, "
+LIBRARY_PATTERNS = ("walkerN[_coupled|_decoupled][_offsets], chain5|7|9|11, quadruped, "
                     + ", ".join(ROBOTS))
 
 
@@ -45,8 +47,8 @@ def library_size(name: str) -> tuple[int, int] | None:
     if name in SIZES:
         return SIZES[name]
     match = WALKER.match(name)
-    if match:
-        return int(match["n"]), 3 + 2 * int(match["n"])
+    if match:  # (the offsets variant has a clock coordinate too)
+        return int(match["n"]), 3 + 2 * int(match["n"]) + (match["offsets"] is not None)
     match = CHAIN.match(name)
     if match:
         return 2, int(match["d"])
@@ -64,7 +66,8 @@ def load_system(spec: str | Path | System) -> System:
         return BY_NAME[text]()
     match = WALKER.match(text)
     if match:
-        return walker(int(match["n"]), match["law"] or "coupled")
+        return walker(int(match["n"]), match["law"] or "coupled",
+                      offsets=match["offsets"] is not None)
     match = CHAIN.match(text)
     if match:
         return chain((int(match["d"]) - 3) // 2)

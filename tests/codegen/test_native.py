@@ -134,7 +134,7 @@ def test_arguments_it_would_read_astray_are_refused(libs):
         lib.outcome_value(0, c.prepared, y, 0)
     with pytest.raises(TypeError, match="argument 1 must be a C-contiguous 1-D float64"):
         lib.outcome_value(0, c.prepared.astype(np.float32), np.zeros(n), 0)
-    with pytest.raises(TypeError, match="takes 4 arguments, got 3"):
+    with pytest.raises(TypeError, match="missing 1 required positional argument"):
         lib.outcome_value(0, c.prepared, np.zeros(n))
     with pytest.raises(TypeError, match="argument 1 must be a C-contiguous 1-D int64"):
         lib.simulate_maneuver(c.prepared, _table(module).astype(np.float64), 0, 0.0,
