@@ -21,9 +21,10 @@ equations and the optimiser's single trajectories are there too: every command s
 Numba. No fast-math in either compile: the library's trajectories are bit for bit those of the
 shared kernel (``tests/codegen/test_native.py``).
 
-Every argument is checked before the call (dtype, dimensions, C order; an array is passed by
-its address, so a wrong one would be read out of bounds), and a call after which the runtime
-counted an error raises :class:`NativeKernelError` instead of returning what it wrote.
+Every argument is checked before the call (dtype and dimensions: an array is passed by its
+address, so a wrong one would be read out of bounds; a strided one goes through a contiguous
+copy, copied back after the call), and a call after which the runtime counted an error raises
+:class:`NativeKernelError` instead of returning what it wrote.
 """
 
 from __future__ import annotations
@@ -185,25 +186,34 @@ def _address(a: np.ndarray) -> int:
 
 def _refuse(name: str, k: int, kind: str, a: Any) -> None:
     dtype, ndim = _ARRAY_KINDS[kind]
-    raise TypeError(f"{name}: argument {k} must be a C-contiguous {ndim}-D {dtype} array, got "
+    raise TypeError(f"{name}: argument {k} must be a {ndim}-D {dtype} array, got "
                     f"{getattr(a, 'dtype', type(a))!r}"
-                    + (f" of {a.ndim} dimensions" if isinstance(a, np.ndarray) else "")
-                    + ("" if not isinstance(a, np.ndarray) or a.flags.c_contiguous
-                       else " (not C-contiguous)"))
+                    + (f" of {a.ndim} dimensions" if isinstance(a, np.ndarray) else ""))
+
+
+def _contiguous(a: np.ndarray, back: list | None) -> tuple[np.ndarray, list | None]:
+    """A C-contiguous copy of the strided array ``a`` for a call, and the list of what to copy
+    back after it (the copy, into ``a``: the function may write into its argument, as the Numba
+    one writes into the strided array itself)."""
+    copy = np.ascontiguousarray(a)
+    if a.flags.writeable:
+        back = [*(back or []), (a, copy)]
+    return copy, back
 
 
 def _caller(lib: ctypes.CDLL, name: str, errors: Callable[[], int]) -> Callable[..., Any]:
     """A function that calls entry ``name`` of ``lib`` as the Numba entry point is called:
     written out for its arguments (a call of a single trajectory is ~10 us of work, and a loop
     over a dozen arguments cost half as much again). Each array is checked (an address read
-    with the wrong layout reads astray) and passed as its address and shape; a scalar goes to
-    ctypes, which checks it (a float for an int64 is a TypeError)."""
+    with the wrong type reads astray) and passed as its address and shape, a strided one
+    through a contiguous copy that is copied back after the call; a scalar goes to ctypes,
+    which checks it (a float for an int64 is a TypeError)."""
     kinds, result = EXPORTS[name]
     fn = getattr(lib, symbol(name))
     fn.argtypes = _argument_types(kinds, result)
     fn.restype = None if len(result) > 1 or result == "v" else _C_SCALAR[result]
     params = [f"a{k}" for k in range(len(kinds))]
-    body, passed = [], []
+    body, passed = ["    back = None"], []
     for k, kind in enumerate(kinds):
         a = f"a{k}"
         if kind not in _ARRAY_KINDS:
@@ -211,14 +221,20 @@ def _caller(lib: ctypes.CDLL, name: str, errors: Callable[[], int]) -> Callable[
             continue
         ndim = _ARRAY_KINDS[kind][1]
         body += [f"    if not (type({a}) is ndarray and ({a}.dtype is D{kind} or "
-                 f"{a}.dtype == D{kind}) and {a}.ndim == {ndim} and {a}.flags.c_contiguous):",
-                 f"        refuse(NAME, {k}, {kind!r}, {a})"]
+                 f"{a}.dtype == D{kind}) and {a}.ndim == {ndim}):",
+                 f"        refuse(NAME, {k}, {kind!r}, {a})",
+                 f"    if not {a}.flags.c_contiguous:",
+                 f"        {a}, back = contiguous({a}, back)"]
         passed += [f"address({a})", *(f"{a}.shape[{d}]" for d in range(ndim))]
     if len(result) > 1:
         body.append(f"    res = Vector{len(result)}()")
         passed.append("res")
-    body += ["    before = errors()", f"    value = fn({', '.join(passed)})",
-             "    if errors() != before:", "        failed(NAME)"]
+    body += ["    before = errors()", "    try:", f"        value = fn({', '.join(passed)})",
+             "    except ArgumentError as exc:  # (a scalar of the wrong type)",
+             "        raise TypeError(f'{NAME}: {exc}') from None",
+             "    if errors() != before:", "        failed(NAME)",
+             "    if back:", "        for original, copy in back:",
+             "            copyto(original, copy)"]
     if len(result) > 1:
         body.append("    return (" + ", ".join(f"{'int' if r == 'i' else 'float'}(res[{j}])"
                                              for j, r in enumerate(result)) + ",)")
@@ -227,7 +243,8 @@ def _caller(lib: ctypes.CDLL, name: str, errors: Callable[[], int]) -> Callable[
     source = "\n".join([f"def {name}({', '.join(params)}):", *body])
     namespace: dict[str, Any] = {
         "ndarray": np.ndarray, "address": _address, "errors": errors, "fn": fn, "NAME": name,
-        "refuse": _refuse, "failed": _failed,
+        "refuse": _refuse, "failed": _failed, "contiguous": _contiguous, "copyto": np.copyto,
+        "ArgumentError": ctypes.ArgumentError,
         **{f"D{kind}": dtype for kind, (dtype, _n) in _ARRAY_KINDS.items()},
         **({f"Vector{len(result)}": ctypes.c_double * len(result)} if len(result) > 1 else {})}
     exec(compile(source, f"<biped_opt kernel library: {name}>", "exec"), namespace)

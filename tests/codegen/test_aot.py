@@ -149,6 +149,9 @@ STARTS = [
     (["sweep", "--system", "rocking_bar", "--maneuver", "drop", "--num", "9", "--no-progress"],
      {"native": ()}),
     (["nonsmooth", "--maneuver", "touchdown", "--num", "41"], {"native": ()}),
+    # (the walker of the pieces study, by its library name: built for this case only)
+    (["pieces", "--legs", "2", "--rounds", "1", "--samples", "20", "--no-derivative", "--json"],
+     {"native": ()}),
     # (the optimiser is SciPy's, its Theorem 1 derivatives integrate with solve_ivp and take
     # the initial and terminal gradients from the description: SciPy and SymPy, not Numba)
     (["optimise", "--maneuver", "touchdown", "--theta0", "0.05"],
@@ -162,6 +165,8 @@ def test_a_cached_cli_start_imports_no_numba(built, args, allowed):
     kind = os.environ["BIPED_OPT_AOT"]
     if kind not in allowed:
         pytest.skip(f"the {kind} kernel does not serve {args[0]} (it loads through Numba)")
+    if args[0] == "pieces":
+        build_kind(kind, names=("walker2_coupled_offsets",))
 
     def run(ahead: str):
         env = dict(os.environ, BIPED_OPT_AOT=ahead,
