@@ -116,8 +116,6 @@ def built(folder: Path, name: str) -> bool:
 
 def _load_extension(path: Path) -> ModuleType | None:
     module_name = path.name.split(".")[0]
-    if module_name in sys.modules:
-        return sys.modules[module_name]
     spec = importlib.util.spec_from_file_location(module_name, path)
     if spec is None or spec.loader is None:
         return None
@@ -132,7 +130,8 @@ def _load_extension(path: Path) -> ModuleType | None:
     return module
 
 
-_LOADED: dict[Path, Any] = {}
+#: the kernels loaded in this process, by file (a file is loaded once)
+_KERNELS: dict[Path, Any] = {}
 
 
 def load(folder: Path, name: str) -> Any | None:
@@ -142,13 +141,13 @@ def load(folder: Path, name: str) -> Any | None:
     called as the shared kernel's; None when there is none."""
     for kind in kinds():
         path = _PATHS[kind](folder, name)
-        if path in _LOADED:
-            return _LOADED[path]
+        if path in _KERNELS:
+            return _KERNELS[path]
         if not path.is_file():
             continue
         kernel = native.load(path) if kind == "native" else _load_extension(path)
         if kernel is not None:
-            _LOADED[path] = kernel
+            _KERNELS[path] = kernel
             return kernel
     return None
 

@@ -9,7 +9,7 @@
      which the machine code reads and counts directly) followed by the data, aligned as asked.
    - errors: the kernel raises none itself (error_model "numpy", no bounds checks), so the only
      exceptions are Numba's own (an allocation that fails). Such a path counts itself in
-     biped_opt_native_errors() and sets a Python error; the caller checks that count after
+     biped_opt_native_error_count and sets a Python error; the caller checks that count after
      every call and raises, so a failed call is never taken for a result.
    - the interpreter lock, which the error path takes to report.
 
@@ -44,13 +44,11 @@ extern void *PyErr_Occurred(void);
 /* how many calls took the error path (read in place by the caller, before and after a call) */
 atomic_long biped_opt_native_error_count = 0;
 
-long biped_opt_native_errors(void) { return atomic_load(&biped_opt_native_error_count); }
-
 static void count_error(void) {
     atomic_fetch_add(&biped_opt_native_error_count, 1);
     if (PyErr_Occurred() == NULL)
         PyErr_SetString(PyExc_RuntimeError,
-                        "biped_opt: the compiled kernel failed (see biped_opt_native_errors)");
+                        "biped_opt: the compiled kernel failed (see biped_opt_native_error_count)");
 }
 
 biped_opt_meminfo *NRT_MemInfo_alloc_aligned(size_t size, unsigned align) {

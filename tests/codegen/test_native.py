@@ -175,11 +175,11 @@ def test_a_failure_inside_is_raised_not_returned(libs):
     # the runtime's error path, as Numba's code takes it (with the interpreter lock held: a
     # PyDLL call): counted, and a Python error set
     pylib = ctypes.PyDLL(str(lib.path), handle=handle)
-    count = lib._lib.biped_opt_native_errors
-    before = count()
+    count = ctypes.c_long.in_dll(lib._lib, "biped_opt_native_error_count")  # (what calls read)
+    before = count.value
     with pytest.raises(RuntimeError, match="the compiled kernel failed"):
         pylib.numba_do_raise(None)
-    assert count() == before + 1
+    assert count.value == before + 1
     # a call during which the count moves is an error, whatever it wrote
     failing = native._caller(lib._lib, "outcome_value", iter(range(100)).__next__)
     with pytest.raises(native.NativeKernelError, match="nothing it wrote is a result"):
