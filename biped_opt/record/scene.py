@@ -202,6 +202,12 @@ class SceneMessages:
         rows = samples[self.shown(samples, self.rate)]
         d = self.ndof
         stamps = stamp_offset_ns + np.round(rows[:, 0] * NS).astype(np.int64)
+        # one row per stamp: distinct times less than half a nanosecond apart (a sample and
+        # the end of a step continued after an event, the offsets summed in floating point)
+        # round to the same stamp, and /tf takes no stamp twice (the last row: the later state)
+        last = np.ones(stamps.size, dtype=bool)
+        last[:-1] = stamps[:-1] != stamps[1:]
+        rows, stamps = rows[last], stamps[last]
         sec, nsec = stamps // NS, stamps % NS
         state = self.scene.evaluate(rows[:, 1 : 1 + d], self.parameters)
         mode = rows[:, 1 + 2 * d].astype(np.int64)

@@ -42,6 +42,7 @@ from biped_opt.record.scene import (
     SceneMessages,
 )
 from biped_opt.record.writer import BIPED_TOPICS, SYSTEM_TOPICS
+from biped_opt.ros.interfaces import load_interfaces
 from biped_opt.simulation.compiled import CompiledSystem
 from biped_opt.systems.library.walker import BODY_DEPTH, BODY_THICKNESS, FOOT_RADIUS, LEG_WIDTH
 
@@ -552,3 +553,23 @@ def test_live_topics_arrive_with_the_documented_qos(live):
 
 def _ns(t: Any) -> int:
     return int(t.sec) * NS + int(t.nanosec)
+
+
+def test_times_within_half_a_nanosecond_take_one_stamp():
+    # a live step continued after an event sums its pieces' offsets in floating point: a
+    # sample and the step's end can differ by 1e-12 s and round to the same nanosecond; /tf
+    # takes no stamp twice (tf2 rejects a repeated one), so one row per stamp, the later one
+    compiled = compiled_biped()
+    tr = simulate("touchdown", 0.1, (2.0, 0.5, 0.0), sample_dt=0.01)
+    samples = tr.samples[:6].copy()
+    twin = samples[3].copy()
+    twin[0] += 1e-12
+    twin[2] += 1e-3  # (a distinguishable state)
+    samples = np.insert(samples, 4, twin, axis=0)
+    scene = SceneMessages(load_interfaces().typestore, compiled.scene,
+                          list(compiled.parameters.values()), len(compiled.coordinates))
+    stamps, data = scene.messages(samples, 0)
+    assert len(set(stamps.tolist())) == len(stamps) == len(samples) - 1
+    assert all(len(v) == len(stamps) for v in data.values())
+    want = scene.messages(np.delete(samples, 3, axis=0), 0)[1]["/tf"]
+    assert data["/tf"] == want  # (the later row of the two is the one shown)
