@@ -350,6 +350,7 @@ class _Run:
             client = self.node.create_client(ros.srvs.StudyPoint, name,
                                              callback_group=self.node._group)
             self.workers[name] = _Worker(name, client)
+            self.node.get_logger().info(f"{name} joined the study")
         if not self.workers and not self._waiting_logged:
             self.node.get_logger().info("waiting for optimiser nodes (none on the domain yet)")
             self._waiting_logged = True
