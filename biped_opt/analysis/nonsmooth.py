@@ -105,7 +105,7 @@ def find_nonsmooth(system: CompiledSystem | str, maneuver: str, inputs: Any = No
     return NonsmoothReport(subject=f"{compiled.name}:{maneuver}", optimal=False,
                            theta0_range=(float(grid[0]), float(grid[-1])),
                            grid_size=int(grid.size), points=tuple(points), nsim=nsim[0],
-                           parameter=str(compiled.system.s))
+                           parameter=compiled.s_name)
 
 
 def _sample_of(r: SystemOptimalResult) -> Sample:
@@ -146,7 +146,7 @@ def find_nonsmooth_optimal(problem: Problem, s: npt.ArrayLike | None = None, *,
     return NonsmoothReport(subject=problem.name, optimal=True,
                            theta0_range=(float(grid[0]), float(grid[-1])),
                            grid_size=int(grid.size), points=tuple(points), nsim=nsim[0],
-                           parameter=str(compiled.system.s))
+                           parameter=compiled.s_name)
 
 
 def bound_slope(held: Sample, decision: str, s: float) -> float:

@@ -637,7 +637,8 @@ def uses_system(args: argparse.Namespace) -> bool:
 
 def problem_from_system_args(args: argparse.Namespace, *, required: bool = True) -> Problem | None:
     """The Problem of --system/--problem/--maneuver with --param overrides, or None."""
-    from biped_opt.control.problems import describe, load_problem
+    from biped_opt.control.problems import load_problem
+    from biped_opt.simulation.compiled import system_facts
 
     try:
         if args.problem is not None:
@@ -647,7 +648,7 @@ def problem_from_system_args(args: argparse.Namespace, *, required: bool = True)
                 if not required:
                     return None
                 raise InvalidInputError("--problem (or --maneuver naming one) is required")
-            system = describe(args.system)
+            system = system_facts(args.system)
             if args.maneuver not in system.problems:
                 if not required:
                     return None
@@ -659,13 +660,13 @@ def problem_from_system_args(args: argparse.Namespace, *, required: bool = True)
             problem = load_problem(args.maneuver, system=args.system)
         if args.system is not None and args.problem is not None and \
                 Path(str(args.problem)).suffix in (".yaml", ".yml", ".py"):
-            chosen = describe(args.system).name
-            if problem.description.name != chosen:
+            chosen = system_facts(args.system).name
+            if problem.facts.name != chosen:
                 raise InvalidInputError(
-                    f"--problem: {args.problem} is a problem on {problem.description.name}, "
+                    f"--problem: {args.problem} is a problem on {problem.facts.name}, "
                     f"not on --system {chosen}")
         check_size(args, "--problem" if args.problem is not None else "--system",
-                   problem.description)
+                   problem.system)
         if args.param:
             merged = {**dict(problem.parameters), **dict(args.param)}
             problem = dataclasses.replace(problem, parameters=tuple(merged.items()))

@@ -78,11 +78,11 @@ def run_system(args: argparse.Namespace) -> int:
             derivatives = derivatives_json(d, "variational (Theorem 1)")
     return show_optimal(
         args.json, optimal_json(r, problem.as_dict()),
-        problem=f"{problem.name}  ({problem.description.name}, maneuver {problem.maneuver})  "
+        problem=f"{problem.name}  ({problem.facts.name}, maneuver {problem.maneuver})  "
                 f"s = {r.s:+.12g}",
         status=f"{'ok' if r.success else 'failed'}: {r.message}", policy=r.policy,
         bound=f"bound: {r.bound}" if r.bound else "", value=r.value,
-        outcome=f"{r.outcome:+.15g}", branch=r.branch, parameter=str(problem.description.s),
+        outcome=f"{r.outcome:+.15g}", branch=r.branch, parameter=problem.facts.s,
         derivatives=derivatives, work=f"simulations = {r.nsim}", success=r.success)
 
 

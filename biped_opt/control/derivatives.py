@@ -35,9 +35,10 @@ branch's sensitivity, is the Bouligand derivative: linear on each branch, piecew
 positively homogeneous in v.
 
 Guard, reset and initial-state derivatives: Da (touchdown guards), d x0/ds, Dh and Do are
-symbolic (SymPy, from the system's description); D lambda_j (liftoff guards) and D_q of the
-impact are fourth-order central differences of the compiled functions; D_q' of the impact is
-exact (the impact is linear in q').
+exact: SymPy differentiates the description once, and the generated functions are kept in the
+cache (:mod:`biped_opt.codegen.gradients`, :meth:`CompiledSystem.gradients`); D lambda_j
+(liftoff guards) and D_q of the impact are fourth-order central differences of the compiled
+functions; D_q' of the impact is exact (the impact is linear in q').
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ import math
 import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, cast
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -57,9 +58,6 @@ from biped_opt.simulation.compiled import CompiledSystem
 from biped_opt.simulation.contacts import DependentContactsError, rank, require_independent
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
 from biped_opt.simulation.trajectory import constraint_names
-
-if TYPE_CHECKING:  # (SymPy and SciPy's integrators load when a derivative is computed)
-    import sympy as sp
 
 __all__ = [
     "OutcomeGradient",
@@ -193,7 +191,7 @@ class OutcomeGradient:
         return self.modes
 
 
-# --- symbolic pieces, per compiled system, maneuver and parameter values --------------------
+# --- the description's gradients, per compiled system, maneuver and parameter values -----------
 @dataclass(frozen=True)
 class _Symbolic:
     jacobian: Callable[..., Any]  # Da(q)
@@ -206,27 +204,23 @@ _SYMBOLIC: weakref.WeakKeyDictionary[CompiledSystem, dict] = weakref.WeakKeyDict
 
 
 def _symbolic(compiled: CompiledSystem, maneuver: str) -> _Symbolic:
+    """The gradients of ``maneuver`` (biped_opt.codegen.gradients) at the compiled system's
+    parameter values."""
     key = (maneuver, tuple(sorted(compiled.parameters.items())))
     cache = _SYMBOLIC.setdefault(compiled, {})
     if key not in cache:
-        import sympy as sp
+        module = compiled.gradients()
+        values = tuple(compiled.parameters.values())  # (the declared order, as generated)
+        k = compiled.code(maneuver)
 
-        derived = compiled.derived
-        system = derived.system
-        subs = {system.p[k]: v for k, v in compiled.parameters.items()}
-        q, dq, u = list(system.q), list(system.dq), list(system.u)
-        m = derived.maneuvers[maneuver]
+        def bound(name: str) -> Callable[..., Any]:
+            function = getattr(module, name)
+            return lambda *args: function(*args, *values)
 
-        def lam(expr: sp.Matrix, args: list[sp.Symbol]) -> Callable[..., Any]:
-            return sp.lambdify(args, expr.subs(subs), modules="numpy", cse=True)
-
-        state = q + dq
         cache[key] = _Symbolic(
-            jacobian=lam(derived.jacobian, q),
-            initial_rate=lam(sp.Matrix(m.initial).diff(system.s), [system.s]),
-            terminal_gradient=lam(sp.Matrix([m.terminal]).jacobian(state + u), state + u),
-            outcome_gradient=lam(sp.Matrix([m.outcome]).jacobian(state), state),
-        )
+            jacobian=bound("jacobian"), initial_rate=bound(f"initial_rate_{k}"),
+            terminal_gradient=bound(f"terminal_gradient_{k}"),
+            outcome_gradient=bound(f"outcome_gradient_{k}"))
     return cache[key]
 
 
@@ -562,7 +556,7 @@ def outcome_gradient(
     names = ("s", *compiled.inputs)
     v = _direction(direction, len(names), names)
     s = float(s)
-    where = f"{compiled.system.where()}: {maneuver} at s = {s!r}"
+    where = f"{compiled.where()}: {maneuver} at s = {s!r}"
     traj = compiled.simulate(maneuver, s, u, options=options)
     if not traj.success:
         raise SimulationError(f"{where}: the simulation ended with status {traj.status.name}")

@@ -39,15 +39,15 @@ import numpy as np
 import numpy.typing as npt
 
 from biped_opt.errors import InvalidParameterError, quoted
+from biped_opt.simulation.compiled import system_facts
+from biped_opt.simulation.facts import SystemFacts, describe
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
 from biped_opt.system_spec import FileSpec, parse_file_spec
 
-if TYPE_CHECKING:  # (SymPy and the descriptions load when a problem is made, not imported)
-    import sympy as sp
-
+if TYPE_CHECKING:  # (SymPy and the descriptions load when first needed, not imported)
     from biped_opt.systems.description import System
 
-__all__ = ["Problem", "load_problem", "get_problem", "describe", "input_modes", "KEYS"]
+__all__ = ["Problem", "load_problem", "get_problem", "describe", "KEYS"]
 
 Array = npt.NDArray[np.float64]
 
@@ -92,7 +92,9 @@ class Problem:
     name: str = ""
     #: the simulator's settings (the default: each maneuver's own event budget and horizon)
     options: SimulatorOptions = field(default=DEFAULT_OPTIONS, compare=True)
-    description: System = field(init=False, repr=False, compare=False)
+    #: the system's names and declared problems (what the fields are checked against; read
+    #: without SymPy when the system is compiled already: biped_opt.simulation.facts)
+    facts: SystemFacts = field(init=False, repr=False, compare=False)
     #: the decisions' columns in the input vector, and (state column, weight, target) of each
     #: final-state term: looked up once, the cost is evaluated per simulation
     decision_columns: tuple[int, ...] = field(init=False, repr=False, compare=False)
@@ -148,8 +150,8 @@ class Problem:
             name=str(spec.get("name", "")))
 
     def __post_init__(self) -> None:
-        system = describe(self.system)
-        object.__setattr__(self, "description", system)
+        system = system_facts(self.system)
+        object.__setattr__(self, "facts", system)
         where = f"{system.where()}: problem {self.name or self.maneuver!r}"
         if not isinstance(self.maneuver, str) or self.maneuver not in system.maneuvers:
             raise InvalidParameterError(
@@ -157,7 +159,7 @@ class Problem:
                 f"(maneuvers: {', '.join(system.maneuvers) or 'none'})")
         if not self.name:
             object.__setattr__(self, "name", f"{system.name}:{self.maneuver}")
-        inputs = system.u.names()
+        inputs = system.inputs
         names = [d for d, _ in self.decisions]
         if not names:
             raise InvalidParameterError(f"{where}: needs at least one decision input")
@@ -184,7 +186,7 @@ class Problem:
                     f"(inputs: {', '.join(inputs) or 'none'})")
             if k in names:
                 raise InvalidParameterError(f"{where}: input {k} is both fixed and decided")
-        states = [*system.coordinate_names, *(str(v) for v in system.dq)]
+        states = [*system.coordinates, *system.velocities]
         for k, _, _ in self.final_state:
             if k not in states:
                 raise InvalidParameterError(
@@ -204,6 +206,12 @@ class Problem:
 
     # -- derived views ------------------------------------------------------------------------
     @property
+    def description(self) -> System:
+        """The system's description (:func:`describe`: built with SymPy when first asked for
+        in a process)."""
+        return self.system if not isinstance(self.system, str) else describe(self.system)
+
+    @property
     def decision_names(self) -> tuple[str, ...]:
         return tuple(d for d, _ in self.decisions)
 
@@ -221,7 +229,7 @@ class Problem:
     def inputs(self, policy: Mapping[str, float] | None = None) -> Array:
         """The full input vector (system order): fixed values, decisions from ``policy`` or at
         their defaults."""
-        names = self.description.u.names()
+        names = self.facts.inputs
         u = np.zeros(max(len(names), 1))
         for k, v in self.fixed:
             u[names.index(k)] = v
@@ -246,7 +254,7 @@ class Problem:
 
     def as_dict(self) -> dict[str, Any]:
         """The problem as the mapping a problem file holds (the system by name or path)."""
-        system = self.description
+        system = self.facts
         return {
             "name": self.name,
             "system": system.source or system.name,
@@ -261,47 +269,9 @@ class Problem:
         }
 
 
-_DESCRIPTIONS: dict[str, tuple[System, tuple[int | None, ...]]] = {}
-
-
-def _stamps(paths: tuple[Path, ...]) -> tuple[int | None, ...]:
-    def stamp(path: Path) -> int | None:
-        try:
-            return path.stat().st_mtime_ns
-        except OSError:
-            return None
-
-    return tuple(stamp(p) for p in paths)
-
-
-def describe(system: System | str) -> System:
-    """:func:`load_system`, remembered per library name or file spec until a file it read (the
-    system file or a module beside it) changes: building a description costs SymPy time that
-    problems on the same system need not repeat."""
-    from biped_opt.systems.description import System
-    from biped_opt.systems.files import load_system
-
-    if isinstance(system, System):
-        return system
-    text = str(system)
-    found = _DESCRIPTIONS.get(text)
-    if found is None or _stamps(found[0].reads) != found[1]:
-        loaded = load_system(text)
-        found = _DESCRIPTIONS[text] = (loaded, _stamps(loaded.reads))
-    return found[0]
-
-
-def input_modes(system: System, derived_forces: tuple[sp.Matrix, ...]) -> dict[str, set[int]]:
-    """For each input, the contact modes (bit masks) whose forces depend on it."""
-    out: dict[str, set[int]] = {}
-    for name, symbol in zip(system.u.names(), system.u):
-        out[name] = {mask for mask, f in enumerate(derived_forces) if f.has(symbol)}
-    return out
-
-
 def get_problem(system: System | str, name: str) -> Problem:
     """A problem the system's description declares (:meth:`System.problem`)."""
-    description = describe(system)
+    description = system_facts(system)
     if name not in description.problems:
         raise InvalidParameterError(
             f"{description.where()}: unknown problem {quoted(name)} "

@@ -8,8 +8,9 @@ sequence is fixed, kinked or discontinuous where it changes), so a local method 
 the wrong piece. The method:
 
 1. **which decisions act**: an input acts only in the contact modes whose forces depend on it
-   (read from the description); a decision that acts in no mode the trajectory visits cannot
-   move the outcome and sits at its cheapest value, the bound point nearest 0;
+   (derived with the system: :meth:`~biped_opt.simulation.compiled.CompiledSystem.input_modes`);
+   a decision that acts in no mode the trajectory visits cannot move the outcome and sits at its
+   cheapest value, the bound point nearest 0;
 2. **bracket globally**: the acting decisions' box is sampled on a uniform grid (65 points for
    one decision, 17 per axis for two, fewer beyond) in one parallel ``simulate_batch`` call;
    every grid point that is no worse than its axis neighbours is a candidate (the best 8).
@@ -41,7 +42,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from biped_opt.control.problems import Problem, input_modes
+from biped_opt.control.problems import Problem
 from biped_opt.errors import InvalidInputError
 from biped_opt.piecewise import locate_switch
 from biped_opt.simulation.compiled import CompiledSystem, compiled_with
@@ -240,7 +241,7 @@ class OptimalResult:
     """Optimal policy pi(s) and value nu(s) of a problem at one s (Eqs. (5), (6) of [1]_).
 
     ``problem`` is the problem asked (a :class:`Problem`, or a preset that stands for one and
-    offers ``decision_names``, ``name`` and ``description``); ``inputs`` the full input vector
+    offers ``decision_names``, ``name`` and ``facts``); ``inputs`` the full input vector
     simulated; ``modes`` the contact modes visited (bit masks) and ``branch`` their sequence as
     text. ``active`` names the acting decision ("u1+u2" when several act, None when none does);
     ``bound`` is "lower"/"upper" when a single acting decision sits on that bound, or
@@ -289,7 +290,7 @@ class OptimalResult:
     def as_dict(self) -> dict[str, Any]:
         return {
             "problem": self.problem.name,
-            "system": self.problem.description.name,
+            "system": self.problem.facts.name,
             "s": self.s,
             "theta0": self.s,  # (the biped's name for s)
             "policy": dict(self.policy),
@@ -344,10 +345,8 @@ class _Runner:
 
 
 def _acting(problem: Problem, compiled: CompiledSystem, modes: Sequence[int]) -> list[str]:
-    # (the applied forces: a system of bodies adds terms of no input to every mode)
-    where = input_modes(problem.description, compiled.derived.applied)
     visited = set(modes)
-    return [d for d in problem.decision_names if where[d] & visited]
+    return [d for d in problem.decision_names if compiled.input_modes(d) & visited]
 
 
 def _grid_rows(problem: Problem, acting: list[str], base: Array, names: tuple[str, ...],
@@ -462,7 +461,7 @@ _Found = tuple[Array, float, str, Trajectory]
 
 def _search(problem: Problem, run: _Runner, acting: list[str], base: Array,
             grid_points: int | None, xatol: float) -> list[_Found]:
-    names = problem.description.u.names()
+    names = problem.facts.inputs
     rows, axes = _grid_rows(problem, acting, base, names, grid_points)
     costs, labels = run.batch(rows)
     found = []
@@ -504,7 +503,7 @@ def optimal_policy(problem: Problem, s: float, *, grid_points: int | None = None
         raise InvalidInputError(f"xatol must be a positive number, got {xatol!r}")
     compiled = compiled_for(problem)
     run = _Runner(problem, compiled, s)
-    names = problem.description.u.names()
+    names = problem.facts.inputs
     base = problem.inputs()
     cost0, label0, tr0 = run(base)
     acting = _acting(problem, compiled, tr0.modes)

@@ -164,7 +164,7 @@ class _Costs:
                  cols: list[int], variational: VariationalOptions = DEFAULT_VARIATIONAL) -> None:
         self.problem, self.compiled, self.cols = problem, compiled, cols
         self.variational = variational
-        self.direction = np.zeros(1 + len(problem.description.u.names()))
+        self.direction = np.zeros(1 + len(problem.facts.inputs))
         self.direction[0] = side
         self.count = 0
 
@@ -191,7 +191,7 @@ class _Costs:
         for scale in ((1.0, 0.5) if extrapolate else (1.0,)):
             out = np.zeros((n + 1, n))
             for j, c in enumerate(self.cols):
-                lo, hi = self.problem.bound(self.problem.description.u.names()[c])
+                lo, hi = self.problem.bound(self.problem.facts.inputs[c])
                 step = scale * HESSIAN_STEP * (hi - lo)
                 up, down = u.copy(), u.copy()
                 up[c] += step
@@ -247,7 +247,7 @@ def polish_optimum(problem: Problem, s: float, start: OptimalResult, *, side: in
     """
     if side not in (-1, 1):
         raise InvalidInputError(f"side must be -1 or +1, got {side!r}")
-    names = problem.description.u.names()
+    names = problem.facts.inputs
     acting = set((start.active or "").split("+")) - {""}
     held = tuple(d for d in problem.decision_names if d in acting and
                  start.policy[d] in problem.bound(d))
@@ -323,7 +323,7 @@ def optimal_derivatives_with_errors(problem: Problem, s: float, *, probe: float 
 def _side(problem: Problem, compiled: CompiledSystem, s: float, side: int, probe: float,
           variational: VariationalOptions) -> dict[str, Any]:
     """The derivatives on the branch s -> s^side (module docstring), with error estimates."""
-    names = problem.description.u.names()
+    names = problem.facts.inputs
     start = optimal_policy(problem, s + side * probe)
     if not start.success:
         raise SimulationError(f"{problem.name} at s = {s + side * probe}: no optimum "

@@ -44,6 +44,8 @@ from biped_opt.control.problems import COST_LIMIT, Problem
 from biped_opt.control.problems import get_problem as declared_problem
 from biped_opt.errors import InvalidInputError, InvalidParameterError
 from biped_opt.paper.biped import BIPED, INPUT_NAMES, BipedParams, Maneuver, parse_maneuver
+from biped_opt.simulation.compiled import system_facts
+from biped_opt.simulation.facts import SystemFacts
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
 
 if TYPE_CHECKING:
@@ -203,6 +205,11 @@ class OptimalControlProblem:
         """The library biped's description."""
         return self.problem.description
 
+    @property
+    def facts(self) -> SystemFacts:
+        """The library biped's names (no SymPy: :mod:`biped_opt.simulation.facts`)."""
+        return self.problem.facts
+
     # --- accessors ---------------------------------------------------------------------------
     def index(self, name: str) -> int:
         """Position of decision ``name`` in :attr:`decisions`."""
@@ -278,7 +285,7 @@ class OptimalControlProblem:
 
 @functools.cache
 def _biped_defaults() -> dict[str, float]:
-    return dict(declared_problem(BIPED, "touchdown").description.defaults)
+    return dict(system_facts(BIPED).defaults)
 
 
 @functools.cache

@@ -285,9 +285,9 @@ def modes_figure(path: str | Path, compiled: CompiledSystem, maneuver: str,
     if bands is None:
         bands = mode_bands(compiled, maneuver, s_grid, inputs)
     return draw_modes(path, bands, compiled.derived.constraint_names,
-                      s_name=str(compiled.system.s),
+                      s_name=compiled.s_name,
                       title=title or f"{compiled.name} {maneuver}: contact mode over time and "
-                      f"{compiled.system.s}", figsize=figsize)
+                      f"{compiled.s_name}", figsize=figsize)
 
 
 def draw_modes(path: str | Path, bands: Sequence[ModeBands], constraint_names: Sequence[str],
@@ -372,7 +372,7 @@ def _setting(compiled: CompiledSystem, maneuver: str, grid: Array) -> list[str]:
         + (", ".join(f"{k} = {v:g}" for k, v in compiled.parameters.items()) or "none") + ".",
         f"Maneuver {maneuver}" + (f": {m.description}" if m.description else "")
         + f"; outcome {m.outcome} at t_f.",
-        f"Grid: {grid.size} values of {compiled.system.s} in [{grid[0]:g}, {grid[-1]:g}]"
+        f"Grid: {grid.size} values of {compiled.s_name} in [{grid[0]:g}, {grid[-1]:g}]"
         + (", 0 included." if 0.0 in grid else "."))]
 
 
@@ -416,16 +416,16 @@ def fixed_input_figures(out: str | Path, compiled: CompiledSystem, maneuver: str
     figures = (
         outcome_figure(out / "outcome.png", s, {f"outcome {name}(t_f)": outcome},
                        points=report.points, ylabel=f"outcome {name}(t_f)",
-                       xlabel=str(compiled.system.s),
+                       xlabel=compiled.s_name,
                        title=f"{subject}: outcome at inputs {shown}"),
         modes_figure(out / "modes.png", compiled, maneuver, s, u, bands=data.bands),
     )
     lines = [
         _caption(None, f"{subject} at fixed inputs {shown}."),
         *_setting(compiled, maneuver, s), "",
-        _caption("outcome.png", f"Outcome {name}(t_f) over {compiled.system.s}, broken at its "
+        _caption("outcome.png", f"Outcome {name}(t_f) over {compiled.s_name}, broken at its "
                  f"jumps (a dot: the value exactly at a jump). {MARKS_CAPTION}"),
-        _caption("modes.png", f"Contact mode over time t and {compiled.system.s} as coloured "
+        _caption("modes.png", f"Contact mode over time t and {compiled.s_name} as coloured "
                  "bands (named by the constraints in contact), contact events as dots (an "
                  "impact that separates at once changes no band but is a dot), t_f in black."),
     ]
@@ -456,11 +456,11 @@ def optimal_figures(out: str | Path, problem: Problem, grid: npt.ArrayLike, *,
     figures = (
         outcome_figure(out / "outcome.png", s, {f"optimal outcome {name}(t_f)": table["outcome"]},
                        points=[p for p in report.points if p.quantity == "outcome"],
-                       ylabel=f"outcome {name}(t_f)", xlabel=str(compiled.system.s),
+                       ylabel=f"outcome {name}(t_f)", xlabel=compiled.s_name,
                        title=f"{subject}: outcome under the optimal policy"),
         policy_value_figure(out / "policy_value.png", s, {d: table[d] for d in names},
                             table["value"], points=report.points,
-                            xlabel=str(compiled.system.s), title=subject),
+                            xlabel=compiled.s_name, title=subject),
     )
     spec = problem.as_dict()
     fixed = ", ".join(f"{k} = {v:g}" for k, v in zip(problem.description.u.names(),
@@ -476,7 +476,7 @@ def optimal_figures(out: str | Path, problem: Problem, grid: npt.ArrayLike, *,
                  + "".join(f" + {a:g} {d}^2" for d, a in spec["weights"].items() if a) + "."),
         *_setting(compiled, problem.maneuver, s), "",
         _caption("outcome.png", f"Outcome {name}(t_f) under the optimal policy over "
-                 f"{compiled.system.s}, broken at its jumps. {MARKS_CAPTION}"),
+                 f"{compiled.s_name}, broken at its jumps. {MARKS_CAPTION}"),
         _caption("policy_value.png", "(a) Optimal policy, one curve per decision, and (b) "
                  "optimal value (the minimal cost), each with its own nonsmooth points."),
     ]

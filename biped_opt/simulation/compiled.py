@@ -9,10 +9,13 @@ changes the source, so it never recompiles.
 A second process need not derive or render to find that module: after a render, a small index
 entry (``systems/start/<key>.json``) maps a cheap key of the request -- a library name, or a system
 file's path and content, together with a hash of the biped_opt sources and the versions of the
-libraries the generator uses -- to the module's name and the few facts simulating needs (names,
-maneuvers, inputs, parameter defaults). On a hit the module is imported directly and SymPy is not
-touched: :attr:`CompiledSystem.system` and :attr:`CompiledSystem.derived` are built when first
-read. Any change of the file or of the package misses, and the slow path writes a fresh entry.
+libraries the generator uses -- to the module's name and the facts simulating and optimising
+need (names, maneuvers, inputs, parameter defaults, the declared problems:
+:class:`~biped_opt.simulation.facts.SystemFacts`; the contact modes each input acts in). On a hit
+the module is imported directly and SymPy is not touched: :attr:`CompiledSystem.system` and
+:attr:`CompiledSystem.derived` are built when first read, and the gradients Theorem 1 needs are
+a cached module of their own (:meth:`CompiledSystem.gradients`). Any change of the file or of
+the package misses, and the slow path writes a fresh entry.
 
 The cache lives in ``$BIPED_OPT_CACHE`` if set, else ``$XDG_CACHE_HOME/biped_opt`` (by default
 ``~/.cache/biped_opt``), under ``systems/``; deleting that directory is always safe.
@@ -44,6 +47,7 @@ import numpy.typing as npt
 
 from biped_opt.codegen import abi, aot, precompile
 from biped_opt.errors import InvalidInputError, InvalidParameterError
+from biped_opt.simulation.facts import SystemFacts, describe
 from biped_opt.simulation.options import DEFAULT_OPTIONS, SimulatorOptions
 from biped_opt.simulation.scene import Scene
 from biped_opt.simulation.trajectory import BatchResult, Trajectory
@@ -245,13 +249,10 @@ def _read_entry(entry: Path | None, *, ahead: bool = False
     """The facts and the module an index entry names, if both are there. ``ahead``: the module
     through its ahead-of-time kernel where that is built (else its build is started and the
     module imported as usual)."""
-    if entry is None:
-        return None
     try:
-        facts = json.loads(entry.read_text())
-        for path, digest in facts["depends"]:  # the modules a system file imported
-            if _digest(Path(path)) != digest:
-                return None
+        facts = _entry_facts(entry)
+        if facts is None:
+            return None
         name = facts["module"]
         path = cache_dir() / f"{name}.py"
         scene = facts["scene"]["module"]
@@ -271,6 +272,18 @@ def _read_entry(entry: Path | None, *, ahead: bool = False
             return facts, _import(name, path)
     except (OSError, ValueError, KeyError, TypeError):
         return None  # absent or unreadable: derive and render instead
+
+
+def _entry_facts(entry: Path | None) -> dict[str, Any] | None:
+    """The facts of an index entry, None when it is absent or a module the system file
+    imported has changed since (OSError, ValueError, KeyError, TypeError when unreadable)."""
+    if entry is None or not entry.is_file():
+        return None
+    facts = json.loads(entry.read_text())
+    for path, digest in facts["depends"]:  # the modules a system file imported
+        if _digest(Path(path)) != digest:
+            return None
+    return facts
 
 
 def _digest(path: Path) -> str | None:
@@ -301,13 +314,34 @@ def cached_size(system: str | Path) -> tuple[int, int] | None:
     """(constraints, coordinates) of a library system or system file the index names, read
     from the index alone (nothing derived, imported or run: a cached start stays one), else
     None."""
-    entry = _start_entry(system)
     try:
-        facts = json.loads(entry.read_text()) if entry is not None else None
+        facts = _entry_facts(_start_entry(system))
         return None if facts is None else (len(facts["constraints"]),
                                            len(facts["coordinates"]))
     except (OSError, ValueError, KeyError, TypeError):
         return None
+
+
+def cached_facts(system: str | Path) -> SystemFacts | None:
+    """The :class:`~biped_opt.simulation.facts.SystemFacts` of a library system or system file
+    the index names, read from the index alone, else None."""
+    try:
+        facts = _entry_facts(_start_entry(system))
+        return None if facts is None else SystemFacts.from_json(facts)
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def system_facts(system: System | SystemFacts | str | Path) -> SystemFacts:
+    """The facts of a description, a library name or a system file: from the compiled systems'
+    index when it names the system, else from its description."""
+    if isinstance(system, SystemFacts):
+        return system
+    if isinstance(system, (str, Path)):
+        cached = cached_facts(system)
+        if cached is not None:
+            return cached
+    return SystemFacts.of(describe(system if not isinstance(system, Path) else str(system)))
 
 
 def cached_module(system: str | Path) -> ModuleType | None:
@@ -347,6 +381,9 @@ class CompiledSystem:
                 _write_entry(entry, facts)
         else:
             facts, self.module = cached
+        #: the generated module's name in the cache (its source's hash)
+        self.module_name: str = facts["module"]
+        self._gradients: ModuleType | None = None
         self._name: str = facts["name"]
         self._where: str = facts["where"]
         self._defaults: dict[str, float] = dict(facts["parameters"])
@@ -357,6 +394,9 @@ class CompiledSystem:
                          for events, horizon in facts["budgets"]]
         self._ranges = [(float(lo), float(hi)) for lo, hi in facts["ranges"]]
         self._coordinates: tuple[str, ...] = tuple(facts["coordinates"])
+        #: the name of the maneuvers' initial-condition parameter s (the biped's th0)
+        self.s_name: str = facts["s"]
+        self._input_modes = {k: frozenset(v) for k, v in facts["input_modes"].items()}
         self._scene_facts: dict[str, Any] = facts["scene"]
         self._scene: Scene | None = None
         self._initial_modes = [int(v) for v in self.module.INITIAL_MODE]
@@ -376,13 +416,14 @@ class CompiledSystem:
         system = self._system = load_system(spec)
         derived = self._derived = derive(system)
         module_name, self.module = _module_for(derived)
-        return {"module": module_name, "name": system.name, "where": system.where(),
-                "parameters": list(system.defaults.items()), "maneuvers": list(derived.maneuvers),
-                "inputs": list(system.u.names()), "constraints": list(system.constraints),
+        # (the applied forces: a system of bodies adds terms of no input to every mode)
+        modes = {name: [mask for mask, f in enumerate(derived.applied) if f.has(symbol)]
+                 for name, symbol in zip(system.u.names(), system.u)}
+        return {"module": module_name, **SystemFacts.of(system).as_json(), "input_modes": modes,
                 "budgets": [[m.description.max_events, m.description.horizon]
                             for m in derived.maneuvers.values()],
                 "ranges": [list(m.description.s_range) for m in derived.maneuvers.values()],
-                "coordinates": list(system.coordinate_names), "scene": _scene_for(system),
+                "scene": _scene_for(system),
                 "constants": _constants(self.module),
                 "depends": [[str(p), _digest(p)] for p in system.reads[1:]]}
 
@@ -409,6 +450,29 @@ class CompiledSystem:
     def name(self) -> str:
         return self._name
 
+    def where(self) -> str:
+        """How messages name the system (its file when it came from one)."""
+        return self._where
+
+    def gradients(self) -> ModuleType:
+        """The module of the gradients Theorem 1's derivatives need
+        (:mod:`biped_opt.codegen.gradients`): rendered with SymPy into the cache on first use,
+        imported from there (plain NumPy) by every later process."""
+        if self._gradients is None:
+            name = f"{self.module_name}_gradients_{_generator_key()[:16]}"
+            folder = cache_dir()
+            path = folder / f"{name}.py"
+            if not path.is_file():
+                from biped_opt.codegen.gradients import render_gradients
+
+                text = render_gradients(self.derived)
+                with _LOCK:
+                    folder.mkdir(parents=True, exist_ok=True)
+                    _write(folder, path, text)
+            with _LOCK:
+                self._gradients = _import(name, path)
+        return self._gradients
+
     @property
     def scene(self) -> Scene:
         """How the system looks (:class:`~biped_opt.simulation.scene.Scene`: frames, shapes,
@@ -420,6 +484,10 @@ class CompiledSystem:
             self._scene = Scene(self._name, self._scene_facts, module.scene_values,
                                 self._constraints, getattr(module, "tree_values", None))
         return self._scene
+
+    def input_modes(self, name: str) -> frozenset[int]:
+        """The contact modes (bit masks) whose forces depend on input ``name``."""
+        return self._input_modes[name]
 
     @property
     def coordinates(self) -> tuple[str, ...]:

@@ -261,11 +261,11 @@ class Study:
         return study
 
     def __post_init__(self) -> None:
-        from biped_opt.control.problems import describe
+        from biped_opt.simulation.compiled import system_facts
 
         # (before anything is described or built)
         _check_points(f"study {self.name!r}", self.size, LIMITS.max_points)
-        system = describe(self.system)
+        system = system_facts(self.system)
         where = f"study {self.name!r} on {system.where()}"
         if self.maneuver is None and self.problem is None:
             raise InvalidParameterError(f"{where}: give a maneuver, a problem or both")
@@ -274,9 +274,9 @@ class Study:
                 f"{where}: unknown maneuver {self.maneuver!r} "
                 f"(maneuvers: {', '.join(system.maneuvers)})")
         for key, _ in self.inputs:
-            if key not in system.u.names():
+            if key not in system.inputs:
                 raise InvalidParameterError(
-                    f"{where}: unknown input {key!r} (inputs: {', '.join(system.u.names())})")
+                    f"{where}: unknown input {key!r} (inputs: {', '.join(system.inputs)})")
         decisions = self._problem().decision_names if self.problem is not None else ()
         allowed = [*system.defaults, *PROBLEM_PARAMETERS, *(f"weight.{d}" for d in decisions)]
         names = [k for k, _ in self.grid] + [k for k, _ in self.sample]
@@ -347,10 +347,9 @@ def _size(kind: str, left: float, right: float) -> float:
 def evaluate_point(study: Study, index: int, values: Mapping[str, float]) -> list[StudyRow]:
     """The rows of parameter point ``index`` (``values`` from :meth:`Study.points`)."""
     from biped_opt.analysis.nonsmooth import find_nonsmooth, find_nonsmooth_optimal
-    from biped_opt.control.problems import describe
-    from biped_opt.simulation.compiled import compiled_with
+    from biped_opt.simulation.compiled import compiled_with, system_facts
 
-    system = describe(study.system)
+    system = system_facts(study.system)
     model = {k: v for k, v in values.items() if k in system.defaults}
     found: list[tuple[str, Any]] = []
     if study.maneuver is not None:
