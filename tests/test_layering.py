@@ -33,7 +33,8 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("nonsmooth analysis", ("biped_opt.analysis",)),
     ("studies", ("biped_opt.studies",)),
     ("the paper's presets", ("biped_opt.paper",)),
-    ("edges", ("biped_opt.plots", "biped_opt.record", "biped_opt.ros")),
+    ("edges", ("biped_opt.plots", "biped_opt.record", "biped_opt.ros",
+               "biped_opt.interface_defs")),
     ("nodes", ("biped_opt.nodes",)),
     ("command line", ("biped_opt.cli",)),
     ("public API", ("biped_opt",)),
@@ -45,8 +46,8 @@ CORE = ["biped_opt.systems", "biped_opt.codegen.render", "biped_opt.simulation.c
         "biped_opt.control.solve", "biped_opt.control.theorem1", "biped_opt.analysis.nonsmooth",
         "biped_opt.analysis.gradients", "biped_opt.analysis.pieces", "biped_opt.studies.study"]
 FORBIDDEN = ["rclpy", "cyclonedds", "rosbags", "mcap", "mcap_ros2", "matplotlib",
-             "biped_opt.ros", "biped_opt.plots", "biped_opt.nodes", "biped_opt.record",
-             "biped_opt.cli"]
+             "biped_opt.ros", "biped_opt.interface_defs", "biped_opt.plots", "biped_opt.nodes",
+             "biped_opt.record", "biped_opt.cli"]
 
 
 def _modules() -> dict[str, Path]:

@@ -227,7 +227,7 @@ def test_colcon_installed_package_imports_from_install(colcon_install, tmp_path)
     site = colcon_install / "lib" / f"python{sys.version_info.major}.{sys.version_info.minor}"
     probe = (
         "import biped_opt, biped_opt.nodes.optimiser as o, importlib.metadata as m\n"
-        "from biped_opt.ros.interfaces import find_msg_defs\n"
+        "from biped_opt.interface_defs import find_msg_defs\n"
         "print(biped_opt.__file__); print(find_msg_defs())\n"
         "print(m.entry_points(group='console_scripts')['optimiser'].value)\n"
     )

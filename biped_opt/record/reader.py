@@ -43,8 +43,8 @@ from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, ChunkIndex, Message, Metadata, Schema
 
 from biped_opt.input_files import InputFileError, open_regular
+from biped_opt.interface_defs import load_definitions
 from biped_opt.record.writer import METADATA_CRC, SYSTEM_METADATA, RecordError, metadata_crc
-from biped_opt.ros.interfaces import load_interfaces
 
 __all__ = [
     "RawChannel", "RawMessage", "RawRecording", "RecordedMessage", "Recording", "checked_metadata",
@@ -302,7 +302,7 @@ def decode_messages(raw: RawRecording, messages: Iterable[RawMessage]
                     ) -> tuple[list[tuple[RawMessage, Any]], dict[str, int]]:
     """(message, decoded) for each of ``messages`` of ``raw`` that decodes with its channel's
     type, and how many did not, by topic."""
-    typestore = load_interfaces().typestore
+    typestore = load_definitions().typestore
     out: list[tuple[RawMessage, Any]] = []
     bad: dict[str, int] = defaultdict(int)
     for m in messages:

@@ -46,9 +46,9 @@ import numpy.typing as npt
 from mcap.writer import CompressionType, Writer
 
 from biped_opt.errors import BipedOptError
+from biped_opt.interface_defs import load_definitions
 from biped_opt.record.cdr import FixedLayout, compile_layout, numpy_dtype
 from biped_opt.record.scene import SCENE_TOPICS, SceneMessages
-from biped_opt.ros.interfaces import load_interfaces
 from biped_opt.version import __version__
 
 __all__ = [
@@ -183,7 +183,7 @@ class SweepWriter:
         self._writer = Writer(self._stream, chunk_size=chunk_size, compression=kind,
                               enable_data_crcs=True)
         self._writer.start(profile="ros2", library=f"biped_opt {__version__}")
-        self.typestore = load_interfaces().typestore
+        self.typestore = load_definitions().typestore
         self._channels: dict[str, int] = {}
         self._layouts: dict[tuple[Any, ...], FixedLayout] = {}
         self.system = dict(system) if system is not None else None

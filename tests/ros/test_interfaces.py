@@ -6,12 +6,8 @@ import numpy as np
 import pytest
 from rosbags.typesys import get_types_from_msg
 
-from biped_opt.ros.interfaces import (
-    InterfaceError,
-    find_msg_defs,
-    load_interfaces,
-    srv_to_idl,
-)
+from biped_opt.interface_defs import InterfaceError, find_msg_defs, srv_to_idl
+from biped_opt.ros.interfaces import load_interfaces
 
 PKG = "biped_opt_interfaces"
 
@@ -225,7 +221,7 @@ def test_find_msg_defs_honours_environment(tmp_path, monkeypatch):
     monkeypatch.setenv("BIPED_OPT_MSG_DEFS", str(copy))
     assert find_msg_defs() == copy
     monkeypatch.setenv("BIPED_OPT_MSG_DEFS", str(tmp_path / "missing"))
-    monkeypatch.setattr("biped_opt.ros.interfaces._candidates", lambda: [tmp_path / "missing"])
+    monkeypatch.setattr("biped_opt.interface_defs._candidates", lambda: [tmp_path / "missing"])
     with pytest.raises(InterfaceError, match="BIPED_OPT_MSG_DEFS"):
         find_msg_defs()
 
