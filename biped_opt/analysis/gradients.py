@@ -53,6 +53,7 @@ from biped_opt.control.problems import Problem, get_problem
 from biped_opt.control.solve import branch_of, compiled_for, optimal_policy
 from biped_opt.control.theorem1 import cost_gradient
 from biped_opt.errors import InvalidInputError, SimulationError
+from biped_opt.simulation.compiled import system_facts
 from biped_opt.simulation.trajectory import BatchResult
 
 __all__ = [
@@ -95,7 +96,7 @@ class Objective:
             raise InvalidInputError(f"problem must be a Problem, got {problem!r}")
         self.problem, self.s = problem, float(s)
         self.compiled = compiled_for(problem)
-        names = problem.description.u.names()
+        names = problem.facts.inputs
         self.cols = [names.index(d) for d in problem.decision_names]
         self.lo = np.array([problem.bound(d)[0] for d in problem.decision_names])
         self.hi = np.array([problem.bound(d)[1] for d in problem.decision_names])
@@ -471,33 +472,28 @@ def policy_gradient_descent(objective: Objective, start: npt.ArrayLike, estimato
 
 
 # --- the smoothed model -----------------------------------------------------------------------
-_SMOOTH: dict[str, Any] = {}
+#: the library's smoothed counterpart of a system, by the system's name
+SMOOTHED = {"biped": "biped_smooth", "rocking_bar": "rocking_bar_soft"}
 
 
-def smoothed_system(name: str) -> Any:
-    """The smoothed counterpart of a library system: the biped with its input switch smoothed
-    over eps (:mod:`~biped_opt.systems.library.smooth_biped`), the rocking bar with soft contacts
-    of width eps (:mod:`~biped_opt.systems.library.soft_rocking_bar`); built once."""
-    from biped_opt.systems.library.smooth_biped import smooth_biped
-    from biped_opt.systems.library.soft_rocking_bar import soft_rocking_bar
-
-    factories = {"biped": smooth_biped, "rocking_bar": soft_rocking_bar}
-    if name not in factories:
+def smoothed_system(name: str) -> str:
+    """The library name of the smoothed counterpart of a library system: the biped with its
+    input switch smoothed over eps (:mod:`~biped_opt.systems.library.smooth_biped`), the rocking
+    bar with soft contacts of width eps (:mod:`~biped_opt.systems.library.soft_rocking_bar`)."""
+    if name not in SMOOTHED:
         raise InvalidInputError(f"no smoothed model of {name!r} (smoothed models: "
-                                f"{', '.join(factories)})")
-    if name not in _SMOOTH:
-        _SMOOTH[name] = factories[name]()
-    return _SMOOTH[name]
+                                f"{', '.join(SMOOTHED)})")
+    return SMOOTHED[name]
 
 
 def smooth_problem(problem: Problem, eps: float) -> Problem:
     """``problem`` on its system's smoothed model (:func:`smoothed_system`) of width eps."""
     if not (isinstance(eps, float) and eps > 0 and math.isfinite(eps)):
         raise InvalidInputError(f"eps must be a positive number, got {eps!r}")
-    smooth_system = smoothed_system(problem.description.name)
+    smooth_system = smoothed_system(problem.facts.name)
     name = problem.name.split(":")[-1]
-    smooth = get_problem(smooth_system,
-                         name if name in smooth_system.problems else problem.maneuver)
+    declared = system_facts(smooth_system).problems
+    smooth = get_problem(smooth_system, name if name in declared else problem.maneuver)
     return replace(smooth, parameters=(*problem.parameters, ("eps", eps)),
                    name=f"{name} (eps={eps:g})")
 
@@ -672,7 +668,7 @@ def run_gradient_study(*, seed: int = 0, quick: bool = False,
                                 obj, start, estimator, sigma, n, opt, rng,
                                 iterations=pg_iterations))
         study.runs[name] = runs
-        if problem.description.name in ("biped", "rocking_bar"):
+        if problem.facts.name in SMOOTHED:
             study.smoothing[name] = []
             for eps in eps_values:
                 smooth = smooth_problem(problem, float(eps))

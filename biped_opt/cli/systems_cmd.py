@@ -99,5 +99,7 @@ def run(args: argparse.Namespace) -> int:
     print("\nwalkerN[_coupled|_decoupled] gives the walker with N legs (walker: 3, coupled); "
           "chain5|7|9|11 the planar chain with that many coordinates (chain: 5); "
           "quadruped (d = 20, n = 4) is built only when named (its description takes "
-          "seconds); a path to a .py file gives your own system (README: Your own system).")
+          "seconds), as are the gradient study's smoothed models biped_smooth and "
+          "rocking_bar_soft; a path to a .py file gives your own system (README: Your own "
+          "system).")
     return 0

@@ -38,6 +38,7 @@ WALKER = re.compile(
 CHAIN = re.compile(r"^chain(?P<d>5|7|9|11)$")
 #: the library's names beyond LIBRARY's, for messages
 LIBRARY_PATTERNS = ("walkerN[_coupled|_decoupled][_offsets], chain5|7|9|11, quadruped, "
+                    "biped_smooth, rocking_bar_soft, "
                     + ", ".join(ROBOTS))
 
 

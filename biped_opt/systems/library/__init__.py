@@ -32,10 +32,29 @@ LIBRARY: dict[str, Callable[[], System]] = {
     "chain": chain,
 }
 
+def biped_smooth() -> System:
+    """The biped with its input switch smoothed (:mod:`biped_opt.systems.library.smooth_biped`,
+    the gradient study's smoothed model)."""
+    from biped_opt.systems.library.smooth_biped import smooth_biped
+
+    return smooth_biped()
+
+
+def rocking_bar_soft() -> System:
+    """The rocking bar with soft contacts (:mod:`biped_opt.systems.library.soft_rocking_bar`,
+    the gradient study's smoothed model)."""
+    from biped_opt.systems.library.soft_rocking_bar import soft_rocking_bar
+
+    return soft_rocking_bar()
+
+
 #: library systems built only when named: the quadruped's description takes seconds (3-D
-#: kinematics), too long for every listing of the library
+#: kinematics), too long for every listing of the library; the gradient study's smoothed
+#: models are named so that a process finds them compiled (the start index) as any other
 BY_NAME: dict[str, Callable[[], System]] = {
     "quadruped": quadruped,
+    "biped_smooth": biped_smooth,
+    "rocking_bar_soft": rocking_bar_soft,
     **ROBOTS,  # (robots from their URDFs: SYSTEMS.md Sec. 3c)
 }
 
@@ -47,5 +66,7 @@ SIZES: dict[str, tuple[int, int]] = {
     "rocking_bar": (2, 3),
     "chain": (2, 5),
     "quadruped": (4, 20),
+    "biped_smooth": (2, 7),
+    "rocking_bar_soft": (0, 3),
     **ROBOT_SIZES,
 }
