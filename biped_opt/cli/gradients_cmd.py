@@ -25,7 +25,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int_in_range("--seed", 0, MAX_SEED), default=0,
                    help="seed of every random draw (default 0)")
     p.add_argument("--quick", action="store_true",
-                   help="small grids and samples (about a minute per problem)")
+                   help="small grids and samples (seconds per problem once compiled)")
     p.add_argument("--problem", action="append", metavar="NAME",
                    choices=LazyChoices(_problem_names),
                    help="study only this problem (repeatable; default all four)")
