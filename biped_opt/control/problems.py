@@ -209,7 +209,7 @@ class Problem:
     def description(self) -> System:
         """The system's description (:func:`describe`: built with SymPy when first asked for
         in a process)."""
-        return self.system if not isinstance(self.system, str) else describe(self.system)
+        return describe(self.system)
 
     @property
     def decision_names(self) -> tuple[str, ...]:

@@ -61,3 +61,13 @@ def test_problems_json_cannot_carry_are_read_from_the_description(tmp_path: Path
     assert cached_facts(str(path)) is None
     assert system_facts(str(path)).problems["far"]["target"] == 0.5
     assert get_problem(str(path), "far").target == 0.5
+
+
+def test_a_problem_builds_its_description_only_when_asked():
+    """The facts serve the checks; ``description`` is the System, also for a system given as a
+    path-like name."""
+    problem = Problem(system=Path("rocking_bar"), maneuver="drop",
+                      decisions=(("u_th", (-1.0, 1.0)),))
+    assert problem.facts.name == "rocking_bar"
+    assert problem.description is describe("rocking_bar")
+    assert problem.description.name == "rocking_bar"
