@@ -14,8 +14,9 @@ a sample of the same angles and scaled to 2001: the ratio a user of the command 
 
 The commands that read a file get one written first, into a temporary directory: a study of one
 parameter point, and a recording of an 11-point sweep (made through the nodes by ``biped-opt
-record``) for ``report``. ``gradients --quick`` is not trivial (tens of seconds per problem); it
-runs with ``--gradients`` only, once, and its start-up is then the one figure to read.
+record``) for ``report``. ``gradients --quick`` is not trivial (about 5 s of work per problem, its
+smallest setting); it runs with ``--gradients`` only, once, and its start-up is then the one
+figure to read.
 
     python -m bench.cli_start [--runs 3] [--reference-sample 41] [--gradients]
 """
@@ -134,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--reference-sample", type=int, default=41,
                     help="angles the SciPy reference is timed on")
     ap.add_argument("--gradients", action="store_true",
-                    help="also gradients --quick on one problem (tens of seconds)")
+                    help="also gradients --quick on one problem (about 10 s)")
     args = ap.parse_args(argv)
     print(f"{'command':20s} {'whole [s]':>10s} {'compute [s]':>12s} {'start-up [s]':>13s}")
     for name, command in COMMANDS.items():
