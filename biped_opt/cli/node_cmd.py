@@ -40,12 +40,20 @@ def run_node(args: argparse.Namespace) -> int:
 #: how long ``launch`` lets its nodes stop after Ctrl-C or SIGTERM before it ends without
 #: them [s]: a callback under way (a study's work item, a first compile in C) can take minutes
 LAUNCH_STOP_S = 2.5
+#: the backstop [s]: if the process has not ended this long after the signal (no Python thread
+#: got to run: something held the interpreter), faulthandler's own thread prints every thread's
+#: stack and ends it with status 1
+LAUNCH_HARD_STOP_S = 12.5
 
 
 def _end_after_stop(stop: Any) -> None:
     """Once a stop is asked, give the graph :data:`LAUNCH_STOP_S`, then end the process
-    (status 0, one line saying what was left; the nodes write no file of their own)."""
+    (status 0, one line saying what was left; the nodes write no file of their own); at the
+    latest after :data:`LAUNCH_HARD_STOP_S`, with the stacks that held it (status 1)."""
+    import faulthandler
+
     stop.event.wait()
+    faulthandler.dump_traceback_later(LAUNCH_HARD_STOP_S, exit=True)
     time.sleep(LAUNCH_STOP_S)
     print(f"biped-opt launch: stopped {LAUNCH_STOP_S:g} s after the signal without waiting for "
           "the callbacks still under way", file=sys.stderr, flush=True)

@@ -89,6 +89,19 @@ def test_launch_gives_its_nodes_a_stated_time_after_a_signal():
                                   "waiting for the callbacks still under way")
 
 
+def test_the_backstop_ends_a_launch_whose_watchdog_cannot_and_shows_where_it_stood():
+    """The watchdog's own wait made longer than the backstop (as when no Python thread gets to
+    run): faulthandler's thread ends the process at the backstop, status 1, with the stacks."""
+    code = ("import threading, types, biped_opt.cli.node_cmd as n\n"
+            "n.LAUNCH_STOP_S, n.LAUNCH_HARD_STOP_S = 60.0, 0.5\nevent = threading.Event()\n"
+            "event.set()\nn._end_after_stop(types.SimpleNamespace(event=event))\n")
+    start = time.monotonic()
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 1 and time.monotonic() - start < 30.0
+    assert "Timeout" in out.stderr and "_end_after_stop" in out.stderr
+
+
 @pytest.mark.alone  # (a 4 s bound on the exit)
 def test_launch_ends_within_3_s_of_a_signal_while_a_work_item_computes():
     """A peer's study work item (64 points of optimal tables: minutes of compute) is under way
