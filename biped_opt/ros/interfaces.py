@@ -27,6 +27,7 @@ from cyclonedds.idl import types as dt
 
 from biped_opt.interface_defs import (
     PACKAGE,
+    Definitions,
     InterfaceError,
     action_to_idl,
     find_msg_defs,
@@ -151,22 +152,19 @@ class Interfaces:
     is created once.
     """
 
-    def __init__(self, root: Path) -> None:
-        defs = load_definitions(root)
-        self.root = root
-        self.typestore = defs.typestore
-        #: scalar fields' default values (``uint64 steps 1``), by ROS type name
-        self.field_defaults = defs.field_defaults
-        self.msg_names, self.srv_names = defs.msg_names, defs.srv_names
-        self.action_names = defs.action_names
+    def __init__(self, definitions: Definitions) -> None:
+        #: the parsed definitions the classes are made from (their typestore, names, defaults)
+        self.definitions = definitions
+        self.typestore = definitions.typestore
+        self.msg_names = definitions.msg_names
         self._classes: dict[str, type] = {}
         self.services: dict[str, ServiceType] = {}
         self.actions: dict[str, ActionType] = {}
         for ros_name in self.msg_names:
             self.message_class(ros_name)
-        for ros_name in self.srv_names:
+        for ros_name in definitions.srv_names:
             self._service(ros_name)
-        for ros_name in self.action_names:
+        for ros_name in definitions.action_names:
             self._action(ros_name)
 
     def message_class(self, ros_name: str) -> type:
@@ -179,7 +177,7 @@ class Interfaces:
         consts, fields = self.typestore.fielddefs[ros_name]
         annotations: dict[str, Any] = {}
         defaults: dict[str, Any] = {}
-        given = self.field_defaults.get(ros_name, {})
+        given = self.definitions.field_defaults.get(ros_name, {})
         for fname, desc in fields:
             annotations[fname], defaults[fname] = self._field(desc)
             if fname in given:
@@ -262,13 +260,14 @@ class Interfaces:
 
 
 _LOCK = threading.Lock()
-_CACHE: dict[Path, Interfaces] = {}
+_CACHE: dict[int, Interfaces] = {}
 
 
 def load_interfaces(root: Path | None = None) -> Interfaces:
-    """Parse ``msg_defs`` (found by :func:`find_msg_defs` when ``root`` is None), cached."""
-    root = (root or find_msg_defs()).resolve()
-    with _LOCK:
-        if root not in _CACHE:
-            _CACHE[root] = Interfaces(root)
-        return _CACHE[root]
+    """The classes of the definitions :func:`~biped_opt.interface_defs.load_definitions` gives
+    for ``root``, made once per process (every DDS type is created once)."""
+    definitions = load_definitions(root)
+    with _LOCK:  # (keyed by the definitions, which load_definitions keeps: one per root)
+        if id(definitions) not in _CACHE:
+            _CACHE[id(definitions)] = Interfaces(definitions)
+        return _CACHE[id(definitions)]
