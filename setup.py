@@ -51,7 +51,7 @@ setup(
     tests_require=["pytest"],
     entry_points={
         "console_scripts": [
-            "biped-opt = biped_opt.cli.main:main",
+            "biped-opt = biped_opt.cli.main:entry",
             "simulator = biped_opt.nodes.simulator:main",
             "optimiser = biped_opt.nodes.optimiser:main",
             "recorder = biped_opt.nodes.recorder:main",

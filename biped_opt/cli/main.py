@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import gc
 import importlib
 import os
 import re
@@ -126,5 +127,34 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE
 
 
+#: the cyclic collector's youngest-generation threshold in the ``biped-opt`` process (Python's
+#: default is 700): see :func:`entry`
+YOUNG_THRESHOLD = 10_000
+
+
+def entry() -> int:
+    """The ``biped-opt`` program: :func:`main` in a process that then ends, with the cyclic
+    collector set for that (the two settings save 0.05 s of a cached ``simulate``'s 0.2 s and
+    0.3 s of a ``report``'s 1.5 s).
+
+    - A command makes most of its objects importing NumPy, SciPy and matplotlib, and keeps
+      them. Collecting the youngest generation every 700 new objects, as Python does by default,
+      walks them again and again; every :data:`YOUNG_THRESHOLD` (a few megabytes of young
+      objects at most) it does so a fourteenth as often. What a long command leaves as cyclic
+      garbage is collected as before, a little later.
+    - When :func:`main` returns, what is still alive is frozen out of the collector: the
+      interpreter's last collections would walk all of it only for the system to reclaim the
+      memory. Exit handlers and the flushing and closing of files run as before; garbage in
+      reference cycles keeps its finalizers unrun, and the package closes what it writes
+      explicitly.
+
+    Not for a caller that goes on afterwards (a test, a script): it calls :func:`main`."""
+    gc.set_threshold(YOUNG_THRESHOLD, *gc.get_threshold()[1:])
+    try:
+        return main()
+    finally:
+        gc.freeze()
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(entry())

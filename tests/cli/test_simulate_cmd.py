@@ -50,3 +50,32 @@ def test_bad_arguments_exit_nonzero_with_one_line_naming_the_argument(args, name
     assert "Traceback" not in proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and named in lines[0]
+
+
+FREEZE_PROBE = """\
+import gc, sys
+from biped_opt.cli.main import {func}
+try:
+    status = {func}()
+except SystemExit as exc:  # (argparse's refusal)
+    status = exc.code
+print(f"status {{status}} frozen {{gc.get_freeze_count()}}", file=sys.stderr)
+"""
+
+
+@pytest.mark.parametrize("theta0", ["0.01", "nan"])
+def test_the_program_freezes_what_is_alive_as_it_ends_and_main_alone_does_not(theta0):
+    """The console script's entry() leaves the process's objects out of the interpreter's last
+    collections (the freeze count is what gc reports after it returns), on success and on a
+    refusal alike, and the output is whole; main(), which tests and scripts call and then go on,
+    freezes nothing."""
+    args = ["simulate", "--maneuver", "touchdown", "--theta0", theta0, "--json"]
+    for func, frozen in (("entry", True), ("main", False)):
+        proc = subprocess.run([sys.executable, "-c", FREEZE_PROBE.format(func=func), *args],
+                              capture_output=True, text=True, timeout=120)
+        status, count = proc.stderr.strip().splitlines()[-1].split()[1::2]
+        assert (int(count) > 1000) == frozen, (func, proc.stderr)
+        if theta0 == "nan":
+            assert status == "2" and "--theta0" in proc.stderr
+        else:
+            assert status == "0" and json.loads(proc.stdout)["status"] == "ok"
