@@ -5,10 +5,13 @@ from __future__ import annotations
 
 import argparse
 
-from biped_opt.cli.args import output_directory, path_arg
+from biped_opt.cli.args import int_in_range, output_directory, path_arg
 from biped_opt.cli.output import emit_paths
 
 __all__ = ["register", "func"]
+
+#: the most figure processes --jobs asks for (a report has a handful of figures)
+MAX_JOBS = 64
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -25,6 +28,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    required=True, help="output directory (made once the recordings are read)")
     p.add_argument("--refine", action="store_true",
                    help="re-locate the points with the core (simulates/optimises again)")
+    p.add_argument("--jobs", type=int_in_range("--jobs", 1, MAX_JOBS), default=None,
+                   metavar="N",
+                   help="draw up to N figures at once, in forked processes (default: the CPUs "
+                        "this process may use; 1: one after the other in this process)")
     p.set_defaults(func=func)
 
 
@@ -35,9 +42,11 @@ def func(args: argparse.Namespace) -> int:
     # no recording is refused in a fraction of a second and of the memory
     raws = [read_raw(path, topics=("/biped/sweep", "/biped/system_info"))
             for path in args.files]
+    from biped_opt.plots.parallel import usable_processes
     from biped_opt.record.report import report
 
-    result = report(raws, args.out, refine=args.refine)
+    result = report(raws, args.out, refine=args.refine,
+                    processes=args.jobs or usable_processes())
     for s in result.sweeps:
         state = "complete" if s.complete else f"RECOVERED ({s.note})"
         print(f"{s.path}: {s.kind} {s.label} sweep, {s.theta0.size} points, {state}")

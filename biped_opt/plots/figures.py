@@ -71,7 +71,13 @@ def _annotate(ax, marks: Sequence[NonsmoothMark], fmt: str = "{:+.4g}") -> None:
 
 
 def _finish(fig, path: Path) -> Path:
-    place_notes(fig)
+    """Place the notes and write the figure. Placing them draws it with its final layout
+    (:func:`~biped_opt.plots.placement.place_notes`); writing it keeps that layout instead of
+    laying it out a third time (0.05 s of a four-panel figure). The layout is kept in fractions
+    of the figure, so it holds at the written resolution as at the drawn one (to a pixel's
+    rounding of the text's extents)."""
+    if place_notes(fig):
+        fig.set_layout_engine("none")
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=150)
     plt.close(fig)

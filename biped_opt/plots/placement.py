@@ -185,12 +185,13 @@ def _outside(ax: Any, notes: list[Any], renderer: Any) -> None:
         top -= size.height / ax.get_window_extent().height + 0.03
 
 
-def place_notes(fig: Any, axes: Iterable[Any] | None = None) -> None:
+def place_notes(fig: Any, axes: Iterable[Any] | None = None) -> bool:
     """Place every note of ``axes`` (default: all of ``fig``'s) as the module docstring says.
-    Notes must use ``textcoords="axes fraction"``; call it after everything else is drawn."""
+    Notes must use ``textcoords="axes fraction"``; call it after everything else is drawn.
+    True when it drew the figure: its layout as last drawn is then final."""
     chosen = [ax for ax in (fig.axes if axes is None else axes) if notes_of(ax)]
     if not chosen:
-        return
+        return False
     fig.canvas.draw()  # (the final layout: the data's pixels and the notes' sizes)
     renderer = fig.canvas.get_renderer()
     for ax in list(chosen):
@@ -209,3 +210,4 @@ def place_notes(fig: Any, axes: Iterable[Any] | None = None) -> None:
     fig.canvas.draw()
     for ax in chosen:
         _place_axes(ax, notes_of(ax), renderer)
+    return True

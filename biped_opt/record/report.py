@@ -42,10 +42,11 @@ Everything also goes into one self-contained HTML page, ``report.html``
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -350,10 +351,13 @@ def _optimal_sweep(s: RecordedSweep) -> OptimalSweep:
 
 
 def report(paths: Sequence[str | Path | RawRecording], out_dir: str | Path, *,
-           refine: bool = False) -> Report:
-    """Figures (whichever the recordings allow) and the nonsmoothness table into ``out_dir``."""
+           refine: bool = False, processes: int = 1) -> Report:
+    """Figures (whichever the recordings allow) and the nonsmoothness table into ``out_dir``;
+    ``processes`` > 1 draws up to that many figures at once in forked processes
+    (:func:`biped_opt.plots.parallel.draw_all`: only in a process with no other thread)."""
     from biped_opt.paper.figures import fixed_data, optimal_data
     from biped_opt.plots.figures import figure2, figure3, figure4
+    from biped_opt.plots.parallel import draw_all
     from biped_opt.plots.reproduce import nonsmooth_table
 
     if not paths:
@@ -370,15 +374,16 @@ def report(paths: Sequence[str | Path | RawRecording], out_dir: str | Path, *,
     grid: dict[str, tuple[GridPoint, ...]] = {}
     blocks = []
     fixed, optimal = {}, {}
-    figures = []
+    drawings: list[Callable[[], Path]] = []
     for (kind, label), s in by_key.items():
         pts = grid_nonsmooth(s)
         grid[f"{kind}:{label}"] = tuple(pts)
         blocks.append(grid_table(s, pts))
         core = [g.point for g in pts]
         if s.system != "biped":
-            figures.append(_system_figure(
-                s, pts, out / f"{s.system}_{s.maneuver}{'_optimal' if s.optimal else ''}.png"))
+            drawings.append(functools.partial(
+                _system_figure, s, pts,
+                out / f"{s.system}_{s.maneuver}{'_optimal' if s.optimal else ''}.png"))
         elif kind == "fixed":
             assert s.problem is not None  # (a sweep of the biped always has its problem)
             fixed[label] = fixed_data(_fixed_sweep(s), s.problem, core)
@@ -386,10 +391,12 @@ def report(paths: Sequence[str | Path | RawRecording], out_dir: str | Path, *,
             optimal[label] = optimal_data(_optimal_sweep(s), core)
     if fixed:
         td, lo = fixed.get("touchdown"), fixed.get("liftoff")
-        figures += [figure2(td, lo, out / "fig2.png"), figure3(td, lo, out / "fig3.png")]
+        drawings += [functools.partial(figure2, td, lo, out / "fig2.png"),
+                     functools.partial(figure3, td, lo, out / "fig3.png")]
     if optimal:
-        figures.append(figure4(optimal.get("touchdown"), optimal.get("liftoff"),
-                               out / "fig4.png"))
+        drawings.append(functools.partial(figure4, optimal.get("touchdown"),
+                                          optimal.get("liftoff"), out / "fig4.png"))
+    figures = draw_all(drawings, processes)
     refined: list[NonsmoothReport] = []
     biped = [s for s in by_key.values() if s.system == "biped"]
     if refine and biped:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -80,6 +82,25 @@ def test_report_writes_figures_and_a_labelled_table(liftoff_file, tmp_path, caps
     line = next(x for x in table.splitlines() if " outcome " in x)
     assert line.split()[0] == "0" and "jump" in line and "0.02" in line  # bracket width
     assert "liftoff sweep, 15 points, complete" in out
+
+
+def test_figures_drawn_in_two_processes_are_the_ones_drawn_in_one(liftoff_file, tmp_path):
+    """The command as a user runs it (a process of one thread, so --jobs 2 forks): the same
+    figures, byte for byte, and the same table; --jobs 0 is refused before anything is read."""
+    outs = {}
+    for jobs in ("1", "2"):
+        outs[jobs] = tmp_path / f"jobs{jobs}"
+        proc = subprocess.run([sys.executable, "-m", "biped_opt.cli.main", "report",
+                               str(liftoff_file), "--out", str(outs[jobs]), "--jobs", jobs],
+                              capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, proc.stderr
+    for name in ("fig2.png", "fig3.png", "nonsmooth_recorded.txt"):
+        assert (outs["1"] / name).read_bytes() == (outs["2"] / name).read_bytes(), name
+    proc = subprocess.run([sys.executable, "-m", "biped_opt.cli.main", "report",
+                           str(liftoff_file), "--out", str(tmp_path / "none"), "--jobs", "0"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "--jobs" in proc.stderr
+    assert not (tmp_path / "none").exists()
 
 
 def test_report_of_a_recovered_file_says_how_much(tmp_path):
