@@ -14,9 +14,10 @@ a sample of the same angles and scaled to 2001: the ratio a user of the command 
 
 The commands that read a file get one written first, into a temporary directory: a study of one
 parameter point, and a recording of an 11-point sweep (made through the nodes by ``biped-opt
-record``) for ``report``. ``gradients --quick`` is not trivial (about 5 s of work per problem, its
-smallest setting); it runs with ``--gradients`` only, once, and its start-up is then the one
-figure to read.
+record``) for ``report``, drawn in two processes as the command does by default and in one
+(``--jobs 1``). ``gradients`` runs at a trial size (one problem, one start, 64 samples, 3
+iterations, a 41-point quadrature); its ``--quick`` study (about 5 s of work per problem) runs
+with ``--gradients`` only, once, and its start-up is then the one figure to read.
 
     python -m bench.cli_start [--runs 3] [--reference-sample 41] [--gradients]
 """
@@ -42,12 +43,15 @@ COMMANDS: dict[str, list[str]] = {
     "nonsmooth": ["nonsmooth", "--maneuver", "touchdown"],
     "simulate --system": ["simulate", "--system", "rocking_bar", "--maneuver", "drop",
                           "--s", "0.1"],
+    "gradients (trial)": ["gradients", "--quick", "--problem", "touchdown", "--starts", "1",
+                          "--samples", "64", "--iterations", "3", "--quadrature", "41"],
 }
 #: (name, arguments with {dir} for the temporary directory): commands that read a file the
 #: bench writes first (see :func:`_files`)
 FILE_COMMANDS: dict[str, list[str]] = {
     "study (1 point)": ["study", "{dir}/one.yaml", "--out", "{dir}/one.csv", "--no-progress"],
     "report": ["report", "--out", "{dir}/report", "{dir}/sweep.mcap"],
+    "report --jobs 1": ["report", "--out", "{dir}/report1", "--jobs", "1", "{dir}/sweep.mcap"],
     "pieces": ["pieces", "--legs", "2", "--rounds", "1", "--samples", "20", "--no-derivative"],
 }
 GRADIENTS = ["gradients", "--quick", "--problem", "touchdown"]

@@ -42,7 +42,7 @@ import math
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -61,7 +61,7 @@ __all__ = [
     "zeroth_order_terms", "first_order_terms", "ZEROTH_BASELINES", "smoothed_gradient",
     "estimator_stats",
     "descend", "where_stopped", "policy_gradient_descent", "find_switches", "study_problems",
-    "smooth_problem",
+    "smooth_problem", "GradientSizes", "FULL", "QUICK",
     "run_gradient_study", "report",
 ]
 
@@ -540,12 +540,83 @@ def study_problems(names: Sequence[str] | None = None) -> list[tuple[Problem, fl
     return out
 
 
+@dataclass(frozen=True)
+class GradientSizes:
+    """How much the study computes; a pair holds the size for a problem of one decision, then
+    for one of two or more.
+
+    - ``starts``: starting decisions per axis of each descent grid;
+    - ``samples``: draws of each estimator's bias and spread;
+    - ``iterations``: the budget of every descent, deterministic and stochastic;
+    - ``quadrature``: grid points per axis of the reference D J_sigma;
+    - ``every_other_s``: descend at every other of a problem's s values only."""
+
+    starts: tuple[int, int] = (7, 4)
+    samples: int = 20000
+    iterations: int = 60
+    quadrature: tuple[int, int] = (8001, 241)
+    every_other_s: bool = False
+
+    #: the bounds of each size, (low, high): the work is bounded before anything is allocated
+    LIMITS: ClassVar[dict[str, tuple[int, int]]] = {
+        "starts": (1, 20), "samples": (2, 200_000), "iterations": (1, 1000),
+        "quadrature": (3, 20_001)}
+    #: the most points of a quadrature grid (points per axis ** decisions)
+    MAX_QUADRATURE_POINTS: ClassVar[int] = 1_000_000
+
+    def __post_init__(self) -> None:
+        for name, (low, high) in self.LIMITS.items():
+            value = getattr(self, name)
+            paired = name in ("starts", "quadrature")
+            values = value if paired and isinstance(value, tuple) and len(value) == 2 else \
+                None if paired else (value,)
+            if values is None or not all(isinstance(v, int) and not isinstance(v, bool)
+                                         and low <= v <= high for v in values):
+                what = "a pair of integers" if paired else "an integer"
+                raise InvalidInputError(f"{name} must be {what} in [{low}, {high}], "
+                                        f"got {value!r}")
+        if not isinstance(self.every_other_s, bool):
+            raise InvalidInputError(f"every_other_s must be True or False, got "
+                                    f"{self.every_other_s!r}")
+
+    @staticmethod
+    def _of(pair: tuple[int, int], m: int) -> int:
+        return pair[0] if m == 1 else pair[1]
+
+    def starts_per_axis(self, m: int) -> int:
+        return self._of(self.starts, m)
+
+    def quadrature_points(self, m: int) -> int:
+        """Grid points per axis of the reference for ``m`` decisions (refused when the grid
+        would exceed :data:`MAX_QUADRATURE_POINTS`)."""
+        n = self._of(self.quadrature, m)
+        if n ** m > self.MAX_QUADRATURE_POINTS:
+            raise InvalidInputError(f"a quadrature of {n} points per axis over {m} decisions is "
+                                    f"{n ** m} points, more than {self.MAX_QUADRATURE_POINTS}")
+        return n
+
+    def describe(self) -> str:
+        def pair(v: tuple[int, int]) -> str:
+            return f"{v[0]}" if v[0] == v[1] else f"{v[0]} (one decision) or {v[1]} (two)"
+
+        return (f"starts {pair(self.starts)} per axis, samples {self.samples}, iterations "
+                f"{self.iterations}, quadrature {pair(self.quadrature)} per axis"
+                f"{', every other s' if self.every_other_s else ''}")
+
+
+#: the whole study (the tables of the docs)
+FULL = GradientSizes()
+#: ``--quick``: small grids and samples (a few seconds per problem)
+QUICK = GradientSizes(starts=(3, 2), samples=2000, iterations=30, every_other_s=True)
+
+
 @dataclass
 class GradientStudy:
     """Everything one run of the study measured, per problem name."""
 
     seed: int
     quick: bool
+    sizes: GradientSizes = FULL
     optimum: dict[str, dict[float, float]] = field(default_factory=dict)
     switches: dict[str, list[float]] = field(default_factory=dict)
     points: dict[str, dict[str, tuple[float, ...]]] = field(default_factory=dict)
@@ -560,6 +631,7 @@ class GradientStudy:
         """The measured numbers as plain data (for JSON)."""
         return {
             "seed": self.seed, "quick": self.quick,
+            "sizes": asdict(self.sizes),
             "problems": {name: {
                 "optimum": {str(s): v for s, v in self.optimum[name].items()},
                 "switches": [float(v) for v in self.switches[name]],
@@ -606,19 +678,24 @@ def run_gradient_study(*, seed: int = 0, quick: bool = False,
                        sigmas: Sequence[float] = (0.003, 0.03),
                        sample_counts: Sequence[int] = (4, 64),
                        eps_values: Sequence[float] = (0.02, 0.002),
+                       sizes: GradientSizes | None = None,
                        progress: Callable[[str], None] | None = None) -> GradientStudy:
-    """The gradient study (module docstring) on the study problems; ``quick`` shrinks every
-    grid (for ``make demo`` and tests). Reproducible: all draws come from ``seed``."""
+    """The gradient study (module docstring) on the study problems, as big as ``sizes`` says
+    (default :data:`QUICK` when ``quick``, for ``make demo`` and tests, else :data:`FULL`).
+    Reproducible: all draws come from ``seed``."""
     say = progress or (lambda _msg: None)
-    study = GradientStudy(seed=seed, quick=quick)
-    per_axis = {1: 3, 2: 2} if quick else {1: 7, 2: 4}
-    samples = 2000 if quick else 20000
-    pg_iterations = 30 if quick else 60
-    for problem, s_est, s_values in study_problems(problems):
+    sizes = sizes if sizes is not None else QUICK if quick else FULL
+    if not isinstance(sizes, GradientSizes):
+        raise InvalidInputError(f"sizes must be GradientSizes, got {sizes!r}")
+    study = GradientStudy(seed=seed, quick=quick, sizes=sizes)
+    chosen = study_problems(problems)
+    for problem, _, _ in chosen:  # (a grid too big is refused before any work)
+        sizes.quadrature_points(len(problem.decision_names))
+    for problem, s_est, s_values in chosen:
         name = problem.name.split(":")[-1]
         # one stream per problem: its numbers do not depend on which others are studied
         rng = np.random.default_rng([seed, [p[1] for p in PROBLEMS].index(name)])
-        s_values = s_values[1::2] if quick else s_values
+        s_values = s_values[1::2] if sizes.every_other_s else s_values
         say(f"{name}: optima")
         study.optimum[name] = {s: optimal_policy(problem, s).value for s in (*s_values, s_est)}
         # estimators at the switch nearest the optimum (near) and at the optimum (away)
@@ -641,11 +718,13 @@ def run_gradient_study(*, seed: int = 0, quick: bool = False,
             study.stats[name][label] = []
             for sigma in sigmas:
                 say(f"{name}: estimators {label}, sigma {sigma:g}")
-                ref = smoothed_gradient(objective, x, sigma * float(objective.width[axis]))
+                ref = smoothed_gradient(objective, x, sigma * float(objective.width[axis]),
+                                        points=sizes.quadrature_points(objective.m))
                 study.references[name][(label, sigma)] = ref
                 # recorded with sigma relative to the decision's bound interval
                 study.stats[name][label] += [replace(e, sigma=sigma) for e in estimator_stats(
-                    objective, x, sigma * float(objective.width[axis]), ref[0], rng, samples)]
+                    objective, x, sigma * float(objective.width[axis]), ref[0], rng,
+                    sizes.samples)]
         grid = np.linspace(objective.lo[axis], objective.hi[axis], 801)
         rows = np.tile(x_best, (grid.size, 1))
         rows[:, axis] = grid
@@ -656,17 +735,16 @@ def run_gradient_study(*, seed: int = 0, quick: bool = False,
         for s in s_values:
             obj = Objective(problem, s)
             opt = study.optimum[name][s]
-            for start in _starts(obj, per_axis[min(obj.m, 2)]):
+            for start in _starts(obj, sizes.starts_per_axis(obj.m)):
                 say(f"{name}: descent at s = {s:g} from {np.round(start, 3).tolist()}")
                 for method in ("exact", "fd", "lbfgsb"):
-                    runs.append(descend(obj, start, method, opt,
-                                        max_iter=30 if quick else 60))
+                    runs.append(descend(obj, start, method, opt, max_iter=sizes.iterations))
                 for estimator in ("zeroth", "first"):
                     for sigma in sigmas:
                         for n in sample_counts:
                             runs.append(policy_gradient_descent(
                                 obj, start, estimator, sigma, n, opt, rng,
-                                iterations=pg_iterations))
+                                iterations=sizes.iterations))
         study.runs[name] = runs
         if problem.facts.name in SMOOTHED:
             study.smoothing[name] = []
@@ -688,7 +766,9 @@ def run_gradient_study(*, seed: int = 0, quick: bool = False,
 # --- text -------------------------------------------------------------------------------------
 def report(study: GradientStudy, sample_counts: Sequence[int] = (4, 64)) -> str:
     """The study's three tables as Markdown text."""
-    lines = [f"gradient study, seed {study.seed}{' (quick)' if study.quick else ''}", "",
+    preset = QUICK if study.quick else FULL
+    sized = "" if study.sizes == preset else f"; {study.sizes.describe()}"
+    lines = [f"gradient study, seed {study.seed}{' (quick)' if study.quick else ''}{sized}", "",
              "estimators of D J_sigma (sigma relative to the decision's bound interval; bias = "
              "|mean - D J_sigma| +- its standard error; std of the N-sample estimate)", "",
              "| problem | point | sigma | D J_sigma | estimator | bias | "

@@ -211,3 +211,58 @@ def test_cli_rejects_unknown_problem(capsys):
         main(["gradients", "--problem", "nope"])
     assert exc.value.code == 2
     assert "invalid choice" in capsys.readouterr().err
+
+
+def test_a_trial_size_study_does_what_its_sizes_say():
+    """The sizes a user chooses reach every stage: one start per axis at each of the two s
+    values of every_other_s gives two runs per method; the header and the JSON name them."""
+    from biped_opt.analysis.gradients import GradientSizes, report, run_gradient_study
+
+    sizes = GradientSizes(starts=(1, 1), samples=64, iterations=3, quadrature=(41, 41),
+                          every_other_s=True)
+    study = run_gradient_study(seed=0, quick=True, problems=["touchdown"], sizes=sizes,
+                               eps_values=(0.02,))
+    rows = study.summary("touchdown")
+    assert {r["method"] for r in rows} >= {"exact", "fd", "lbfgsb"}
+    assert all(r["runs"] == 2 for r in rows)
+    assert all(run.iterations <= 3 for run in study.runs["touchdown"] if run.method != "lbfgsb")
+    assert report(study).splitlines()[0] == (
+        "gradient study, seed 0 (quick); starts 1 per axis, samples 64, iterations 3, "
+        "quadrature 41 per axis, every other s")
+    assert study.as_dict()["sizes"] == {"starts": (1, 1), "samples": 64, "iterations": 3,
+                                        "quadrature": (41, 41), "every_other_s": True}
+
+
+@pytest.mark.parametrize("bad", [{"samples": 1}, {"starts": (0, 2)}, {"starts": 3},
+                                 {"iterations": 1001}, {"quadrature": (41,)},
+                                 {"samples": True}, {"every_other_s": 1}])
+def test_sizes_out_of_their_bounds_are_refused(bad):
+    from biped_opt.analysis.gradients import GradientSizes
+
+    with pytest.raises(InvalidInputError):
+        GradientSizes(**bad)
+
+
+def test_a_quadrature_too_big_is_refused_before_any_work(monkeypatch):
+    import biped_opt.analysis.gradients as g
+
+    def no_work(*_args, **_kwargs):
+        raise AssertionError("the study started")
+
+    monkeypatch.setattr(g, "optimal_policy", no_work)
+    with pytest.raises(InvalidInputError, match="more than 1000000"):
+        g.run_gradient_study(problems=["liftoff", "touchdown"],
+                             sizes=g.GradientSizes(quadrature=(8001, 1001)))
+
+
+def test_the_presets_keep_the_studys_sizes():
+    """--quick and the full study as they were before sizes could be chosen (the tables of the
+    docs were made with these)."""
+    from biped_opt.analysis.gradients import FULL, QUICK
+
+    assert [FULL.starts_per_axis(m) for m in (1, 2)] == [7, 4]
+    assert [QUICK.starts_per_axis(m) for m in (1, 2)] == [3, 2]
+    assert (FULL.samples, FULL.iterations, FULL.every_other_s) == (20000, 60, False)
+    assert (QUICK.samples, QUICK.iterations, QUICK.every_other_s) == (2000, 30, True)
+    assert [FULL.quadrature_points(m) for m in (1, 2)] == [8001, 241]
+    assert QUICK.quadrature == FULL.quadrature
