@@ -192,13 +192,18 @@ def place_notes(fig: Any, axes: Iterable[Any] | None = None) -> bool:
     chosen = [ax for ax in (fig.axes if axes is None else axes) if notes_of(ax)]
     if not chosen:
         return False
+    for ax in chosen:  # (a note inside its axes never moves the layout, wherever it goes)
+        for note in notes_of(ax):
+            note.set_in_layout(False)
     fig.canvas.draw()  # (the final layout: the data's pixels and the notes' sizes)
     renderer = fig.canvas.get_renderer()
+    moved = False
     for ax in list(chosen):
         notes = notes_of(ax)
         for _round in range(ROUNDS + 1):
             if _place_axes(ax, notes, renderer):
                 break
+            moved = True
             if _round < ROUNDS:
                 low, high = ax.get_ylim()
                 ax.set_ylim(low, high + HEADROOM * (high - low))
@@ -206,7 +211,10 @@ def place_notes(fig: Any, axes: Iterable[Any] | None = None) -> bool:
         else:
             _outside(ax, notes, renderer)
             chosen.remove(ax)
-    # a raised limit elsewhere may have moved the layout by a few pixels: place once more
+    if not moved:  # every note found a spot in the first layout, which is then final
+        return True
+    # a raised limit or a note outside may have moved the layout by a few pixels: place once
+    # more in the layout they give
     fig.canvas.draw()
     for ax in chosen:
         _place_axes(ax, notes_of(ax), renderer)

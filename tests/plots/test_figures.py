@@ -141,6 +141,7 @@ def test_a_note_moves_off_the_data_and_points_at_its_mark():
     points, radii = pixels_of_data(ax)
     assert covered(boxes(ax, renderer)[0], points, radii) > 0  # (where it was made)
     place_notes(fig)
+    fig.canvas.draw()  # (the figure as it is then written)
     assert covered(boxes(ax, renderer)[0], *pixels_of_data(ax)) == 0
     assert note.xy == (0.5, 0.5)
     plt.close(fig)
@@ -156,4 +157,28 @@ def test_a_note_moves_off_the_data_and_points_at_its_mark():
     fig.canvas.draw()
     assert ax.get_ylim()[1] > high
     assert covered(boxes(ax, fig.canvas.get_renderer())[0], *pixels_of_data(ax)) == 0
+    plt.close(fig)
+
+
+def test_a_layout_in_which_every_note_found_a_spot_is_final():
+    """place_notes draws once when every note fits where the data leaves room: the notes are
+    out of the layout, so laying the figure out again, as writing it did, moves no axes."""
+    fig, axes = plt.subplots(1, 2, figsize=(6, 3), dpi=100, constrained_layout=True)
+    for ax in axes:
+        x = np.linspace(0, 1, 101)
+        ax.plot(x, x ** 2, ".", ms=2)
+        ax.set_title("a title long enough to matter")
+        # (made straddling the axes' top edge: in the layout, it would take room there)
+        ax.annotate("kink at 0.5\nleft slope 1\nright slope 1", xy=(0.5, 0.25),
+                    xytext=(0.03, 1.1), textcoords="axes fraction", va="top", fontsize=7,
+                    gid=NOTE, bbox={"boxstyle": "round"}, arrowprops={"arrowstyle": "-"})
+    draws = []
+    fig.canvas.mpl_connect("draw_event", lambda _event: draws.append(1))
+    assert place_notes(fig) is True
+    assert len(draws) == 1
+    placed = [ax.get_position().bounds for ax in axes]
+    fig.canvas.draw()
+    assert [ax.get_position().bounds for ax in axes] == placed
+    for ax in axes:
+        assert covered(boxes(ax, fig.canvas.get_renderer())[0], *pixels_of_data(ax)) == 0
     plt.close(fig)
