@@ -259,8 +259,9 @@ class Service(_RequestReply):
 
     # rmw_cyclonedds waits 100 ms for a new client's reply reader before answering and drops the
     # reply after that; on a loaded machine discovery can take longer, and a dropped reply leaves
-    # the client waiting forever, so wait up to 1 s (only a client not yet matched ever waits)
-    reply_wait_s = 1.0
+    # the client waiting forever, so wait up to 5 s (only a client not yet matched ever waits;
+    # eight clients made at once on two busy cores once took over 1 s to be matched)
+    reply_wait_s = 5.0
 
     def __init__(self, node: Owner, srv_type: ServiceType, name: str,
                  callback: Callable[[Any, Any], Any], qos: QoSProfile, group: Any) -> None:
