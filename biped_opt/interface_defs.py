@@ -18,7 +18,6 @@ import os
 import re
 import sys
 import sysconfig
-import tempfile
 import threading
 from pathlib import Path
 from typing import Any
@@ -384,13 +383,12 @@ def _read_parsed(path: Path) -> dict[str, Any] | None:
 def _write_parsed(path: Path, parsed: dict[str, Any]) -> None:
     """Keep a parse for later processes, written whole then renamed; a cache that cannot be
     written only costs the next process the parse."""
+    from biped_opt.simulation.compiled import write_whole
+
     try:
         text = json.dumps({**parsed, "types": _to_json(parsed["types"])})
         path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile("w", dir=path.parent, suffix=".tmp",
-                                         delete=False) as fh:
-            fh.write(text)
-        os.replace(fh.name, path)
+        write_whole(path, text)
     except (OSError, TypeError, ValueError):
         pass
 

@@ -60,7 +60,7 @@ if TYPE_CHECKING:  # (imported where needed: SymPy and the generator are the slo
 
 __all__ = ["BatchResult", "CompiledSystem", "SystemTrajectory", "Trajectory", "available_cores",
            "batch_thread_limit", "batch_threads", "cache_dir", "compile_system", "compiled_with",
-           "kernels_cached", "run_batch", "simulate", "simulate_batch", "warm_up"]
+           "kernels_cached", "run_batch", "simulate", "simulate_batch", "warm_up", "write_whole"]
 
 Array = npt.NDArray[np.float64]
 
@@ -77,10 +77,10 @@ def cache_dir() -> Path:
     return Path(xdg) / "biped_opt" / "systems"
 
 
-def _write(folder: Path, path: Path, text: str) -> None:
-    """``text`` into ``path``, written whole then renamed: a concurrent process never reads
-    half a file."""
-    with tempfile.NamedTemporaryFile("w", dir=folder, suffix=".tmp", delete=False) as fh:
+def write_whole(path: Path, text: str) -> None:
+    """``text`` into ``path``, written whole beside it then renamed: a concurrent process never
+    reads half a file."""
+    with tempfile.NamedTemporaryFile("w", dir=path.parent, suffix=".tmp", delete=False) as fh:
         fh.write(text)
     os.replace(fh.name, path)
 
@@ -176,7 +176,7 @@ def _scene_for(system: System) -> dict[str, Any]:
     with _LOCK:
         folder.mkdir(parents=True, exist_ok=True)
         if not path.exists() or path.read_text() != text:
-            _write(folder, path, text)
+            write_whole(path, text)
     return {"module": name, **scene_facts(system)}
 
 
@@ -193,7 +193,7 @@ def _module_for(derived: DerivedSystem) -> tuple[str, ModuleType]:
             folder.mkdir(parents=True, exist_ok=True)
             fresh = not path.exists() or path.read_text() != text
             if fresh:
-                _write(folder, path, text)
+                write_whole(path, text)
                 # a new module: its event functions compile in a second process meanwhile
                 precompile.start(path, _MODULE_PREFIX + name)
         module = _import(name, path)
@@ -356,7 +356,7 @@ def cached_module(system: str | Path) -> ModuleType | None:
 
 def _write_entry(entry: Path, facts: dict[str, Any]) -> None:
     entry.parent.mkdir(parents=True, exist_ok=True)
-    _write(entry.parent, entry, json.dumps(facts))
+    write_whole(entry, json.dumps(facts))
 
 
 #: the one trajectory type under the name this module gave it first
@@ -468,7 +468,7 @@ class CompiledSystem:
                 text = render_gradients(self.derived)
                 with _LOCK:
                     folder.mkdir(parents=True, exist_ok=True)
-                    _write(folder, path, text)
+                    write_whole(path, text)
             with _LOCK:
                 self._gradients = _import(name, path)
         return self._gradients
