@@ -160,5 +160,5 @@ def bound_slope(held: Sample, decision: str, s: float) -> float:
     result: SystemOptimalResult = held.result
     problem = result.problem
     polished = polish_optimum(problem, s, result, side=1)
-    column = 1 + problem.description.u.names().index(decision)
+    column = 1 + problem.facts.inputs.index(decision)
     return float(cost_gradient(problem, polished.gradient, polished.inputs)[column])

@@ -573,7 +573,7 @@ def check_size(args: argparse.Namespace, flag: str, spec: Any) -> None:
             size = library_size(str(spec))
     if size is None:
         if isinstance(spec, (str, Path)):
-            from biped_opt.control.problems import describe
+            from biped_opt.simulation.facts import describe
 
             try:
                 spec = describe(str(spec))

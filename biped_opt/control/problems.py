@@ -47,7 +47,7 @@ from biped_opt.system_spec import FileSpec, parse_file_spec
 if TYPE_CHECKING:  # (SymPy and the descriptions load when first needed, not imported)
     from biped_opt.systems.description import System
 
-__all__ = ["Problem", "load_problem", "get_problem", "describe", "KEYS"]
+__all__ = ["Problem", "load_problem", "get_problem", "KEYS"]
 
 Array = npt.NDArray[np.float64]
 

@@ -227,7 +227,8 @@ def request_problem(system: str, problem: str, maneuver: str) -> Problem:
     (``""``: the one named like ``maneuver``), which must be on ``maneuver``. Each error names
     the field. (A request from the domain names files only through
     :mod:`biped_opt.nodes.sources`.)"""
-    from biped_opt.control.problems import describe, load_problem
+    from biped_opt.control.problems import load_problem
+    from biped_opt.simulation.facts import describe
 
     described = None
     if system or not _is_file(problem):

@@ -156,9 +156,9 @@ class SweepRequest:
         """An optimal sweep's problem on the served system (SystemInfo's fields)."""
         problem = convert.request_problem(self.system.strip(), self.problem.strip(),
                                           self.maneuver)
-        if problem.description.name != info["system"]:
+        if problem.facts.name != info["system"]:
             raise InvalidInputError(f"problem: {problem.name} is a problem on "
-                                    f"{problem.description.name}, not on {info['system']}")
+                                    f"{problem.facts.name}, not on {info['system']}")
         return problem
 
 

@@ -143,9 +143,9 @@ def check_maneuver_of(described: Any, maneuver: str) -> None:
 def check_problem_on(found: Problem, described: Any, maneuver: str) -> Problem:
     """``found``, a request's problem, must be on the requested system (``described``; None:
     any) and on ``maneuver``; each error names the field."""
-    if described is not None and found.description.name != described.name:
+    if described is not None and found.facts.name != described.name:
         raise InvalidInputError(
-            f"problem: {found.name} is a problem on {found.description.name}, not on "
+            f"problem: {found.name} is a problem on {found.facts.name}, not on "
             f"{described.name}")
     if found.maneuver != maneuver:
         raise InvalidInputError(
@@ -192,7 +192,7 @@ class SystemLimits:
 @dataclass(frozen=True, kw_only=True)
 class Names:
     """What a request names, checked (:meth:`Sources.check_request`) and resolved: ``source``
-    what :func:`biped_opt.control.problems.describe` loads (a library name or the path of a
+    what :func:`biped_opt.simulation.facts.describe` loads (a library name or the path of a
     file of system_paths; "" when the request names no system: the biped, or the system its
     problem file names), ``problem`` and ``maneuver`` plain names (``problem`` "": the one
     named like the maneuver; ``maneuver`` "": a study's). ``checked``: the system's description
@@ -213,7 +213,7 @@ class Sources:
     limits: SystemLimits = SystemLimits()
 
     def system(self, field: str, text: str) -> str:
-        """What :func:`biped_opt.control.problems.describe` loads for the system name ``text``:
+        """What :func:`biped_opt.simulation.facts.describe` loads for the system name ``text``:
         the library name itself or the absolute path of ``<dir>/<name>.py`` (else
         ``<dir>/<name>.urdf``)."""
         from biped_opt.systems.files import LIBRARY_PATTERNS
@@ -289,8 +289,8 @@ class Sources:
 
     def describe(self, field: str, source: str) -> System:
         """The description of a resolved system, its size checked before anything derives."""
-        from biped_opt.control.problems import describe
         from biped_opt.errors import BipedOptError
+        from biped_opt.simulation.facts import describe
 
         try:
             system = describe(source)

@@ -284,7 +284,7 @@ def modes_figure(path: str | Path, compiled: CompiledSystem, maneuver: str,
     there when not given)."""
     if bands is None:
         bands = mode_bands(compiled, maneuver, s_grid, inputs)
-    return draw_modes(path, bands, compiled.derived.constraint_names,
+    return draw_modes(path, bands, compiled.constraints,
                       s_name=compiled.s_name,
                       title=title or f"{compiled.name} {maneuver}: contact mode over time and "
                       f"{compiled.s_name}", figsize=figsize)
@@ -463,8 +463,7 @@ def optimal_figures(out: str | Path, problem: Problem, grid: npt.ArrayLike, *,
                             xlabel=compiled.s_name, title=subject),
     )
     spec = problem.as_dict()
-    fixed = ", ".join(f"{k} = {v:g}" for k, v in zip(problem.description.u.names(),
-                                                     problem.inputs())
+    fixed = ", ".join(f"{k} = {v:g}" for k, v in zip(problem.facts.inputs, problem.inputs())
                       if k not in names) or "none"
     lines = [
         _caption(None, f"{subject}: minimise the cost over "

@@ -32,6 +32,7 @@ LIBRARY: dict[str, Callable[[], System]] = {
     "chain": chain,
 }
 
+
 def biped_smooth() -> System:
     """The biped with its input switch smoothed (:mod:`biped_opt.systems.library.smooth_biped`,
     the gradient study's smoothed model)."""
