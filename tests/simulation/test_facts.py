@@ -63,9 +63,9 @@ def test_problems_json_cannot_carry_are_read_from_the_description(tmp_path: Path
     assert get_problem(str(path), "far").target == 0.5
 
 
-def test_a_problem_builds_its_description_only_when_asked():
-    """The facts serve the checks; ``description`` is the System, also for a system given as a
-    path-like name."""
+def test_a_problems_description_is_the_system_also_for_a_path_like_name():
+    """The facts serve the checks; ``description`` is the System (built by describe, the one
+    every problem on it shares), also for a system given as a path-like name."""
     problem = Problem(system=Path("rocking_bar"), maneuver="drop",
                       decisions=(("u_th", (-1.0, 1.0)),))
     assert problem.facts.name == "rocking_bar"
